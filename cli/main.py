@@ -1,0 +1,53 @@
+"""The `omninav` command. Each subcommand lives in its own module and is imported only when used."""
+from __future__ import annotations
+
+import argparse
+import importlib
+import sys
+
+# name -> (module with add_arguments(parser) and main(args) -> int, one-line help)
+COMMANDS: dict[str, tuple[str, str]] = {
+    "run": ("omninav.services.runtime.run", "run one service as a process on the bus"),
+    "router": ("omninav.cli.router", "run a Zenoh router on loopback"),
+    "services": ("omninav.cli.services", "list the services that can be run"),
+    "up": ("omninav.services.runtime.launcher", "start a compose file: router + services as processes"),
+    "record": ("omninav.services.recorder.cli", "record messages on the bus to MCAP"),
+    "recover": ("omninav.services.recorder.recover", "rewrite a damaged MCAP file with what is readable"),
+    "replay": ("omninav.services.replay.cli", "replay a recording live, or deterministically into a service"),
+    "topics": ("omninav.cli.introspect", "list keys on the bus with their types and rates"),
+    "echo": ("omninav.cli.introspect", "print decoded messages from a key"),
+    "hz": ("omninav.cli.introspect", "measure the rate of a key"),
+    "get": ("omninav.cli.introspect", "query a queryable and print the reply"),
+    "bench": ("omninav.cli.bench", "benchmarks (transport, ...)"),
+    "demo": ("omninav.cli.demo", "the main job: a short run of the stack, recorded and replayed"),
+}
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="omninav", description="omninav: navigation for wheeled robots over Zenoh")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name, (module, help_text) in COMMANDS.items():
+        sub.add_parser(name, help=help_text, add_help=False)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
+        build_parser().parse_args(argv or ["--help"])
+        return 2
+    name, rest = argv[0], argv[1:]
+    module = importlib.import_module(COMMANDS[name][0])
+    parser = argparse.ArgumentParser(prog=f"omninav {name}", description=COMMANDS[name][1])
+    add = getattr(module, f"add_{name}_arguments", None) or module.add_arguments
+    add(parser)
+    args = parser.parse_args(rest)
+    run = getattr(module, f"main_{name}", None) or module.main
+    try:
+        return int(run(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

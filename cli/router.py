@@ -1,0 +1,23 @@
+"""`omninav router`: a Zenoh router on loopback, for running services by hand."""
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+
+from ..services.runtime.zenoh_config import open_router, router_endpoint
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--listen", help="endpoint (default $OMNINAV_ROUTER or tcp/127.0.0.1:7447)")
+
+
+def main(args: argparse.Namespace) -> int:
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    endpoint = router_endpoint(args.listen)
+    with open_router(endpoint):
+        print(f"router listening on {endpoint}", flush=True)
+        stop.wait()
+    return 0

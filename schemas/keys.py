@@ -1,0 +1,107 @@
+"""The key layout: the only place that spells a key.
+
+Robot keys are omninav/<robot>/<topic>; sim-wide keys are omninav/sim/<topic>; each service's
+diagnostics go to omninav/<robot>/diagnostics/<service>. Every topic has exactly one message type.
+"""
+from __future__ import annotations
+
+import re
+
+from . import messages as m
+
+ROOT = "omninav"
+DEFAULT_ROBOT = "r1"
+ALL = f"{ROOT}/**"
+
+# topic -> message type, for keys under omninav/<robot>/
+ROBOT_TOPICS: dict[str, type] = {
+    "cmd_vel": m.Twist,                 # from the local planner / teleop, to the chassis
+    "cmd_vel_nav": m.Twist,             # raw local-planner output, before smoother & collision monitor
+    "wheel_cmd": m.WheelCommand,        # chassis -> sim
+    "wheel_state": m.WheelState,        # sim -> chassis
+    "odom": m.Odometry,
+    "odom_follower": m.Odometry,        # follower-wheel + gyro odometry
+    "scan": m.LaserScan,
+    "map": m.OccupancyGrid,
+    "pose": m.PoseWithCovariance,       # amcl_pose / slam pose in the map frame
+    "initialpose": m.PoseWithCovariance,
+    "particlecloud": m.ParticleCloud,
+    "tf/map_odom": m.Transform,
+    "tf/odom_base": m.Transform,
+    "costmap/global": m.OccupancyGrid,
+    "costmap/local": m.OccupancyGrid,
+    "plan": m.Path,
+    "local_plan": m.Path,
+    "goal": m.Goal,
+    "cancel": m.CancelGoal,
+    "nav_status": m.NavStatus,
+    "chatter": m.Chatter,
+    "echo": m.Chatter,
+}
+
+# topic -> message type, for keys under omninav/sim/
+SIM_TOPICS: dict[str, type] = {
+    "clock": m.Clock,
+}
+SIM_ROBOT_TOPICS: dict[str, type] = {
+    "truth": m.Odometry,                # ground truth, for evaluation only: omninav/sim/<robot>/truth
+}
+
+_SEGMENT = re.compile(r"^[A-Za-z0-9_\-]+$")
+
+
+def _check_segment(what: str, value: str) -> str:
+    if not _SEGMENT.match(value):
+        raise ValueError(f"{what} {value!r} must be letters, digits, '_' or '-'")
+    return value
+
+
+class KeyLayout:
+    """Keys for one robot namespace."""
+
+    def __init__(self, robot: str = DEFAULT_ROBOT):
+        self.robot_name = _check_segment("robot namespace", robot)
+
+    def robot(self, topic: str) -> str:
+        if topic not in ROBOT_TOPICS:
+            raise KeyError(f"unknown robot topic {topic!r}; known: {sorted(ROBOT_TOPICS)}")
+        return f"{ROOT}/{self.robot_name}/{topic}"
+
+    @staticmethod
+    def sim(topic: str) -> str:
+        if topic not in SIM_TOPICS:
+            raise KeyError(f"unknown sim topic {topic!r}; known: {sorted(SIM_TOPICS)}")
+        return f"{ROOT}/sim/{topic}"
+
+    def sim_robot(self, topic: str) -> str:
+        if topic not in SIM_ROBOT_TOPICS:
+            raise KeyError(f"unknown sim robot topic {topic!r}; known: {sorted(SIM_ROBOT_TOPICS)}")
+        return f"{ROOT}/sim/{self.robot_name}/{topic}"
+
+    def diagnostics(self, service: str) -> str:
+        return f"{ROOT}/{self.robot_name}/diagnostics/{_check_segment('service name', service)}"
+
+    def resolve(self, name: str) -> str:
+        """A topic as services name it: 'scan', 'sim/clock', 'sim/truth' or a full key."""
+        if name.startswith(f"{ROOT}/"):
+            return name
+        if name.startswith("sim/"):
+            topic = name[4:]
+            return self.sim_robot(topic) if topic in SIM_ROBOT_TOPICS else self.sim(topic)
+        return self.robot(name)
+
+
+def type_for_key(key: str) -> type | None:
+    """The message type that a concrete key carries, or None if the layout does not know it."""
+    parts = key.split("/")
+    if len(parts) < 3 or parts[0] != ROOT:
+        return None
+    if parts[1] == "sim":
+        rest = "/".join(parts[2:])
+        if rest in SIM_TOPICS:
+            return SIM_TOPICS[rest]
+        return SIM_ROBOT_TOPICS.get("/".join(parts[3:])) if len(parts) >= 4 else None
+    rest = "/".join(parts[2:])
+    if parts[2] == "diagnostics" and len(parts) == 4:
+        return m.Diagnostic
+    return ROBOT_TOPICS.get(rest)

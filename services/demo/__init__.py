@@ -1,0 +1,1 @@
+"""Two tiny services that exercise the bus: talker (a clock source) and listener (a stateful echo)."""

@@ -1,0 +1,143 @@
+"""Drive a Node from Zenoh: callbacks only enqueue; one thread decodes, merges by stamp, processes.
+
+The wait bound (sync_timeout_s, wall time) exists only so a dead input stream cannot stall the
+service forever; when it is hit the service counts it in its Diagnostic, because that run is no
+longer exactly replayable.
+"""
+from __future__ import annotations
+
+import queue
+import threading
+import time
+from typing import Any
+
+import zenoh
+
+from ...schemas import MessageError, decode
+from ...schemas.attachment import pack_attachment
+from ...schemas.codec import encode
+from .merge import StampMerger
+from .node import Node, Publisher, QueryError
+from .selector import parse_parameters
+from .zenoh_config import open_client
+
+_POLL_S = 0.05
+
+
+class LiveRunner:
+    def __init__(self, node: Node, router: str | None = None, *, sync_timeout_s: float = 1.0,
+                 diagnostics_period_s: float = 1.0):
+        self.node = node
+        self.router = router
+        self.sync_timeout_s = sync_timeout_s
+        self.diagnostics_period_s = diagnostics_period_s
+        self.stop_event = threading.Event()
+        self._inbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._merger = StampMerger([i.synced for i in node.inputs])
+        self._zpubs: dict[str, zenoh.Publisher] = {}
+
+    # ------------------------------------------------------------ wiring
+
+    def _sink(self, pub: Publisher, payload: bytes, stamp_ns: int) -> None:
+        self._zpubs[pub.key].put(payload, attachment=pack_attachment(pub.seq, stamp_ns, pub.type_name))
+
+    def _declare(self, session: zenoh.Session) -> list:
+        handles = []
+        for key, pub in self.node.outputs.items():
+            self._zpubs[key] = session.declare_publisher(
+                key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE)
+            pub.sink = self._sink
+        diag = self.node.diagnostics
+        self._zpubs[diag.key] = session.declare_publisher(diag.key, congestion_control=zenoh.CongestionControl.BLOCK)
+        diag.sink = self._sink
+        for index, inp in enumerate(self.node.inputs):
+            handles.append(session.declare_subscriber(
+                inp.key, lambda s, i=index: self._inbox.put(("msg", i, s.payload.to_bytes(), str(s.key_expr)))))
+        for key in self.node.queryables:
+            handles.append(session.declare_queryable(key, lambda q: self._inbox.put(("query", q))))
+        return handles
+
+    # ------------------------------------------------------------ the processing thread
+
+    def run(self) -> None:
+        """Process until stop_event is set; then drain what is buffered and close the session."""
+        with open_client(self.router) as session:
+            handles = self._declare(session)
+            self._loop()
+            self._finish()
+            for handle in handles:
+                handle.undeclare()
+            for zpub in self._zpubs.values():
+                zpub.undeclare()
+
+    def _loop(self) -> None:
+        pacer = self.node.pace_s()
+        next_tick = time.monotonic()
+        next_diag = time.monotonic() + self.diagnostics_period_s
+        while not self.stop_event.is_set():
+            now = time.monotonic()
+            wait = _POLL_S if pacer is None else max(0.0, min(_POLL_S, next_tick - now))
+            try:
+                self._handle(self._inbox.get(timeout=wait))
+                while True:  # take everything queued before merging, so stamps sort in one go
+                    self._handle(self._inbox.get_nowait())
+            except queue.Empty:
+                pass
+            self._release()
+            now = time.monotonic()
+            if pacer is not None and now >= next_tick:
+                self.node.tick()
+                next_tick = max(next_tick + pacer, now - 10 * pacer)  # never burst more than 10 ticks
+            if now >= next_diag:
+                self._publish_diagnostic()
+                next_diag = now + self.diagnostics_period_s
+
+    def _handle(self, item: tuple) -> None:
+        if item[0] == "query":
+            self._answer(item[1])
+            return
+        _, index, payload, key = item
+        inp = self.node.inputs[index]
+        try:
+            msg = decode(payload, inp.msg_type, key=key)
+        except MessageError as exc:
+            self.node.reject(key, exc)
+            return
+        if not self._merger.push(index, msg.header.stamp_ns, (index, msg), time.monotonic()):
+            self.node.counters[f"late/{key}"] += 1
+
+    def _release(self) -> None:
+        for index, msg in self._merger.pop_ready():
+            self.node.process(index, msg)
+        waited_since = self._merger.head_enqueued_at()
+        if waited_since is not None and time.monotonic() - waited_since > self.sync_timeout_s:
+            self.node.counters["sync_timeouts"] += 1
+            if self.node.counters["sync_timeouts"] == 1:
+                self.node.log.warning("an input stream stopped for %.1fs; processing without it "
+                                      "(this run is not exactly replayable)", self.sync_timeout_s)
+            index, msg = self._merger.pop_oldest()
+            self.node.process(index, msg)
+
+    def _answer(self, query: zenoh.Query) -> None:
+        key = str(query.key_expr)
+        params = parse_parameters(str(query.parameters))
+        try:
+            reply = self.node.answer(key, params)
+        except QueryError as exc:
+            query.reply_err(str(exc).encode())
+        else:
+            if reply is None:
+                query.reply_err(f"{key}: no value yet".encode())
+            else:
+                query.reply(key, encode(reply))
+        finally:
+            query.drop()
+
+    def _publish_diagnostic(self) -> None:
+        self.node.diagnostics.publish(self.node.diagnostic())
+
+    def _finish(self) -> None:
+        for index, msg in self._merger.drain():
+            self.node.process(index, msg)
+        self.node.close()
+        self._publish_diagnostic()

@@ -1,0 +1,178 @@
+"""The Node base: what a service declares and how its inputs are processed, independent of transport.
+
+A service subclasses Node, declares its inputs, outputs, queryables and sim-time timers in setup(),
+and writes handlers that call its pure core. Drivers feed it: live.py from Zenoh, replay from a
+recording. Both go through process(), so a replayed service runs exactly the live code.
+"""
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from dataclasses import dataclass
+from typing import Any, Callable, ClassVar
+
+from ...schemas import MessageError
+from ...schemas.codec import encode
+from ...schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
+from ...schemas.messages import Clock, Diagnostic, Header
+from ...schemas.registry import type_info
+
+CLOCK_TOPIC = "sim/clock"
+NS_PER_S = 1_000_000_000
+
+
+@dataclass(frozen=True)
+class NoParams:
+    """For services without parameters."""
+
+
+@dataclass
+class Input:
+    key: str
+    msg_type: type
+    handler: Callable[[Any], None]
+    synced: bool          # others wait for this stream to pass a stamp (see merge.py)
+
+
+class Publisher:
+    """Stamps the per-key sequence number, encodes and hands the payload to the driver's sink."""
+
+    def __init__(self, key: str, msg_type: type):
+        self.key, self.msg_type = key, msg_type
+        self.type_name = type_info(msg_type)[0]
+        self.seq = 0
+        self.sink: Callable[[Publisher, bytes, int], None] | None = None
+
+    def publish(self, msg: Any) -> None:
+        if type(msg) is not self.msg_type:
+            raise TypeError(f"{self.key} carries {self.type_name}, not {type(msg).__name__}")
+        self.seq += 1
+        msg.header.seq = self.seq
+        if self.sink is not None:
+            self.sink(self, encode(msg), msg.header.stamp_ns)
+
+
+@dataclass
+class _Timer:
+    period_ns: int
+    handler: Callable[[], None]
+    next_ns: int | None = None
+
+
+class QueryError(Exception):
+    """A query that cannot be answered; the text goes back to the caller."""
+
+
+class Node:
+    service: ClassVar[str] = ""
+    Params: ClassVar[type] = NoParams
+
+    def __init__(self, params: Any = None, robot: str = DEFAULT_ROBOT, name: str | None = None):
+        self.params = params if params is not None else self.Params()
+        self.name = name or self.service
+        self.keys = KeyLayout(robot)
+        self.log = logging.getLogger(f"omninav.{self.name}")
+        self.inputs: list[Input] = []
+        self.outputs: dict[str, Publisher] = {}
+        self.queryables: dict[str, Callable[[dict[str, str]], Any]] = {}
+        self.counters: Counter[str] = Counter()
+        self.first_seq: dict[str, int] = {}
+        self.now_ns = 0
+        self._timers: list[_Timer] = []
+        self._logged_bad_keys: set[str] = set()
+        # not in self.outputs: diagnostics count wall-time events, so replay does not compare them
+        self.diagnostics = Publisher(self.keys.diagnostics(self.name), Diagnostic)
+        self.setup()
+        if self._timers:
+            # the clock goes first so a timer at t fires before inputs stamped t, after those before t
+            self.inputs.insert(0, Input(self.keys.resolve(CLOCK_TOPIC), Clock, self._on_clock, True))
+
+    # ------------------------------------------------------------ declarations (in setup)
+
+    def setup(self) -> None:
+        """Declare inputs, outputs, queryables and timers."""
+
+    def subscribe(self, topic: str, handler: Callable[[Any], None], *, synced: bool = True) -> None:
+        key = self.keys.resolve(topic)
+        if any(i.key == key for i in self.inputs):
+            raise ValueError(f"{self.name}: {key} subscribed twice")
+        self.inputs.append(Input(key, type_for_key(key), handler, synced))
+
+    def publisher(self, topic: str) -> Publisher:
+        key = self.keys.resolve(topic)
+        if key not in self.outputs:
+            self.outputs[key] = Publisher(key, type_for_key(key))
+        return self.outputs[key]
+
+    def queryable(self, topic: str, handler: Callable[[dict[str, str]], Any]) -> None:
+        self.queryables[self.keys.resolve(topic)] = handler
+
+    def every(self, period_s: float, handler: Callable[[], None]) -> None:
+        """Call handler every period_s of sim time (driven by the clock key)."""
+        if period_s <= 0:
+            raise ValueError(f"{self.name}: timer period must be positive, got {period_s}")
+        self._timers.append(_Timer(round(period_s * NS_PER_S), handler))
+
+    # ------------------------------------------------------------ driving (by live.py / replay)
+
+    def process(self, index: int, msg: Any) -> None:
+        """Handle one decoded input; drivers call this in merge order."""
+        inp = self.inputs[index]
+        self.now_ns = max(self.now_ns, msg.header.stamp_ns)
+        self.first_seq.setdefault(inp.key, msg.header.seq)
+        self.counters[f"received/{inp.key}"] += 1
+        inp.handler(msg)
+
+    def answer(self, key: str, parameters: dict[str, str]) -> Any:
+        """The reply to a `get` on one of this node's queryables (raises QueryError)."""
+        try:
+            return self.queryables[key](parameters)
+        except QueryError:
+            raise
+        except (KeyError, ValueError, TypeError) as exc:
+            raise QueryError(f"{key}: bad query parameters {parameters}: {exc}") from None
+
+    def reject(self, key: str, error: MessageError) -> None:
+        """A malformed input: logged once per key, counted, and otherwise ignored."""
+        self.counters[f"malformed/{key}"] += 1
+        if key not in self._logged_bad_keys:
+            self._logged_bad_keys.add(key)
+            self.log.warning("malformed message ignored (further ones on this key only counted): %s", error)
+
+    def header(self, frame_id: str = "", stamp_ns: int | None = None) -> Header:
+        """A header stamped with the current sim time (the stamp of the input being handled)."""
+        return Header(stamp_ns=self.now_ns if stamp_ns is None else stamp_ns, frame_id=frame_id)
+
+    def diagnostic(self) -> Diagnostic:
+        values: dict[str, float | int | str] = dict(self.counters)
+        values.update({f"first_seq/{k}": v for k, v in self.first_seq.items()})
+        trouble = sorted(k for k in self.counters if k.startswith(("malformed/", "late/", "sync_timeout")))
+        return Diagnostic(
+            header=self.header(),
+            name=self.name,
+            level=1 if trouble else 0,
+            message=("not exactly replayable or saw bad input: " + ", ".join(trouble)) if trouble else "ok",
+            values=values,
+        )
+
+    def close(self) -> None:
+        """Called once after the last input; finish files and the like."""
+
+    def pace_s(self) -> float | None:
+        """Wall-clock period of tick() for sources (the sim); None for services driven by inputs."""
+        return None
+
+    def tick(self) -> None:
+        """One step of a source; only called when pace_s() is not None."""
+
+    # ------------------------------------------------------------ internals
+
+    def _on_clock(self, clock: Clock) -> None:
+        now = clock.header.stamp_ns
+        for timer in self._timers:
+            if timer.next_ns is None:
+                timer.next_ns = now
+            if timer.next_ns <= now:
+                timer.handler()
+                missed = (now - timer.next_ns) // timer.period_ns
+                timer.next_ns += (missed + 1) * timer.period_ns

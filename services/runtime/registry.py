@@ -1,0 +1,33 @@
+"""Which services exist: name -> the module and Node class that implement it.
+
+Compose files, `omninav run` and `replay --into` name services by these names.
+"""
+from __future__ import annotations
+
+import importlib
+
+SERVICES: dict[str, str] = {
+    "talker": "omninav.services.demo.talker:Talker",
+    "listener": "omninav.services.demo.listener:Listener",
+    "recorder": "omninav.services.recorder.node:RecorderNode",
+}
+
+
+class UnknownService(LookupError):
+    pass
+
+
+def node_class(service: str, spec: str | None = None) -> type:
+    """The Node class of a registered service, or of an explicit 'package.module:Class' spec."""
+    target = spec or SERVICES.get(service)
+    if target is None:
+        raise UnknownService(f"unknown service {service!r}; known: {sorted(SERVICES)}")
+    module_name, _, class_name = target.partition(":")
+    try:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
+        raise UnknownService(f"service {service!r}: cannot import {module_name}: {exc}") from None
+    try:
+        return getattr(module, class_name)
+    except AttributeError:
+        raise UnknownService(f"service {service!r}: {module_name} has no {class_name}") from None

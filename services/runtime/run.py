@@ -1,0 +1,54 @@
+"""Run one service as its own process: `omninav run SERVICE [--params FILE] [--set k=v] ...`."""
+from __future__ import annotations
+
+import argparse
+import logging
+import signal
+import sys
+
+from .live import LiveRunner
+from .params import ParamError, load_params, load_params_file, parse_overrides
+from .registry import UnknownService, node_class
+
+
+def build_node(service: str, params_file: str | None = None, overrides: dict | None = None,
+               robot: str = "r1", name: str | None = None, spec: str | None = None):
+    """Construct a service's Node with validated parameters (raises UnknownService / ParamError)."""
+    cls = node_class(service, spec)
+    params = load_params_file(cls.Params, params_file, name or service) if params_file else load_params(cls.Params, {})
+    if overrides:
+        from dataclasses import asdict
+        merged = {**asdict(params), **overrides}
+        params = load_params(cls.Params, merged, f"{params_file or service} with overrides")
+    return cls(params, robot=robot, name=name)
+
+
+def configure_logging(name: str, level: str = "INFO") -> None:
+    logging.basicConfig(level=level, stream=sys.stderr, format=f"%(levelname)s [{name}] %(message)s")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("service", help="service name (see `omninav services`)")
+    parser.add_argument("--params", help="YAML parameter file (ROS 1 or ROS 2 layout accepted)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override one parameter")
+    parser.add_argument("--robot", default="r1", help="robot namespace (default r1)")
+    parser.add_argument("--name", help="instance name (default: the service name)")
+    parser.add_argument("--router", help="router endpoint (default $OMNINAV_ROUTER or tcp/127.0.0.1:7447)")
+    parser.add_argument("--log-level", default="INFO")
+
+
+def main(args: argparse.Namespace) -> int:
+    configure_logging(args.name or args.service, args.log_level)
+    log = logging.getLogger("omninav.run")
+    try:
+        node = build_node(args.service, args.params, parse_overrides(args.set), args.robot, args.name)
+    except (UnknownService, ParamError, ValueError) as exc:
+        log.error("%s", exc)
+        return 2
+    runner = LiveRunner(node, args.router)
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: runner.stop_event.set())
+    log.info("started (robot %s)", args.robot)
+    runner.run()
+    log.info("stopped")
+    return 0

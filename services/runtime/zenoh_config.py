@@ -1,0 +1,69 @@
+"""Zenoh session configuration that can only ever use loopback.
+
+Zenoh's defaults listen on every interface and scout by multicast; here every session has scouting
+off, and every endpoint is checked to be tcp on 127.0.0.0/8 or ::1, or a unix socket.
+"""
+from __future__ import annotations
+
+import ipaddress
+import json
+import os
+
+import zenoh
+
+DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
+ROUTER_ENV = "OMNINAV_ROUTER"
+
+
+def router_endpoint(explicit: str | None = None) -> str:
+    """The router endpoint to use: the argument, else $OMNINAV_ROUTER, else the default."""
+    return check_loopback(explicit or os.environ.get(ROUTER_ENV) or DEFAULT_ROUTER)
+
+
+def check_loopback(endpoint: str) -> str:
+    """Return the endpoint if it is a loopback tcp or unix-socket endpoint; raise otherwise."""
+    proto, _, address = endpoint.partition("/")
+    if proto == "unixsock-stream" and address:
+        return endpoint
+    if proto != "tcp" or not address:
+        raise ValueError(f"endpoint {endpoint!r}: only tcp/127.x.x.x:PORT, tcp/[::1]:PORT or unixsock-stream/PATH")
+    host, _, port = address.rpartition(":")
+    try:
+        ip = ipaddress.ip_address(host.strip("[]"))
+    except ValueError:
+        raise ValueError(f"endpoint {endpoint!r}: host must be a loopback IP address, not a name") from None
+    if not ip.is_loopback or not port.isdigit():
+        raise ValueError(f"endpoint {endpoint!r} is not a loopback address with a port")
+    return endpoint
+
+
+def _base(mode: str) -> zenoh.Config:
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "false")
+    return conf
+
+
+def router_config(listen: str) -> zenoh.Config:
+    conf = _base("router")
+    conf.insert_json5("listen/endpoints", json.dumps([check_loopback(listen)]))
+    return conf
+
+
+def client_config(router: str | None = None) -> zenoh.Config:
+    """A client that connects to the router and waits for it (start order does not matter)."""
+    conf = _base("client")
+    conf.insert_json5("listen/endpoints", "[]")
+    conf.insert_json5("connect/endpoints", json.dumps([router_endpoint(router)]))
+    conf.insert_json5("connect/timeout_ms", "-1")
+    conf.insert_json5("connect/exit_on_failure", "false")
+    return conf
+
+
+def open_client(router: str | None = None) -> zenoh.Session:
+    return zenoh.open(client_config(router))
+
+
+def open_router(listen: str | None = None) -> zenoh.Session:
+    return zenoh.open(router_config(router_endpoint(listen)))

@@ -1,0 +1,123 @@
+import math
+
+import msgpack
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from omninav.schemas import MessageError, all_types, decode, encode, peek_type
+from omninav.schemas.codec import describe, to_wire
+from omninav.schemas.messages import Chatter, LaserScan, OccupancyGrid, Odometry, Path
+
+from strategies import struct_strategy
+
+ALL_TYPES = sorted(all_types().items())
+
+
+def assert_same(a, b):
+    assert type(a) is type(b)
+    for name in a.__slots__:
+        x, y = getattr(a, name), getattr(b, name)
+        if isinstance(x, np.ndarray):
+            assert x.dtype == y.dtype and x.shape == y.shape
+            assert np.array_equal(x, y, equal_nan=True)
+        elif hasattr(x, "__slots__"):
+            assert_same(x, y)
+        else:
+            assert x == y or (isinstance(x, float) and math.isnan(x) and math.isnan(y))
+
+
+@pytest.mark.parametrize("name,cls", ALL_TYPES)
+@settings(max_examples=40, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_every_type_round_trips_byte_for_byte(name, cls, data):
+    msg = data.draw(struct_strategy(cls))
+    payload = encode(msg)
+    back = decode(payload, cls)
+    assert_same(msg, back)
+    assert encode(back) == payload          # deterministic: the same message, the same bytes
+    assert peek_type(payload) == name
+
+
+@pytest.mark.parametrize("name,cls", ALL_TYPES)
+@settings(max_examples=25, suppress_health_check=[HealthCheck.too_slow])
+@given(data=st.data())
+def test_damaged_payloads_raise_message_error_only(name, cls, data):
+    payload = encode(data.draw(struct_strategy(cls)))
+    cut = data.draw(st.integers(0, len(payload) - 1))
+    with pytest.raises(MessageError):
+        decode(payload[:cut])
+    flip = data.draw(st.integers(0, len(payload) - 1))
+    damaged = bytearray(payload)
+    damaged[flip] ^= 0xFF
+    try:
+        decode(bytes(damaged))
+    except MessageError:
+        pass                                 # a clean refusal; anything else fails the test
+
+
+def test_arrays_decode_without_copy():
+    scan = LaserScan(ranges=np.arange(360, dtype=np.float32))
+    back = decode(encode(scan))
+    assert not back.ranges.flags.writeable   # a view over the received bytes
+    assert back.ranges.base is not None
+
+
+def wire_with(msg, **changes):
+    wire = to_wire(msg)
+    for path, value in changes.items():
+        node = wire
+        *parents, leaf = path.split("__")
+        for p in parents:
+            node = node[p]
+        node[leaf] = value
+    return msgpack.packb(wire, use_bin_type=True)
+
+
+@pytest.mark.parametrize("msg,change,field", [
+    (Chatter(), {"value": "x"}, "Chatter.value"),
+    (Chatter(), {"header__stamp_ns": 1.5}, "Chatter.header.stamp_ns"),
+    (Chatter(), {"text": 3}, "Chatter.text"),
+    (Chatter(), {"value": math.nan}, "Chatter.value"),
+    (Odometry(), {"pose__theta": math.inf}, "Odometry.pose.theta"),
+    (Path(), {"poses": {"dtype": "<f8", "shape": [2, 2], "data": bytes(32)}}, "Path.poses"),
+    (Path(), {"poses": {"dtype": "<f4", "shape": [1, 3], "data": bytes(12)}}, "Path.poses"),
+    (Path(), {"poses": {"dtype": "<f8", "shape": [1, 3], "data": bytes(5)}}, "Path.poses"),
+    (OccupancyGrid(), {"data": [1, 2, 3]}, "OccupancyGrid.data"),
+    (Chatter(), {"bogus": 1}, "Chatter"),
+])
+def test_bad_fields_are_named(msg, change, field):
+    with pytest.raises(MessageError) as err:
+        decode(wire_with(msg, **change), key="omninav/r1/x")
+    assert field in str(err.value) and "omninav/r1/x" in str(err.value)
+
+
+def test_missing_field_and_wrong_type_and_version():
+    wire = to_wire(Chatter())
+    del wire["text"]
+    with pytest.raises(MessageError, match=r"Chatter\.text: missing"):
+        decode(msgpack.packb(wire))
+    with pytest.raises(MessageError, match="expected LaserScan"):
+        decode(encode(Chatter()), LaserScan)
+    with pytest.raises(MessageError, match="version"):
+        decode(wire_with(Chatter(), _version=99))
+    with pytest.raises(MessageError, match="unknown message type"):
+        decode(msgpack.packb({"_type": "Nope", "_version": 1}))
+    for junk in (b"", b"\xc1", msgpack.packb([1, 2]), msgpack.packb("text")):
+        with pytest.raises(MessageError):
+            decode(junk)
+
+
+def test_nan_allowed_only_where_declared():
+    scan = LaserScan(ranges=np.array([1.0, np.inf, np.nan], dtype=np.float32))
+    assert np.isinf(decode(encode(scan)).ranges[1])
+    odom = Odometry(pose_covariance=np.full((3, 3), np.nan))
+    with pytest.raises(MessageError, match="pose_covariance"):
+        decode(encode(odom))
+
+
+@pytest.mark.parametrize("name,cls", ALL_TYPES)
+def test_every_type_has_a_schema(name, cls):
+    schema = describe(cls)
+    assert schema["title"] == name and "header" in schema["properties"]

@@ -1,0 +1,67 @@
+import pytest
+
+from omninav.schemas import MessageError, decode
+from omninav.schemas.messages import Chatter, Clock, Header
+from omninav.services.demo.listener import Listener, ListenerParams
+from omninav.services.runtime.node import NS_PER_S
+
+
+def capture(node):
+    out = []
+    for pub in node.outputs.values():
+        pub.sink = lambda p, payload, stamp: out.append((p.key, decode(payload)))
+    return out
+
+
+def clock(t_s):
+    return Clock(header=Header(stamp_ns=round(t_s * NS_PER_S)))
+
+
+def chatter(t_s, seq, value):
+    return Chatter(header=Header(stamp_ns=round(t_s * NS_PER_S), seq=seq), text=f"m{seq}", value=value)
+
+
+def test_listener_echoes_with_running_sum_and_timer_on_sim_time():
+    node = Listener(ListenerParams(summary_period_s=1.0, gain=2.0))
+    out = capture(node)
+    index = {inp.key: i for i, inp in enumerate(node.inputs)}
+    assert list(index) == ["omninav/sim/clock", "omninav/r1/chatter"]   # the clock goes first
+    node.process(index["omninav/sim/clock"], clock(0.0))                # timer fires at the first tick
+    node.process(index["omninav/r1/chatter"], chatter(0.5, 7, 1.0))
+    node.process(index["omninav/sim/clock"], clock(0.9))                # not due yet
+    node.process(index["omninav/r1/chatter"], chatter(0.95, 8, 0.5))
+    node.process(index["omninav/sim/clock"], clock(2.5))                # due at 1.0 (2.0 was missed): fires once
+    texts = [(k, m.text, m.value, m.header.seq, m.header.stamp_ns) for k, m in out]
+    assert texts == [
+        ("omninav/r1/echo", "summary: 0 messages", 0.0, 1, 0),
+        ("omninav/r1/echo", "echo: m7", 2.0, 2, int(0.5 * NS_PER_S)),
+        ("omninav/r1/echo", "echo: m8", 3.0, 3, int(0.95 * NS_PER_S)),
+        ("omninav/r1/echo", "summary: 2 messages", 3.0, 4, int(2.5 * NS_PER_S)),
+    ]
+    assert node.first_seq["omninav/r1/chatter"] == 7
+    node.process(index["omninav/sim/clock"], clock(3.0))                # next due was 3.0
+    assert out[-1][1].text == "summary: 2 messages" and len(out) == 5
+
+
+def test_malformed_input_is_counted_and_logged_once(caplog):
+    node = Listener()
+    node.reject("omninav/r1/chatter", MessageError("bad", field="value", type_name="Chatter"))
+    node.reject("omninav/r1/chatter", MessageError("bad again"))
+    assert node.counters["malformed/omninav/r1/chatter"] == 2
+    assert len([r for r in caplog.records if "malformed" in r.message]) == 1
+    diag = node.diagnostic()
+    assert diag.level == 1 and diag.values["malformed/omninav/r1/chatter"] == 2
+
+
+def test_publisher_refuses_the_wrong_type():
+    node = Listener()
+    with pytest.raises(TypeError, match="carries Chatter"):
+        node.echo.publish(Clock())
+
+
+def test_queryable_answers_the_last_echo():
+    node = Listener()
+    capture(node)
+    assert node.answer("omninav/r1/echo", {}) is None
+    node.process(1, chatter(0.1, 1, 4.0))
+    assert node.answer("omninav/r1/echo", {}).value == 4.0
