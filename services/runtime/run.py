@@ -45,10 +45,14 @@ def main(args: argparse.Namespace) -> int:
     except (UnknownService, ParamError, ValueError) as exc:
         log.error("%s", exc)
         return 2
+    # a service that talks to Zenoh itself (the recorder) provides run_live(router, stop_event)
     runner = LiveRunner(node, args.router)
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: runner.stop_event.set())
     log.info("started (robot %s)", args.robot)
-    runner.run()
+    if hasattr(node, "run_live"):
+        node.run_live(args.router, runner.stop_event)
+    else:
+        runner.run()
     log.info("stopped")
     return 0

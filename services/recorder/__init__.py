@@ -1,0 +1,1 @@
+"""Recording the bus to MCAP, and recovering files whose writer was killed."""

@@ -1,0 +1,1 @@
+"""Replaying recordings: live onto the bus, or deterministically into one service."""

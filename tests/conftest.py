@@ -1,0 +1,103 @@
+"""Shared fixtures: a loopback router per test and OS processes that are always stopped."""
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from omninav.services.runtime.zenoh_config import ROUTER_ENV, open_router
+
+REPO = Path(__file__).resolve().parents[1]
+SHARED_DATA = REPO.parent / "shared" / "data"
+
+
+def free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def wait_until(predicate, timeout: float = 10.0, interval: float = 0.05, what: str = "condition"):
+    """Poll until predicate() is truthy; fail the test naming `what` if it never is."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        value = predicate()
+        if value:
+            return value
+        time.sleep(interval)
+    pytest.fail(f"timed out after {timeout}s waiting for {what}")
+
+
+@pytest.fixture
+def router_endpoint():
+    """A router on a free loopback port, in this process, for the duration of one test."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    with open_router(endpoint):
+        yield endpoint
+
+
+class Processes:
+    """Starts `omninav …` as child processes (own process groups) and stops every one at the end."""
+
+    def __init__(self, tmp_path: Path, endpoint: str | None):
+        self.tmp_path, self.endpoint = tmp_path, endpoint
+        self.started: list[tuple[subprocess.Popen, Path]] = []
+
+    def omninav(self, *args: str, env: dict | None = None, cwd: Path | None = None) -> subprocess.Popen:
+        log = self.tmp_path / f"proc{len(self.started)}-{args[0]}.log"
+        full_env = {**os.environ, **({ROUTER_ENV: self.endpoint} if self.endpoint else {}), **(env or {})}
+        proc = subprocess.Popen([sys.executable, "-m", "omninav.cli.main", *args], cwd=cwd or REPO,
+                                env=full_env, stdout=open(log, "wb"), stderr=subprocess.STDOUT,
+                                start_new_session=True)
+        self.started.append((proc, log))
+        return proc
+
+    @staticmethod
+    def output(proc_log: Path) -> str:
+        return proc_log.read_text(errors="replace")
+
+    def log_of(self, proc: subprocess.Popen) -> str:
+        return next(self.output(log) for p, log in self.started if p is proc)
+
+    @staticmethod
+    def stop(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 15.0) -> int:
+        if proc.poll() is None:
+            try:
+                os.killpg(proc.pid, sig)
+            except ProcessLookupError:
+                pass
+            try:
+                proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait(5)
+        return proc.returncode
+
+    def stop_all(self) -> None:
+        for proc, _ in reversed(self.started):
+            self.stop(proc)
+            try:  # also anything it started in its group
+                os.killpg(proc.pid, signal.SIGKILL)
+            except (ProcessLookupError, PermissionError):
+                pass
+
+
+@pytest.fixture
+def processes(tmp_path, router_endpoint):
+    procs = Processes(tmp_path, router_endpoint)
+    yield procs
+    procs.stop_all()
+
+
+@pytest.fixture
+def processes_no_router(tmp_path):
+    """For commands that start their own router (omninav up)."""
+    procs = Processes(tmp_path, None)
+    yield procs
+    procs.stop_all()
