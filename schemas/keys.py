@@ -42,6 +42,7 @@ ROBOT_TOPICS: dict[str, type] = {
 # topic -> message type, for keys under omninav/sim/
 SIM_TOPICS: dict[str, type] = {
     "clock": m.Clock,
+    "movers": m.Obstacles,              # moving obstacles, for the simulated lidar
 }
 SIM_ROBOT_TOPICS: dict[str, type] = {
     "truth": m.Odometry,                # ground truth, for evaluation only: omninav/sim/<robot>/truth

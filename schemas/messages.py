@@ -132,6 +132,15 @@ class Transform:
     transform: Pose2D = field(default_factory=Pose2D)
 
 
+@message("Obstacles", 1)
+@dataclass(slots=True)
+class Obstacles:
+    """Moving obstacles as circles, published by the sim so the lidar can see them."""
+    header: Header = field(default_factory=Header)     # frame_id: world
+    circles: np.ndarray = array("<f8", (None, 3))       # x, y, radius
+    velocities: np.ndarray = array("<f8", (None, 2))    # vx, vy in the world frame
+
+
 @message("Clock", 1)
 @dataclass(slots=True)
 class Clock:
