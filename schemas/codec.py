@@ -72,7 +72,9 @@ def _encode_struct(obj: Any) -> dict:
         value = getattr(obj, f.name)
         if f.kind == "array":
             arr = np.ascontiguousarray(value, dtype=f.array.dtype)
-            out[f.name] = {"dtype": f.array.dtype, "shape": list(arr.shape), "data": arr.tobytes()}
+            # a flat byte view: msgpack copies it once into the payload, tobytes() would copy twice
+            data = memoryview(arr.reshape(-1)).cast("B") if arr.size else b""
+            out[f.name] = {"dtype": f.array.dtype, "shape": list(arr.shape), "data": data}
         elif f.kind == "struct":
             out[f.name] = _encode_struct(value)
         elif f.kind == "float":
@@ -97,79 +99,111 @@ def encode(msg: Any) -> bytes:
 
 
 # ---------------------------------------------------------------- decode
+# Each type gets a decoder built once from its plan: a closure per field, so the hot path is a
+# few type checks per field. Field paths are assembled only when something is wrong.
 
-def _fail(reason: str, path: str) -> typing.NoReturn:
-    raise MessageError(reason, field=path)
+class _Bad(Exception):
+    def __init__(self, reason: str):
+        self.reason, self.path = reason, []
 
 
-def _decode_array(raw: Any, spec: ArraySpec, path: str) -> np.ndarray:
-    if not isinstance(raw, dict) or set(raw) != {"dtype", "shape", "data"}:
-        _fail("expected an array map with dtype, shape and data", path)
-    if raw["dtype"] != spec.dtype:
-        _fail(f"dtype {raw['dtype']!r}, expected {spec.dtype!r}", path)
-    shape = raw["shape"]
-    if not isinstance(shape, list) or not all(type(n) is int and n >= 0 for n in shape):
-        _fail(f"shape {shape!r} is not a list of sizes", path)
-    if len(shape) != len(spec.shape) or any(w is not None and n != w for n, w in zip(shape, spec.shape)):
-        _fail(f"shape {tuple(shape)}, expected {spec.shape} (None = any)", path)
-    data = raw["data"]
-    if not isinstance(data, bytes):
-        _fail("array data is not binary", path)
+def _array_decoder(spec: ArraySpec):
     dtype = np.dtype(spec.dtype)
-    if len(data) != math.prod(shape) * dtype.itemsize:
-        _fail(f"{len(data)} bytes do not fill shape {tuple(shape)} of {spec.dtype}", path)
-    arr = np.frombuffer(data, dtype=dtype).reshape(shape)
-    if not spec.allow_nonfinite and dtype.kind == "f" and not np.isfinite(arr).all():
-        _fail("contains NaN or infinity", path)
-    return arr
+    ndim = len(spec.shape)
+    fixed = [(axis, n) for axis, n in enumerate(spec.shape) if n is not None]
+    check_finite = not spec.allow_nonfinite and dtype.kind == "f"
+    keys = {"dtype", "shape", "data"}
+
+    def dec(raw):
+        if type(raw) is not dict or raw.keys() != keys:
+            raise _Bad("expected an array map with dtype, shape and data")
+        if raw["dtype"] != spec.dtype:
+            raise _Bad(f"dtype {raw['dtype']!r}, expected {spec.dtype!r}")
+        shape = raw["shape"]
+        if type(shape) is not list or not all(type(n) is int and n >= 0 for n in shape):
+            raise _Bad(f"shape {shape!r} is not a list of sizes")
+        if len(shape) != ndim or any(shape[axis] != n for axis, n in fixed):
+            raise _Bad(f"shape {tuple(shape)}, expected {spec.shape} (None = any)")
+        data = raw["data"]
+        if type(data) is not bytes:
+            raise _Bad("array data is not binary")
+        if len(data) != math.prod(shape) * dtype.itemsize:
+            raise _Bad(f"{len(data)} bytes do not fill shape {tuple(shape)} of {spec.dtype}")
+        arr = np.frombuffer(data, dtype=dtype).reshape(shape)
+        if check_finite and arr.size and not np.isfinite(arr).all():
+            raise _Bad("contains NaN or infinity")
+        return arr
+
+    return dec
 
 
-def _decode_scalar(raw: Any, f: _Field, path: str) -> Any:
-    if f.kind == "float":
-        if type(raw) not in (float, int):
-            _fail(f"expected a number, got {type(raw).__name__}", path)
-        value = float(raw)
-        if not f.allow_nonfinite and not math.isfinite(value):
-            _fail(f"{value} is not finite", path)
-        return value
-    if f.kind == "int":
-        if type(raw) is not int:
-            _fail(f"expected an integer, got {type(raw).__name__}", path)
+def _float_decoder(allow_nonfinite: bool):
+    def dec(raw):
+        kind = type(raw)
+        if kind is float:
+            if not allow_nonfinite and not math.isfinite(raw):
+                raise _Bad(f"{raw} is not finite")
+            return raw
+        if kind is int:
+            return float(raw)
+        raise _Bad(f"expected a number, got {kind.__name__}")
+
+    return dec
+
+
+def _exact_decoder(kind: type, what: str):
+    def dec(raw):
+        if type(raw) is not kind:
+            raise _Bad(f"expected {what}, got {type(raw).__name__}")
         return raw
-    if f.kind == "str":
-        if type(raw) is not str:
-            _fail(f"expected a string, got {type(raw).__name__}", path)
-        return raw
-    if f.kind == "bool":
-        if type(raw) is not bool:
-            _fail(f"expected true or false, got {type(raw).__name__}", path)
-        return raw
-    if not isinstance(raw, dict) or not all(
-        type(k) is str and type(v) in (int, float, str) for k, v in raw.items()
-    ):
-        _fail("expected a map of names to numbers or strings", path)
+
+    return dec
+
+
+def _dict_decoder(raw):
+    if type(raw) is not dict or not all(type(k) is str and type(v) in (int, float, str) for k, v in raw.items()):
+        raise _Bad("expected a map of names to numbers or strings")
     return raw
 
 
-def _decode_struct(raw: Any, cls: type, path: str, skip: tuple[str, ...] = ()) -> Any:
-    if not isinstance(raw, dict):
-        _fail(f"expected a map for {cls.__name__}, got {type(raw).__name__}", path)
-    plan = _plan(cls)
-    unknown = set(raw) - {f.name for f in plan} - set(skip)
-    if unknown:
-        _fail(f"unknown field(s) {sorted(map(str, unknown))}", path)
-    values = {}
-    for f in plan:
-        sub = f"{path}.{f.name}" if path else f.name
-        if f.name not in raw:
-            _fail("missing", sub)
-        if f.kind == "array":
-            values[f.name] = _decode_array(raw[f.name], f.array, sub)
-        elif f.kind == "struct":
-            values[f.name] = _decode_struct(raw[f.name], f.struct, sub)
-        else:
-            values[f.name] = _decode_scalar(raw[f.name], f, sub)
-    return cls(**values)
+def _field_decoder(f: _Field):
+    if f.kind == "array":
+        return _array_decoder(f.array)
+    if f.kind == "struct":
+        return _struct_decoder(f.struct)
+    if f.kind == "float":
+        return _float_decoder(f.allow_nonfinite)
+    if f.kind == "dict":
+        return _dict_decoder
+    return _exact_decoder({"int": int, "str": str, "bool": bool}[f.kind],
+                          {"int": "an integer", "str": "a string", "bool": "true or false"}[f.kind])
+
+
+@cache
+def _struct_decoder(cls: type, envelope: tuple[str, ...] = ()):
+    fields = tuple((f.name, _field_decoder(f)) for f in _plan(cls))
+    expected = frozenset(name for name, _ in fields) | frozenset(envelope)
+
+    def dec(raw):
+        if type(raw) is not dict:
+            raise _Bad(f"expected a map for {cls.__name__}, got {type(raw).__name__}")
+        if raw.keys() != expected:
+            missing = [name for name, _ in fields if name not in raw]
+            if missing:
+                bad = _Bad("missing")
+                bad.path.append(missing[0])
+                raise bad
+            raise _Bad(f"unknown field(s) {sorted(map(str, set(raw) - expected))}")
+        values = []
+        for name, field_dec in fields:
+            try:
+                values.append(field_dec(raw[name]))
+            except _Bad as bad:
+                bad.path.insert(0, name)
+                raise
+        return cls(*values)
+
+    return dec
 
 
 def _unpack(data: bytes | bytearray | memoryview) -> dict:
@@ -207,9 +241,9 @@ def decode(data: bytes | bytearray | memoryview, expected: type | None = None, *
                 field=VERSION_FIELD, type_name=want_name,
             )
         try:
-            return _decode_struct(raw, cls, "", skip=(TYPE_FIELD, VERSION_FIELD))
-        except MessageError as exc:
-            raise MessageError(exc.reason, field=exc.field, type_name=want_name) from None
+            return _struct_decoder(cls, (TYPE_FIELD, VERSION_FIELD))(raw)
+        except _Bad as bad:
+            raise MessageError(bad.reason, field=".".join(bad.path), type_name=want_name) from None
     except MessageError as exc:
         if key and not exc.key:
             raise MessageError(exc.reason, field=exc.field, type_name=exc.type_name, key=key) from None

@@ -36,6 +36,13 @@ class LiveRunner:
         self._merger = StampMerger([i.synced for i in node.inputs])
         self._zpubs: dict[str, zenoh.Publisher] = {}
 
+    def stop(self) -> None:
+        """Ask the loop to finish; safe from a signal handler. The wake-up item matters: on
+        CPython 3.11 a SimpleQueue.get(timeout) interrupted by a signal can block until the next
+        put, and a source (no inputs) would never get one."""
+        self.stop_event.set()
+        self._inbox.put(("wake",))
+
     # ------------------------------------------------------------ wiring
 
     def _sink(self, pub: Publisher, payload: bytes, stamp_ns: int) -> None:
@@ -93,6 +100,8 @@ class LiveRunner:
                 next_diag = now + self.diagnostics_period_s
 
     def _handle(self, item: tuple) -> None:
+        if item[0] == "wake":
+            return
         if item[0] == "query":
             self._answer(item[1])
             return

@@ -29,6 +29,7 @@ def configure_logging(name: str, level: str = "INFO") -> None:
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("service", help="service name (see `omninav services`)")
+    parser.add_argument("--module", help="run this package.module:Class instead of a registered service")
     parser.add_argument("--params", help="YAML parameter file (ROS 1 or ROS 2 layout accepted)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override one parameter")
     parser.add_argument("--robot", default="r1", help="robot namespace (default r1)")
@@ -41,14 +42,15 @@ def main(args: argparse.Namespace) -> int:
     configure_logging(args.name or args.service, args.log_level)
     log = logging.getLogger("omninav.run")
     try:
-        node = build_node(args.service, args.params, parse_overrides(args.set), args.robot, args.name)
+        node = build_node(args.service, args.params, parse_overrides(args.set), args.robot, args.name,
+                          args.module)
     except (UnknownService, ParamError, ValueError) as exc:
         log.error("%s", exc)
         return 2
     # a service that talks to Zenoh itself (the recorder) provides run_live(router, stop_event)
     runner = LiveRunner(node, args.router)
     for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: runner.stop_event.set())
+        signal.signal(sig, lambda *_: runner.stop())
     log.info("started (robot %s)", args.robot)
     if hasattr(node, "run_live"):
         node.run_live(args.router, runner.stop_event)
