@@ -1,0 +1,1 @@
+"""The chassis service: drive kinematics and limits, wheel and follower-wheel odometry."""

@@ -1,0 +1,163 @@
+"""SE(2) pose algebra and odometry: encoder increments (and a gyro) integrated exactly into a pose.
+
+Poses are arrays (..., 3) of (x, y, theta) with theta in [-pi, pi); every helper broadcasts over
+leading axes. A "motion" is a twist times its duration, (vx*dt, vy*dt, wz*dt) in the robot frame
+at the start of the step; `se2_exp` turns it into the pose increment of driving that constant
+twist for dt (a straight line, an arc, or a sideways arc for a holonomic robot).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .kinematics import ChassisParams, Kinematics
+
+
+def wrap_angle(angle):
+    """Angles into [-pi, pi)."""
+    return np.remainder(np.asarray(angle, dtype=float) + np.pi, 2 * np.pi) - np.pi
+
+
+def compose(a, b) -> np.ndarray:
+    """a (+) b: the pose b, given in the frame of pose a, expressed in a's parent frame."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    return np.stack([a[..., 0] + c * b[..., 0] - s * b[..., 1],
+                     a[..., 1] + s * b[..., 0] + c * b[..., 1],
+                     wrap_angle(a[..., 2] + b[..., 2])], axis=-1)
+
+
+def inverse(a) -> np.ndarray:
+    """The pose whose composition with `a` is the identity: the parent frame seen from a."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    return np.stack([-c * a[..., 0] - s * a[..., 1],
+                     s * a[..., 0] - c * a[..., 1],
+                     wrap_angle(-a[..., 2])], axis=-1)
+
+
+def relative(a, b) -> np.ndarray:
+    """The pose b seen from pose a (both in one frame): inverse(a) (+) b."""
+    return compose(inverse(a), b)
+
+
+def se2_exp(motion) -> np.ndarray:
+    """Pose increment of driving the constant twist `motion / dt` for dt, from (vx, vy, wz)*dt.
+
+    x = dx sin(phi)/phi - dy (1 - cos phi)/phi, y = dx (1 - cos phi)/phi + dy sin(phi)/phi.
+    Written with sinc and the half angle, (1 - cos phi)/phi = sin(phi/2) * sinc(phi/2), neither
+    term cancels for small phi, so no separate series branch is needed near phi = 0.
+    """
+    motion = np.asarray(motion, dtype=float)
+    dx, dy, phi = motion[..., 0], motion[..., 1], motion[..., 2]
+    along = np.sinc(phi / np.pi)
+    across = np.sin(phi / 2) * np.sinc(phi / (2 * np.pi))
+    return np.stack([along * dx - across * dy, across * dx + along * dy, phi], axis=-1)
+
+
+def integrate(pose, twist, dt) -> np.ndarray:
+    """The pose after driving a constant body twist (vx, vy, wz) for dt seconds, exactly."""
+    twist = np.asarray(twist, dtype=float)
+    return compose(pose, se2_exp(twist * np.asarray(dt, dtype=float)[..., None]))
+
+
+@dataclass(frozen=True)
+class OdomEstimate:
+    stamp_ns: int
+    pose: np.ndarray               # (3,) x, y, theta in the odom frame
+    twist: np.ndarray              # (3,) vx, vy, wz in the robot frame
+    pose_covariance: np.ndarray    # (3, 3) over (x, y, theta)
+    twist_covariance: np.ndarray   # (3, 3)
+    distance: float                # m driven since the start (path length)
+    rotation: float                # rad turned since the start (sum of |dtheta|)
+
+
+class EncoderOdometry:
+    """Dead reckoning from any sensor set that maps linearly to body motion.
+
+    Each step, the encoder increments (n values, rad or ticks) and the gyro's heading change
+    (gyro_z * dt: the rate sent with a reading is the mean rate since the previous reading, as
+    an integrating IMU or a fixed-step simulation reports it) form a vector s, and
+    `sensor_matrix` (3, n + 1) maps s to the motion (vx*dt, vy*dt, wz*dt), integrated exactly.
+    The same matrix maps sensor rates to the twist, so the twist covariance is
+    sensor_matrix diag(sensor_std^2) sensor_matrix'.
+
+    The pose covariance follows the usual first-order propagation P <- F P F' + G Q G', with the
+    step's own noise Q = diag(kt d, kt d, kr |dtheta| + krd d) in the robot frame, d the path
+    length of the step: variances grow linearly with distance and turn (a random walk), so the
+    update rate hardly changes the result.
+    """
+
+    def __init__(self, sensor_matrix, sensor_std, params: ChassisParams, pose=(0.0, 0.0, 0.0)):
+        self.sensor_matrix = np.asarray(sensor_matrix, dtype=float)
+        self.n_encoders = self.sensor_matrix.shape[1] - 1
+        self.params = params
+        self.pose = compose(pose, np.zeros(3))      # a copy, heading wrapped
+        self.pose_covariance = np.zeros((3, 3))
+        sensor_var = np.asarray(sensor_std, dtype=float) ** 2
+        self.twist_covariance = (self.sensor_matrix * sensor_var) @ self.sensor_matrix.T
+        self.twist = np.zeros(3)
+        self.distance = 0.0
+        self.rotation = 0.0
+        self._last: tuple[int, np.ndarray] | None = None
+
+    def update(self, stamp_ns: int, positions, gyro_z: float = 0.0) -> OdomEstimate:
+        """Advance to the encoder positions (cumulative, not wrapped) at stamp_ns.
+
+        The first call only sets the starting readings. Raises ValueError on a wrong number of
+        positions, a non-finite value, or a stamp earlier than the previous one.
+        """
+        positions = np.asarray(positions, dtype=float)
+        if positions.shape != (self.n_encoders,):
+            raise ValueError(f"expected {self.n_encoders} encoder positions, got shape {positions.shape}")
+        if not (np.all(np.isfinite(positions)) and np.isfinite(gyro_z)):
+            raise ValueError("encoder positions and gyro rate must be finite")
+        if self._last is not None:
+            last_stamp, last_positions = self._last
+            if stamp_ns < last_stamp:
+                raise ValueError(f"stamp {stamp_ns} ns is earlier than the previous {last_stamp} ns")
+            dt = (stamp_ns - last_stamp) * 1e-9
+            sensed = np.append(positions - last_positions, gyro_z * dt)
+            self._advance(self.sensor_matrix @ sensed, dt)
+        self._last = (stamp_ns, positions.copy())
+        return OdomEstimate(stamp_ns, self.pose.copy(), self.twist.copy(), self.pose_covariance.copy(),
+                            self.twist_covariance.copy(), self.distance, self.rotation)
+
+    def _advance(self, motion: np.ndarray, dt: float) -> None:
+        p = self.params
+        step = se2_exp(motion)
+        path = float(np.hypot(motion[0], motion[1]))
+        turn = abs(float(motion[2]))
+        c, s = np.cos(self.pose[2]), np.sin(self.pose[2])
+        jac_pose = np.array([[1.0, 0.0, -s * step[0] - c * step[1]],
+                             [0.0, 1.0, c * step[0] - s * step[1]],
+                             [0.0, 0.0, 1.0]])
+        jac_step = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        noise = np.diag([p.odom_trans_var_per_m * path, p.odom_trans_var_per_m * path,
+                         p.odom_rot_var_per_rad * turn + p.odom_rot_var_per_m * path])
+        self.pose_covariance = (jac_pose @ self.pose_covariance @ jac_pose.T
+                                + jac_step @ noise @ jac_step.T)
+        self.pose = compose(self.pose, step)
+        self.distance += path
+        self.rotation += turn
+        if dt > 0:
+            self.twist = motion / dt
+
+
+def wheel_odometry(params: ChassisParams, pose=(0.0, 0.0, 0.0)) -> EncoderOdometry:
+    """Odometry from the drive wheels' encoders (rad), in the order of Kinematics.wheel_names.
+
+    Forward kinematics of the angle increments gives the motion; its heading part is blended
+    with the gyro's by odom_gyro_weight (0: wheels only, 1: gyro only — wheels of a mecanum
+    robot slip most when it turns).
+    """
+    fk = Kinematics(params).fk_matrix
+    weight = params.odom_gyro_weight
+    matrix = np.zeros((3, fk.shape[1] + 1))
+    matrix[:2, :-1] = fk[:2]
+    matrix[2, :-1] = (1.0 - weight) * fk[2]
+    matrix[2, -1] = weight
+    std = np.append(np.full(fk.shape[1], params.odom_encoder_rate_std), params.odom_gyro_std)
+    return EncoderOdometry(matrix, std, params, pose)
