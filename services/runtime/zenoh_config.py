@@ -13,6 +13,10 @@ import zenoh
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 ROUTER_ENV = "OMNINAV_ROUTER"
+# Zenoh's shared memory is on by default (a 16 MiB pool per process in /dev/shm); "off" disables it
+# for every session of a run (a mix of on and off is slower than either), e.g. where /dev/shm is small
+SHM_ENV = "OMNINAV_SHM"
+_SWITCH = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": False}
 
 
 def router_endpoint(explicit: str | None = None) -> str:
@@ -42,6 +46,11 @@ def _base(mode: str) -> zenoh.Config:
     conf.insert_json5("mode", json.dumps(mode))
     conf.insert_json5("scouting/multicast/enabled", "false")
     conf.insert_json5("scouting/gossip/enabled", "false")
+    shm = os.environ.get(SHM_ENV)
+    if shm is not None:
+        if shm.lower() not in _SWITCH:
+            raise ValueError(f"{SHM_ENV}={shm!r}: use on or off")
+        conf.insert_json5("transport/shared_memory/enabled", json.dumps(_SWITCH[shm.lower()]))
     return conf
 
 
