@@ -9,6 +9,9 @@ import sys
 BENCHES: dict[str, str] = {
     "transport": "omninav.services.runtime.bench_transport",
     "recorder": "omninav.services.recorder.bench",
+    "sim": "omninav.sim.bench",
+    "amcl": "omninav.services.localizer.bench",
+    "planner": "omninav.services.global_planner.bench",
 }
 
 

@@ -18,7 +18,11 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "echo": ("omninav.cli.introspect", "print decoded messages from a key"),
     "hz": ("omninav.cli.introspect", "measure the rate of a key"),
     "get": ("omninav.cli.introspect", "query a queryable and print the reply"),
-    "bench": ("omninav.cli.bench", "benchmarks (transport, ...)"),
+    "teleop": ("omninav.cli.teleop", "drive the robot from the keyboard"),
+    "report": ("omninav.cli.report", "draw a picture of a recording"),
+    "import": ("omninav.cli.importers", "convert CARMEN logs or ROS bags into MCAP recordings"),
+    "slam-eval": ("omninav.services.slam.evaluate", "run SLAM on a CARMEN log and score it with the relations metric"),
+    "bench": ("omninav.cli.bench", "benchmarks (transport, recorder, sim, amcl, planner, ...)"),
     "demo": ("omninav.cli.demo", "the main job: a short run of the stack, recorded and replayed"),
 }
 

@@ -10,6 +10,9 @@ SERVICES: dict[str, str] = {
     "talker": "omninav.services.demo.talker:Talker",
     "listener": "omninav.services.demo.listener:Listener",
     "recorder": "omninav.services.recorder.node:RecorderNode",
+    "sim": "omninav.sim.node:SimNode",
+    "chassis": "omninav.services.chassis.node:ChassisNode",
+    "lidar": "omninav.services.lidar.node:LidarNode",
 }
 
 
