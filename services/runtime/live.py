@@ -112,7 +112,9 @@ class LiveRunner:
         except MessageError as exc:
             self.node.reject(key, exc)
             return
-        if not self._merger.push(index, msg.header.stamp_ns, (index, msg), time.monotonic()):
+        stamp = msg.header.stamp_ns
+        in_order = self._merger.push(index, stamp, (index, msg), time.monotonic())
+        if not in_order and stamp + inp.max_delay_ns < self._merger.released_upto:
             self.node.counters[f"late/{key}"] += 1
 
     def _release(self) -> None:

@@ -32,6 +32,9 @@ class Input:
     msg_type: type
     handler: Callable[[Any], None]
     synced: bool          # others wait for this stream to pass a stamp (see merge.py)
+    # a sporadic input whose effect the node defers by this much sim time may arrive that late
+    # (after inputs stamped up to stamp + max_delay_ns) without changing the outputs
+    max_delay_ns: int = 0
 
 
 class Publisher:
@@ -92,11 +95,14 @@ class Node:
     def setup(self) -> None:
         """Declare inputs, outputs, queryables and timers."""
 
-    def subscribe(self, topic: str, handler: Callable[[Any], None], *, synced: bool = True) -> None:
+    def subscribe(self, topic: str, handler: Callable[[Any], None], *, synced: bool = True,
+                  max_delay_s: float = 0.0) -> None:
         key = self.keys.resolve(topic)
         if any(i.key == key for i in self.inputs):
             raise ValueError(f"{self.name}: {key} subscribed twice")
-        self.inputs.append(Input(key, type_for_key(key), handler, synced))
+        if max_delay_s < 0:
+            raise ValueError(f"{self.name}: max_delay_s must not be negative, got {max_delay_s}")
+        self.inputs.append(Input(key, type_for_key(key), handler, synced, round(max_delay_s * NS_PER_S)))
 
     def publisher(self, topic: str) -> Publisher:
         key = self.keys.resolve(topic)

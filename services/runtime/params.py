@@ -104,11 +104,16 @@ def load_params(cls: type, values: dict | None, source: str = "parameters") -> A
         raise ParamError(f"{source}: {exc}") from None
 
 
-def load_params_file(cls: type, path: str | Path, node_name: str = "") -> Any:
+def read_params_mapping(path: str | Path, node_name: str = "") -> dict:
+    """The flat parameter mapping of a ROS 1 or ROS 2 style YAML file."""
     data = read_yaml(path)
     if not isinstance(data, dict):
         raise ParamError(f"{path}: expected a mapping of parameter names to values")
-    return load_params(cls, unwrap_ros(data, node_name), str(path))
+    return unwrap_ros(data, node_name)
+
+
+def load_params_file(cls: type, path: str | Path, node_name: str = "") -> Any:
+    return load_params(cls, read_params_mapping(path, node_name), str(path))
 
 
 def parse_overrides(pairs: list[str]) -> dict:

@@ -7,7 +7,7 @@ import signal
 import sys
 
 from .live import LiveRunner
-from .params import ParamError, load_params, load_params_file, parse_overrides
+from .params import ParamError, load_params, parse_overrides, read_params_mapping
 from .registry import UnknownService, node_class
 
 
@@ -15,11 +15,11 @@ def build_node(service: str, params_file: str | None = None, overrides: dict | N
                robot: str = "r1", name: str | None = None, spec: str | None = None):
     """Construct a service's Node with validated parameters (raises UnknownService / ParamError)."""
     cls = node_class(service, spec)
-    params = load_params_file(cls.Params, params_file, name or service) if params_file else load_params(cls.Params, {})
-    if overrides:
-        from dataclasses import asdict
-        merged = {**asdict(params), **overrides}
-        params = load_params(cls.Params, merged, f"{params_file or service} with overrides")
+    # merge the raw mappings, not built dataclasses: a built one carries derived defaults
+    # (e.g. a lidar's angle_min from its fov) that an override must be free to change
+    values = read_params_mapping(params_file, name or service) if params_file else {}
+    source = " with overrides".join(filter(None, [params_file or service, "" if overrides else None]))
+    params = load_params(cls.Params, {**values, **(overrides or {})}, source)
     return cls(params, robot=robot, name=name)
 
 
