@@ -1,0 +1,151 @@
+"""The chassis service: wheel states in, odometry and wheel commands out.
+
+Every wheel_state (the sim's step, or a motor driver's reading) advances the wheel odometry (and
+the follower-wheel + gyro odometry) and produces the wheel command for the next interval, stamped
+with the reading's time. cmd_vel is sporadic: a command stamped t takes effect from the first
+wheel_state stamped after t + cmd_vel_delay_s, not from whichever reading happened to come next.
+That fixed delay is what makes a live run replayable: whether the command reached the node before
+or after the readings stamped in (t, t + delay] cannot change the outputs (see docs/teleop_and_report.md).
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...schemas import MessageError
+from ...schemas.messages import Header, Odometry, Pose2D, Transform, Twist, WheelCommand, WheelState
+from ..runtime.node import NS_PER_S, Node
+from .follower import follower_odometry
+from .kinematics import ChassisParams, Kinematics
+from .odometry import OdomEstimate, wheel_odometry
+
+N_FOLLOWERS = 2
+
+
+@dataclass(frozen=True)
+class ChassisNodeParams(ChassisParams):
+    """ChassisParams plus what the node needs around the core."""
+    cmd_vel_timeout_s: float = 0.5     # sim s: a command older than this is replaced by zero
+    cmd_vel_delay_s: float = 0.05      # sim s from a command's stamp until it takes effect
+    odom_frame_id: str = "odom"
+    base_frame_id: str = "base_link"
+    follower_odometry: bool = True     # also publish odom_follower (needs two follower encoders)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("cmd_vel_timeout_s", "cmd_vel_delay_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be zero or positive, got {value}")
+        if self.cmd_vel_delay_s >= self.cmd_vel_timeout_s:
+            raise ValueError(f"cmd_vel_delay_s ({self.cmd_vel_delay_s}) must be shorter than "
+                             f"cmd_vel_timeout_s ({self.cmd_vel_timeout_s}), or no command is ever fresh")
+        for name in ("odom_frame_id", "base_frame_id"):
+            if not getattr(self, name):
+                raise ValueError(f"{name} must not be empty")
+
+
+class ChassisNode(Node):
+    service = "chassis"
+    Params = ChassisNodeParams
+
+    def setup(self) -> None:
+        p = self.params
+        self.kinematics = Kinematics(p)
+        self.wheel_odom = wheel_odometry(p)
+        self.follower_odom = follower_odometry(p) if p.follower_odometry else None
+        self.odom_pub = self.publisher("odom")
+        self.tf_pub = self.publisher("tf/odom_base")
+        self.follower_pub = self.publisher("odom_follower") if p.follower_odometry else None
+        self.wheel_cmd_pub = self.publisher("wheel_cmd")
+        self.wheel_state_key = self.keys.resolve("wheel_state")
+        self.delay_ns = round(p.cmd_vel_delay_s * NS_PER_S)
+        self.timeout_ns = round(p.cmd_vel_timeout_s * NS_PER_S)
+        self.subscribe("wheel_state", self.on_wheel_state)
+        self.subscribe("cmd_vel", self.on_cmd_vel, synced=False, max_delay_s=p.cmd_vel_delay_s)
+        self.queryable("odom", lambda _params: self.last_odom)
+        self.last_odom: Odometry | None = None
+        self.pending: list[tuple[int, int, np.ndarray]] = []   # (stamp, seq, twist) not yet in effect
+        self.command: tuple[int, np.ndarray] | None = None     # (stamp, twist) in effect
+        self.previous = np.zeros(3)                            # the twist last commanded
+        self.last_stamp: int | None = None                     # of the last accepted wheel_state
+
+    # ------------------------------------------------------------ inputs
+
+    def on_cmd_vel(self, msg: Twist) -> None:
+        # sorted by (stamp, seq): the order replay feeds them in, whatever order they arrived in
+        bisect.insort(self.pending, (msg.header.stamp_ns, msg.header.seq,
+                                     np.array([msg.linear_x, msg.linear_y, msg.angular_z])),
+                      key=lambda item: item[:2])
+
+    def on_wheel_state(self, msg: WheelState) -> None:
+        problem = self._check(msg)
+        if problem:
+            self.reject(self.wheel_state_key, MessageError(problem, type_name="WheelState", key=self.wheel_state_key))
+            return
+        t = msg.header.stamp_ns
+        dt = 0.0 if self.last_stamp is None else (t - self.last_stamp) / NS_PER_S
+        self.last_stamp = t
+        odom = self.wheel_odom.update(t, msg.positions, msg.gyro_z)
+        self.last_odom = self._odometry(odom)
+        self.odom_pub.publish(self.last_odom)
+        self.tf_pub.publish(Transform(header=Header(stamp_ns=t, frame_id=self.params.odom_frame_id),
+                                      child_frame_id=self.params.base_frame_id,
+                                      transform=self.last_odom.pose))
+        if self.follower_odom is not None:
+            self.follower_pub.publish(self._odometry(self.follower_odom.update(t, msg.follower_positions, msg.gyro_z)))
+        self._command(t, dt)
+
+    def _check(self, msg: WheelState) -> str:
+        """Why this reading cannot be used, or ''."""
+        p = self.params
+        n = self.kinematics.n_wheels
+        if msg.drive != p.drive:
+            return f"drive {msg.drive!r}, but the chassis is configured for {p.drive!r} (parameter drive)"
+        if msg.positions.shape != (n,):
+            return f"positions: {msg.positions.shape[0]} wheels, a {p.drive} chassis has {n}"
+        if self.follower_odom is not None and msg.follower_positions.shape != (N_FOLLOWERS,):
+            return (f"follower_positions: {msg.follower_positions.shape[0]} encoders, follower odometry needs "
+                    f"{N_FOLLOWERS} (set follower_odometry: false for a robot without follower wheels)")
+        if self.last_stamp is not None and msg.header.stamp_ns < self.last_stamp:
+            return (f"stamp {msg.header.stamp_ns} ns is before the previous reading's {self.last_stamp} ns "
+                    "(did the sim restart? restart the chassis with it)")
+        return ""
+
+    # ------------------------------------------------------------ outputs
+
+    def _odometry(self, est: OdomEstimate) -> Odometry:
+        p = self.params
+        x, y, theta = (float(v) for v in est.pose)
+        vx, vy, wz = (float(v) for v in est.twist)
+        return Odometry(header=Header(stamp_ns=est.stamp_ns, frame_id=p.odom_frame_id),
+                        child_frame_id=p.base_frame_id, pose=Pose2D(x, y, theta),
+                        twist=Twist(header=Header(stamp_ns=est.stamp_ns, frame_id=p.base_frame_id),
+                                    linear_x=vx, linear_y=vy, angular_z=wz),
+                        pose_covariance=est.pose_covariance, twist_covariance=est.twist_covariance)
+
+    def _target(self, t: int) -> np.ndarray:
+        """The latest command in effect at t (stamped before t - delay), or zero if it is stale."""
+        while self.pending and self.pending[0][0] + self.delay_ns < t:
+            stamp, _, twist = self.pending.pop(0)
+            # a command that arrived after a newer one took effect is already superseded
+            if self.command is None or stamp >= self.command[0]:
+                self.command = (stamp, twist)
+        if self.command is None or t - self.command[0] > self.timeout_ns:
+            return np.zeros(3)
+        return self.command[1]
+
+    def _command(self, t: int, dt: float) -> None:
+        limited = self.kinematics.limit(self._target(t), self.previous, dt)
+        self.previous = limited.twist
+        if limited.dropped_vy:
+            self.counters["dropped_vy"] += 1
+        if limited.saturation < 1.0:
+            self.counters["saturated"] += 1
+        if limited.accel_limited:
+            self.counters["accel_limited"] += 1
+        self.wheel_cmd_pub.publish(WheelCommand(header=Header(stamp_ns=t, frame_id=self.params.base_frame_id),
+                                                drive=self.params.drive, velocities=limited.wheels))

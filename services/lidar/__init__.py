@@ -1,0 +1,1 @@
+"""The lidar service: a simulated 2-D laser scanner over the sim's ground truth and world."""

@@ -1,0 +1,133 @@
+"""omninav report: a synthetic recording (truth, odom, follower, scans, movers, sim diagnostic)
+drawn into a PNG, the summary figures checked against the motion, bad files refused clearly."""
+import numpy as np
+import pytest
+
+from omninav.cli.main import main
+from omninav.cli.report import in_world_frame, load_run, summarize
+from omninav.schemas import encode
+from omninav.schemas.messages import Diagnostic, Header, Obstacles, Odometry, Pose2D
+from omninav.services.chassis.odometry import integrate
+from omninav.services.recorder.mcap_io import RecordingWriter
+from omninav.sim.raycast import LidarParams, make_scan, scan
+from omninav.sim.world import load_world, world_path
+
+from conftest import SHARED_DATA
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+DT, SECONDS = 0.01, 6.0
+TRUE_TWIST, ODOM_TWIST = np.array([0.5, 0.0, 0.2]), np.array([0.5, 0.0, 0.21])   # odometry over-turns
+START = np.array([1.2, 1.0, 0.0])
+
+
+def odometry(t_ns, frame, pose, seq):
+    return Odometry(header=Header(stamp_ns=t_ns, frame_id=frame, seq=seq), pose=Pose2D(*map(float, pose)))
+
+
+def write_run(path, *, world="room", diagnostic=True, collisions=2, truth=True):
+    steps = round(SECONDS / DT)
+    times = np.arange(steps + 1) * DT
+    true_poses = integrate(START, TRUE_TWIST, times)
+    odom_poses = integrate(np.zeros(3), ODOM_TWIST, times)
+    follower_poses = integrate(np.zeros(3), TRUE_TWIST * 1.01, times)
+    world_obj = load_world(world_path(world))
+    lidar = LidarParams(noise_std=0.0)
+    with RecordingWriter(path) as writer:
+        for k, t in enumerate(times):
+            t_ns = round(t * 1e9)
+            tracks = [("omninav/r1/odom", "odom", odom_poses), ("omninav/r1/odom_follower", "odom", follower_poses)]
+            for key, frame, poses in tracks + ([("omninav/sim/r1/truth", "world", true_poses)] if truth else []):
+                writer.write(key, "Odometry", encode(odometry(t_ns, frame, poses[k], k + 1)), k + 1, t_ns, t_ns)
+            mover = np.array([[6.0 + np.cos(t), 4.0 + np.sin(t), 0.3]])
+            writer.write("omninav/sim/movers", "Obstacles",
+                         encode(Obstacles(header=Header(stamp_ns=t_ns, seq=k + 1), circles=mover,
+                                          velocities=np.zeros((1, 2)))), k + 1, t_ns, t_ns)
+            if k % 50 == 0:
+                msg = make_scan(lidar, scan(world_obj, true_poses[k], mover, lidar, None), t_ns)
+                msg.header.seq = k // 50 + 1
+                writer.write("omninav/r1/scan", "LaserScan", encode(msg), msg.header.seq, t_ns, t_ns)
+            if diagnostic and k % 100 == 0:
+                diag = Diagnostic(header=Header(stamp_ns=t_ns, seq=k // 100 + 1), name="sim",
+                                  values={"world": str(world_path(world)), "collisions": collisions if k else 0,
+                                          "drive": "mecanum", "min_clearance_m": 0.4})
+                writer.write("omninav/r1/diagnostics/sim", "Diagnostic", encode(diag), diag.header.seq, t_ns, t_ns)
+    return true_poses, odom_poses
+
+
+def is_png(path):
+    data = path.read_bytes()
+    return data[:8] == PNG_MAGIC and len(data) > 10_000
+
+
+def test_the_report_draws_a_run_and_sums_it_up(tmp_path, capsys):
+    recording = tmp_path / "run.mcap"
+    true_poses, odom_poses = write_run(recording)
+    out = tmp_path / "pictures" / "run.png"
+    assert main(["report", str(recording), "-o", str(out)]) == 0
+    assert is_png(out)
+    printed = capsys.readouterr().out
+    assert "room" in printed and "2 collisions" in printed and "6.0 s" in printed
+
+    run = load_run(recording)
+    summary = summarize(run)
+    # the aligned odometry starts on the truth, so it ends where its own twist takes the true start
+    expected_end = integrate(START, ODOM_TWIST, SECONDS)
+    assert np.allclose(in_world_frame(run.odom, run.truth).poses[-1], expected_end, atol=1e-9)
+    assert summary.odom_error_m == pytest.approx(np.hypot(*(expected_end[:2] - true_poses[-1][:2])), rel=1e-9)
+    assert summary.odom_heading_error_rad == pytest.approx(0.01 * SECONDS, rel=1e-6)
+    assert summary.distance_m == pytest.approx(0.5 * SECONDS, rel=1e-4)
+    assert summary.collisions == 2 and summary.duration_s == pytest.approx(SECONDS)
+    assert len(run.scans) == 13 and run.mover_circles.shape == (len(true_poses), 1, 3)
+
+
+def test_without_a_world_only_the_data_is_drawn(tmp_path, capsys):
+    recording = tmp_path / "run.mcap"
+    write_run(recording, diagnostic=False)
+    out = tmp_path / "run.png"
+    assert main(["report", str(recording), "-o", str(out)]) == 0
+    assert is_png(out)
+    captured = capsys.readouterr()
+    assert "drawing only the data" in captured.err and "collisions: unknown" in captured.out
+
+
+def test_a_recording_without_truth_is_drawn_from_its_odometry(tmp_path, capsys):
+    recording = tmp_path / "robot.mcap"
+    write_run(recording, diagnostic=False, truth=False)
+    out = tmp_path / "robot.png"
+    assert main(["report", str(recording), "-o", str(out)]) == 0
+    assert is_png(out)
+    summary = summarize(load_run(recording))
+    assert summary.odom_error_m is None and summary.distance_m == pytest.approx(0.5 * SECONDS, rel=1e-4)
+
+
+@pytest.mark.skipif(not (SHARED_DATA / "maps" / "willow-full-0.05.yaml").is_file(), reason="shared map data absent")
+def test_a_map_world_is_drawn_from_its_grid(tmp_path):
+    recording = tmp_path / "run.mcap"
+    write_run(recording, diagnostic=False)
+    out = tmp_path / "willow.png"
+    assert main(["report", str(recording), "-o", str(out), "--world", "willow"]) == 0
+    assert is_png(out)
+
+
+def test_missing_damaged_and_wrong_inputs_fail_clearly(tmp_path, capsys):
+    out = tmp_path / "x.png"
+    assert main(["report", str(tmp_path / "nosuch.mcap"), "-o", str(out)]) == 2
+    assert "nosuch.mcap: no such recording" in capsys.readouterr().err
+
+    recording = tmp_path / "run.mcap"
+    write_run(recording)
+    data = recording.read_bytes()
+    damaged = tmp_path / "damaged.mcap"
+    damaged.write_bytes(data[: len(data) // 2])
+    assert main(["report", str(damaged), "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "not a readable MCAP recording" in err and f"omninav recover {damaged}" in err
+    assert damaged.read_bytes() == data[: len(data) // 2]          # the recording is left as it was
+
+    assert main(["report", str(recording), "-o", str(out), "--world", str(tmp_path / "none.yaml")]) == 2
+    assert "--world" in capsys.readouterr().err
+    assert main(["report", str(recording), "-o", str(recording)]) == 2
+    assert "is the recording itself" in capsys.readouterr().err
+    assert main(["report", str(recording), "-o", str(out), "--robot", "r2"]) == 2
+    assert "nothing to draw for robot 'r2'" in capsys.readouterr().err
+    assert not out.exists()
