@@ -1,0 +1,105 @@
+"""The `sim` service: steps the physics at dt × 1/rate of wall time and publishes what happened.
+
+A source (pace_s/tick): each tick advances one step and publishes, all stamped with the new sim
+time, the robot's wheel states, the ground truth, the movers and, last, the Clock — so whoever
+sees the clock at t has been sent everything stamped t. Wheel commands are a sporadic input:
+the sim applies whichever command has arrived by the time it steps.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..schemas.messages import Clock, Diagnostic, Obstacles, Odometry, Pose2D, Twist, WheelCommand, WheelState
+from ..services.runtime.node import NS_PER_S, Node
+from .physics import Readings, SimParams, Simulation
+from .world import WorldError, load_world, shipped_worlds, world_path
+
+
+@dataclass(frozen=True)
+class SimNodeParams(SimParams):
+    world: str = "room"           # a shipped world's name or a world file's path
+    rate: float = 1.0             # sim seconds per wall second
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not self.rate > 0:
+            raise ValueError(f"rate must be positive, got {self.rate}")
+
+
+def open_world(name_or_path: str):
+    """Load the world a parameter names; a clear WorldError if there is no such world."""
+    path = world_path(name_or_path)
+    if not path.is_file():
+        raise WorldError(f"world {name_or_path!r}: no such file {path} "
+                         f"(shipped worlds: {', '.join(shipped_worlds())})")
+    return load_world(path)
+
+
+class SimNode(Node):
+    service = "sim"
+    Params = SimNodeParams
+
+    def setup(self) -> None:
+        p = self.params
+        self.world = open_world(p.world)
+        self.sim = Simulation(self.world, p)
+        self.step_ns = round(p.dt * NS_PER_S)
+        self.wheel_state = self.publisher("wheel_state")
+        self.truth = self.publisher("sim/truth")
+        self.movers = self.publisher("sim/movers")
+        self.clock = self.publisher("sim/clock")
+        self.command_key = self.keys.resolve("wheel_cmd")
+        self.subscribe("wheel_cmd", self.on_wheel_cmd, synced=False)
+        self.queryable("sim/truth", lambda _params: self.last_truth)
+        self.last_truth = self._truth(self.sim.pose, np.zeros(3))
+        self._logged_problems: set[str] = set()
+
+    def pace_s(self) -> float:
+        return self.params.dt / self.params.rate
+
+    def on_wheel_cmd(self, msg: WheelCommand) -> None:
+        wanted = self.sim.command.size
+        if msg.drive != self.sim.drive or msg.velocities.shape != (wanted,):
+            problem = (f"wheel command for a {msg.drive} drive with {msg.velocities.size} wheels rejected: "
+                       f"the simulated robot is a {self.sim.drive} drive with {wanted} wheels")
+            self.counters[f"rejected/{self.command_key}"] += 1
+            if problem not in self._logged_problems:
+                self._logged_problems.add(problem)
+                self.log.warning("%s (further ones only counted)", problem)
+            return
+        self.sim.set_wheel_command(msg.velocities)
+
+    def tick(self) -> None:
+        r = self.sim.step()
+        self.now_ns = self.sim.steps * self.step_ns
+        self.wheel_state.publish(self._wheel_state(r))
+        self.last_truth = self._truth(r.pose, r.twist)
+        self.truth.publish(self.last_truth)
+        self.movers.publish(Obstacles(header=self.header("world"), circles=r.mover_circles,
+                                      velocities=r.mover_velocities))
+        self.clock.publish(Clock(header=self.header(), rate=self.params.rate))
+
+    def _wheel_state(self, r: Readings) -> WheelState:
+        return WheelState(header=self.header("base_link"), drive=self.sim.drive, positions=r.encoder_positions,
+                          velocities=r.wheel_speeds, follower_positions=r.follower_positions, gyro_z=r.gyro_z)
+
+    def _truth(self, pose: np.ndarray, twist: np.ndarray) -> Odometry:
+        x, y, theta = (float(v) for v in pose)
+        vx, vy, wz = (float(v) for v in twist)
+        return Odometry(header=self.header("world"), child_frame_id="base_link", pose=Pose2D(x, y, theta),
+                        twist=Twist(header=self.header("base_link"), linear_x=vx, linear_y=vy, angular_z=wz),
+                        pose_covariance=np.zeros((3, 3)), twist_covariance=np.zeros((3, 3)))
+
+    def diagnostic(self) -> Diagnostic:
+        diag = super().diagnostic()
+        diag.values.update(collisions=self.sim.collisions, contact_steps=self.sim.contact_steps,
+                           min_clearance_m=self.sim.min_clearance, world=str(self.world.source),
+                           drive=self.sim.drive)
+        rejected = sorted(k for k in self.counters if k.startswith("rejected/"))
+        if rejected:
+            diag.level = max(diag.level, 1)
+            note = "rejected wheel commands: " + ", ".join(rejected)
+            diag.message = note if diag.message == "ok" else f"{diag.message}; {note}"
+        return diag
