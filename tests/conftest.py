@@ -5,6 +5,7 @@ import os
 import signal
 import socket
 import subprocess
+import textwrap
 import sys
 import time
 from pathlib import Path
@@ -12,6 +13,8 @@ from pathlib import Path
 import pytest
 
 from omninav.services.runtime.zenoh_config import ROUTER_ENV, open_router
+
+from launching import processes_using
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
@@ -101,3 +104,23 @@ def processes_no_router(tmp_path):
     procs = Processes(tmp_path, None)
     yield procs
     procs.stop_all()
+
+
+@pytest.fixture
+def endpoint():
+    """A free loopback endpoint for `up`; afterwards nothing that used it may survive."""
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    yield endpoint
+    for pid in processes_using(endpoint):  # only if a test failed half-way: never leave processes
+        os.kill(pid, signal.SIGKILL)
+
+
+@pytest.fixture
+def up(endpoint, processes_no_router, tmp_path):
+    """Start `omninav up` on a compose text; `processes_no_router` stops it at the end."""
+    def start(compose_text: str, *extra: str, env: dict | None = None):
+        compose = tmp_path / "compose.yaml"
+        compose.write_text(textwrap.dedent(compose_text))
+        return processes_no_router.omninav("up", str(compose), "--router", endpoint, *extra, env=env)
+    start.procs = processes_no_router
+    return start

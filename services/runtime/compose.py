@@ -1,0 +1,161 @@
+"""Compose files: which services `omninav up` starts, in which order, with which parameters.
+
+Loading validates everything that can be checked without starting a process — service names,
+module paths, parameter files and every parameter against the node's Params dataclass — so a
+broken file is one clear error naming the file and the key, and nothing is started. See
+docs/compose.md for the format.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from ...schemas.keys import DEFAULT_ROBOT, KeyLayout
+from .node import Node
+from .params import ParamError, load_params, load_params_file, read_yaml, unwrap_ros
+from .registry import UnknownService, node_class
+from .zenoh_config import check_loopback
+
+RESTART_POLICIES = ("no", "on-failure", "always")
+TOP_KEYS = ("router", "robot", "services")
+SERVICE_KEYS = ("name", "service", "module", "params", "params_file", "robot", "restart", "max_restarts")
+
+
+class ComposeError(ValueError):
+    """A compose file that cannot be used; the message names the file and the key."""
+
+
+@dataclass(frozen=True)
+class ServiceSpec:
+    name: str                 # instance name: log prefix, diagnostics key, ROS node name in params files
+    service: str | None       # a name in the registry, or
+    module: str | None        # "package.module:Class" for a Node class that is not registered
+    params: dict[str, Any]    # the effective mapping (params_file, then inline params), validated
+    robot: str
+    restart: str              # one of RESTART_POLICIES
+    max_restarts: int | None  # None: no limit
+
+
+@dataclass(frozen=True)
+class Compose:
+    path: Path
+    router: str | None        # None: $OMNINAV_ROUTER or the default
+    robot: str
+    services: tuple[ServiceSpec, ...]
+
+
+def load_compose(path: str | Path) -> Compose:
+    path = Path(path)
+    try:
+        data = read_yaml(path)
+    except ParamError as exc:
+        raise ComposeError(str(exc)) from None
+    if not isinstance(data, dict):
+        raise ComposeError(f"{path}: expected a mapping with a 'services' list")
+    _no_unknown_keys(data, TOP_KEYS, f"{path}")
+
+    router = data.get("router")
+    if router is not None:
+        if not isinstance(router, str):
+            raise ComposeError(f"{path}: router must be an endpoint string such as tcp/127.0.0.1:7447")
+        try:
+            check_loopback(router)
+        except ValueError as exc:
+            raise ComposeError(f"{path}: router: {exc}") from None
+    robot = _robot(data.get("robot", DEFAULT_ROBOT), f"{path}: robot")
+
+    entries = data.get("services")
+    if not isinstance(entries, list) or not entries:
+        raise ComposeError(f"{path}: services must be a non-empty list")
+    services: list[ServiceSpec] = []
+    for index, entry in enumerate(entries):
+        spec = _service(entry, f"{path}: services[{index}]", path.parent, robot)
+        if any(s.name == spec.name for s in services):
+            raise ComposeError(f"{path}: services[{index}]: duplicate name {spec.name!r}")
+        services.append(spec)
+    return Compose(path, router, robot, tuple(services))
+
+
+def _service(entry: Any, where: str, base: Path, default_robot: str) -> ServiceSpec:
+    if not isinstance(entry, dict):
+        raise ComposeError(f"{where}: expected a mapping with 'service' or 'module'")
+    _no_unknown_keys(entry, SERVICE_KEYS, where)
+    service, module = entry.get("service"), entry.get("module")
+    if (service is None) == (module is None):
+        raise ComposeError(f"{where}: give exactly one of 'service' (a registered name) or 'module' (package.module:Class)")
+    for key in ("service", "module", "name", "params_file"):
+        if key in entry and not isinstance(entry[key], str):
+            raise ComposeError(f"{where}.{key}: must be a string, got {entry[key]!r}")
+    if module is not None and (module.count(":") != 1 or not all(module.split(":"))):
+        raise ComposeError(f"{where}.module: {module!r} is not 'package.module:Class'")
+
+    name = entry.get("name", service)
+    if name is None:
+        raise ComposeError(f"{where}: a 'module' service needs a 'name'")
+    try:
+        KeyLayout(default_robot).diagnostics(name)  # the name becomes a key segment
+    except ValueError as exc:
+        raise ComposeError(f"{where}.name: {exc}") from None
+    where = f"{where} ({name})"
+
+    try:
+        cls = node_class(service or name, module)
+    except UnknownService as exc:
+        raise ComposeError(f"{where}: {exc}") from None
+    except Exception as exc:  # a user's module that raises while importing (SyntaxError, ...)
+        raise ComposeError(f"{where}: importing {module or service} failed: {type(exc).__name__}: {exc}") from None
+    if not (isinstance(cls, type) and issubclass(cls, Node)):
+        raise ComposeError(f"{where}.module: {module} is not a Node class")
+
+    params = _params(entry, where, base, name, cls.Params)
+    robot = _robot(entry.get("robot", default_robot), f"{where}.robot")
+
+    restart = entry.get("restart", "on-failure")
+    if restart is False:  # YAML 1.1 reads an unquoted `no` as false
+        restart = "no"
+    if restart not in RESTART_POLICIES:
+        raise ComposeError(f"{where}.restart: {restart!r} is not one of {list(RESTART_POLICIES)}")
+    max_restarts = entry.get("max_restarts")
+    if max_restarts is not None and (isinstance(max_restarts, bool) or not isinstance(max_restarts, int)
+                                     or max_restarts < 0):
+        raise ComposeError(f"{where}.max_restarts: must be a whole number >= 0, got {max_restarts!r}")
+
+    return ServiceSpec(name, service, module, params, robot, restart, max_restarts)
+
+
+def _params(entry: dict, where: str, base: Path, name: str, params_type: type) -> dict:
+    """File parameters overridden by inline ones, validated against the node's Params."""
+    merged: dict[str, Any] = {}
+    if "params_file" in entry:
+        file = base / entry["params_file"]
+        try:
+            load_params_file(params_type, file, name)
+            merged = unwrap_ros(read_yaml(file), name)
+        except ParamError as exc:
+            raise ComposeError(f"{where}.params_file: {exc}") from None
+    inline = entry.get("params") or {}
+    if not isinstance(inline, dict):
+        raise ComposeError(f"{where}.params: must be a mapping of parameter names to values")
+    merged = {**merged, **inline}
+    try:
+        load_params(params_type, merged, f"{where}.params")
+    except ParamError as exc:
+        raise ComposeError(str(exc)) from None
+    return merged
+
+
+def _robot(value: Any, where: str) -> str:
+    if not isinstance(value, str):
+        raise ComposeError(f"{where}: must be a string, got {value!r}")
+    try:
+        KeyLayout(value)
+    except ValueError as exc:
+        raise ComposeError(f"{where}: {exc}") from None
+    return value
+
+
+def _no_unknown_keys(mapping: dict, known: tuple[str, ...], where: str) -> None:
+    unknown = sorted(map(str, set(mapping) - set(known)))
+    if unknown:
+        raise ComposeError(f"{where}: unknown key(s) {unknown}; known: {list(known)}")
