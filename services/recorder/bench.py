@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import socket
 import statistics
 import subprocess
 import sys
@@ -26,7 +25,7 @@ from ...schemas.codec import encode
 from ...schemas.keys import KeyLayout
 from ...schemas.messages import Chatter, Header
 from ...schemas.registry import type_info
-from ..runtime.zenoh_config import open_client, open_router
+from ..runtime.zenoh_config import free_loopback_endpoint, open_client, open_router
 from .node import RecorderNode, RecorderParams
 
 KEY = KeyLayout().robot("chatter")
@@ -127,17 +126,11 @@ def reference_run(router: str, n: int) -> tuple[float, int]:
             sub.undeclare()
 
 
-def _free_endpoint() -> str:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
-
-
 def main(args: argparse.Namespace) -> int:
     if args.messages <= 0 or args.repeats <= 0:
         print("--messages and --repeats must be positive", file=sys.stderr)
         return 2
-    router = _free_endpoint()
+    router = free_loopback_endpoint()
     recorded, reference = [], []
     with open_router(router), tempfile.TemporaryDirectory() as tmp:
         for i in range(args.repeats):

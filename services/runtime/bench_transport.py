@@ -12,7 +12,6 @@ import argparse
 import importlib.metadata
 import json
 import queue
-import socket
 import subprocess
 import sys
 import threading
@@ -29,7 +28,7 @@ from ...schemas.codec import decode, encode
 from ...schemas.keys import KeyLayout
 from ...schemas.messages import Chatter, Header, LaserScan, MapMetaData, OccupancyGrid
 from ...schemas.registry import type_info
-from .zenoh_config import client_config, open_client, open_router
+from .zenoh_config import client_config, free_loopback_endpoint, open_client, open_router
 
 BEAMS = 360
 GRID_CELLS = 2000
@@ -250,12 +249,6 @@ class Client:
             handle.undeclare()
 
 
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _start_peer(router: str) -> subprocess.Popen:
     peer = subprocess.Popen(
         [sys.executable, "-m", "omninav.cli.bench", "transport", "--role", "peer", "--router", router],
@@ -329,7 +322,7 @@ def measure(client: Client, size: BenchSize) -> dict:
 
 
 def run_bench(size: BenchSize) -> dict:
-    router = f"tcp/127.0.0.1:{_free_port()}"
+    router = free_loopback_endpoint()
     with open_router(router):
         peer = _start_peer(router)
         try:

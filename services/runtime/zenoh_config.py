@@ -8,6 +8,7 @@ from __future__ import annotations
 import ipaddress
 import json
 import os
+import socket
 
 import zenoh
 
@@ -22,6 +23,13 @@ _SWITCH = {"on": True, "1": True, "true": True, "off": False, "0": False, "false
 def router_endpoint(explicit: str | None = None) -> str:
     """The router endpoint to use: the argument, else $OMNINAV_ROUTER, else the default."""
     return check_loopback(explicit or os.environ.get(ROUTER_ENV) or DEFAULT_ROUTER)
+
+
+def free_loopback_endpoint() -> str:
+    """A tcp endpoint on 127.0.0.1 with a port that is free right now (for benches and demos)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
 
 
 def check_loopback(endpoint: str) -> str:
