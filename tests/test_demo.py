@@ -1,0 +1,12 @@
+"""`omninav demo` (what `make demo` runs) completes: recorded, replayed byte for byte, drawn."""
+from omninav.services.recorder.mcap_io import read_records
+
+
+def test_demo_runs_records_replays_and_draws(processes_no_router, tmp_path):
+    out = tmp_path / "demo"
+    demo = processes_no_router.omninav("demo", "-o", str(out), "--route", "0.3,0,0,2;0,0.2,0,1")
+    assert demo.wait(300) == 0, processes_no_router.log_of(demo)
+    log = processes_no_router.log_of(demo)
+    assert "replay run.mcap --into chassis --compare\n   ok" in log
+    assert {"omninav/r1/scan", "omninav/r1/odom"} <= {r.key for r in read_records(out / "run.mcap")}
+    assert (out / "run.png").read_bytes()[:4] == b"\x89PNG"
