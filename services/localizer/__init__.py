@@ -1,0 +1,1 @@
+"""AMCL localization on a known map: the pure core (params, motion, sensor, filter) and its bench."""
