@@ -1,0 +1,373 @@
+"""Costmap parameters with ROS costmap_2d's names and defaults, and a loader for ROS parameter files.
+
+Names and defaults are those of ROS 1 noetic costmap_2d (Costmap2DROS, StaticLayer, ObstacleLayer,
+InflationLayer). ROS parameter files load unchanged:
+
+- ROS 1 move_base layout: a common file (flat, loaded into both costmaps) plus files that nest
+  the costmap's own values under `global_costmap:` / `local_costmap:`.
+- Hydro and later `plugins: [{name: ..., type: costmap_2d::...}]` with one section per plugin
+  name, or the pre-Hydro layout without `plugins` (static layer when `static_map: true`, then the
+  obstacle and inflation layers, fed from the costmap-level values), exactly as Costmap2DROS
+  decides.
+- ROS 2 wrapping (`global_costmap: global_costmap: ros__parameters:`) and Nav2's plugin list of
+  names whose section gives the type as `plugin:`.
+
+ROS 1 quirks kept on purpose, so a file means here what it meant on a ROS robot: a value given at
+the costmap level is copied into every plugin of the matching type and wins over that plugin's own
+(Costmap2DROS::copyParentParameters); an observation source's obstacle_range and raytrace_range are
+searched upwards (source, layer, costmap, then 2.5 / 3.0 m).
+
+Names ROS accepts that mean nothing for a 2-D laser costmap (voxel settings, obstacle heights,
+topic wiring handled by the node) are listed in IGNORED and accepted without effect; anything else
+unknown is an error naming the key and the file.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Union
+
+import yaml
+
+from ..runtime.params import ParamError, load_params, read_yaml
+
+COSTMAP_NAMES = ("global_costmap", "local_costmap")
+DEFAULT_OBSTACLE_RANGE = 2.5   # m, ObstacleLayer's fallback when no level sets obstacle_range
+DEFAULT_RAYTRACE_RANGE = 3.0   # m
+
+# Accepted for compatibility, no effect here (why, in docs/costmap_and_planner.md).
+IGNORED = {
+    "costmap": {"map_type", "publish_voxel_map", "origin_z", "z_resolution", "z_voxels",
+                "unknown_threshold", "mark_threshold", "footprint_topic", "published_footprint_topic",
+                "use_sim_time", "max_obstacle_height", "map_vis_z"},
+    "obstacle": {"max_obstacle_height", "publish_voxel_map", "origin_z", "z_resolution", "z_voxels",
+                 "unknown_threshold", "mark_threshold", "transform_tolerance", "footprint_scale"},
+    "source": {"min_obstacle_height", "max_obstacle_height", "expected_update_rate"},
+    "layer": {"use_sim_time"},
+}
+# Nav2 spells two observation-source ranges differently.
+SOURCE_ALIASES = {"obstacle_max_range": "obstacle_range", "raytrace_max_range": "raytrace_range"}
+
+
+def _finite_at_least(owner: str, name: str, value: float, low: float, strict: bool = False) -> None:
+    if not math.isfinite(value) or value < low or (strict and value == low):
+        relation = ">" if strict else "≥"
+        raise ValueError(f"{owner}: {name} must be {relation} {low}, got {value}")
+
+
+@dataclass(frozen=True)
+class ObservationSource:
+    """One sensor of an obstacle layer (ROS: the section named in observation_sources)."""
+    name: str
+    topic: str = ""                     # ROS default: the source's name
+    sensor_frame: str = ""              # "" = the frame the scan's header names
+    data_type: str = "LaserScan"        # only laser scans reach this costmap (ROS default PointCloud)
+    marking: bool = True
+    clearing: bool = False
+    obstacle_range: float = DEFAULT_OBSTACLE_RANGE   # m, mark hits nearer than this
+    raytrace_range: float = DEFAULT_RAYTRACE_RANGE   # m, clear free space out to this
+    inf_is_valid: bool = False          # +inf readings clear out to range_max
+    observation_persistence: float = 0.0  # s; 0 keeps only the latest scan
+
+    def __post_init__(self):
+        if not self.topic:
+            object.__setattr__(self, "topic", self.name)
+        if self.data_type != "LaserScan":
+            raise ValueError(f"observation source {self.name!r}: data_type {self.data_type!r} is not "
+                             "supported (only LaserScan)")
+        for key in ("obstacle_range", "raytrace_range", "observation_persistence"):
+            _finite_at_least(f"observation source {self.name!r}", key, getattr(self, key), 0.0)
+
+
+@dataclass(frozen=True)
+class StaticLayerParams:
+    name: str = "static_layer"
+    enabled: bool = True
+    map_topic: str = "map"
+    first_map_only: bool = False
+    subscribe_to_updates: bool = False
+    track_unknown_space: bool = True    # map's unknown cells stay NO_INFORMATION
+    use_maximum: bool = False           # combine by max instead of overwriting
+    lethal_cost_threshold: int = 100    # map values at or above are lethal
+    unknown_cost_value: int = -1        # the map value meaning unknown
+    trinary_costmap: bool = True        # everything below lethal is free (else scaled)
+
+    def __post_init__(self):
+        if not 0 <= self.lethal_cost_threshold <= 100:
+            raise ValueError(f"{self.name}: lethal_cost_threshold must be within 0..100, "
+                             f"got {self.lethal_cost_threshold}")
+
+
+@dataclass(frozen=True)
+class ObstacleLayerParams:
+    name: str = "obstacle_layer"
+    enabled: bool = True
+    track_unknown_space: bool | None = None   # None: the costmap's track_unknown_space
+    footprint_clearing_enabled: bool = True
+    combination_method: int = 1               # 0 overwrite, 1 maximum
+    observation_sources: tuple[ObservationSource, ...] = ()
+
+    def __post_init__(self):
+        if self.combination_method not in (0, 1):
+            raise ValueError(f"{self.name}: combination_method must be 0 (overwrite) or 1 (maximum), "
+                             f"got {self.combination_method}")
+        names = [s.name for s in self.observation_sources]
+        if len(set(names)) != len(names):
+            raise ValueError(f"{self.name}: observation source named twice in {names}")
+
+
+@dataclass(frozen=True)
+class InflationLayerParams:
+    name: str = "inflation_layer"
+    enabled: bool = True
+    inflation_radius: float = 0.55       # m
+    cost_scaling_factor: float = 10.0    # 1/m, exponential decay beyond the inscribed radius
+    inflate_unknown: bool = False        # let inflation overwrite unknown cells below inscribed cost
+
+    def __post_init__(self):
+        _finite_at_least(self.name, "inflation_radius", self.inflation_radius, 0.0)
+        _finite_at_least(self.name, "cost_scaling_factor", self.cost_scaling_factor, 0.0)
+
+
+@dataclass(frozen=True)
+class KeepoutLayerParams:
+    """Keepout zones and speed limits from mask images (map_server YAML files, in the map frame),
+    after Nav2's keepout and speed filters. Keepout cells (mask value ≥ 100) are lethal; a speed
+    mask value v in 1..100 limits the speed to speed_limit_base + speed_limit_multiplier·v
+    (percent of the maximum speed, or m/s when speed_limit_percentage is false); 0 and unknown
+    cells have no limit."""
+    name: str = "keepout_layer"
+    enabled: bool = True
+    mask: str = ""                        # map YAML of the keepout mask ("" = none)
+    speed_limit_mask: str = ""            # map YAML of the speed mask ("" = none)
+    speed_limit_base: float = 0.0
+    speed_limit_multiplier: float = 1.0
+    speed_limit_percentage: bool = True
+
+    def __post_init__(self):
+        for key in ("speed_limit_base", "speed_limit_multiplier"):
+            if not math.isfinite(getattr(self, key)):
+                raise ValueError(f"{self.name}: {key} must be finite")
+
+
+LayerParams = Union[StaticLayerParams, ObstacleLayerParams, InflationLayerParams, KeepoutLayerParams]
+
+LAYER_TYPES: dict[str, type] = {
+    "costmap_2d::StaticLayer": StaticLayerParams,
+    "costmap_2d::ObstacleLayer": ObstacleLayerParams,
+    "costmap_2d::VoxelLayer": ObstacleLayerParams,   # a 2-D laser fills every voxel column alike
+    "costmap_2d::InflationLayer": InflationLayerParams,
+    "nav2_costmap_2d::StaticLayer": StaticLayerParams,
+    "nav2_costmap_2d::ObstacleLayer": ObstacleLayerParams,
+    "nav2_costmap_2d::VoxelLayer": ObstacleLayerParams,
+    "nav2_costmap_2d::InflationLayer": InflationLayerParams,
+    "omninav::KeepoutLayer": KeepoutLayerParams,
+}
+
+
+@dataclass(frozen=True)
+class CostmapParams:
+    """One costmap (Costmap2DROS). width/height are metres (ROS declares them int but files often
+    write 6.0); they size a rolling window, or a costmap without a static map."""
+    global_frame: str = "map"
+    robot_base_frame: str = "base_link"
+    transform_tolerance: float = 0.3      # s
+    update_frequency: float = 5.0         # Hz, sim time
+    publish_frequency: float = 0.0        # Hz, sim time; 0 = never
+    rolling_window: bool = False
+    track_unknown_space: bool = False
+    always_send_full_costmap: bool = False
+    width: float = 10.0                   # m
+    height: float = 10.0                  # m
+    resolution: float = 0.05              # m/cell
+    origin_x: float = 0.0                 # m
+    origin_y: float = 0.0                 # m
+    footprint: tuple[tuple[float, float], ...] = ()   # polygon in the robot frame; () = robot_radius
+    robot_radius: float = 0.46            # m
+    footprint_padding: float = 0.01       # m
+    # pre-Hydro default plugin set (no static map unless static_map: true)
+    layers: tuple[LayerParams, ...] = field(default_factory=lambda: (ObstacleLayerParams(), InflationLayerParams()))
+
+    def __post_init__(self):
+        for key in ("transform_tolerance", "update_frequency", "publish_frequency", "robot_radius",
+                    "footprint_padding"):
+            _finite_at_least("costmap", key, getattr(self, key), 0.0)
+        for key in ("width", "height", "resolution"):
+            _finite_at_least("costmap", key, getattr(self, key), 0.0, strict=True)
+        if self.footprint and len(self.footprint) < 3:
+            raise ValueError(f"costmap: footprint needs at least 3 points, got {len(self.footprint)}")
+        names = [layer.name for layer in self.layers]
+        if len(set(names)) != len(names):
+            raise ValueError(f"costmap: layer named twice in {names}")
+        if sum(isinstance(layer, InflationLayerParams) and layer.enabled for layer in self.layers) > 1:
+            raise ValueError("costmap: at most one inflation layer")
+
+    def layer(self, kind: type) -> Any:
+        """The first enabled layer of a params type, or None."""
+        return next((l for l in self.layers if isinstance(l, kind) and l.enabled), None)
+
+
+# ---------------------------------------------------------------- loading ROS files
+
+def _merge(base: dict, extra: dict) -> dict:
+    out = dict(base)
+    for key, value in extra.items():
+        out[key] = _merge(out[key], value) if isinstance(value, dict) and isinstance(out.get(key), dict) else value
+    return out
+
+
+def _unwrap_ros2(section: Any, name: str) -> Any:
+    if isinstance(section, dict) and isinstance(section.get(name), dict) and len(section) == 1:
+        section = section[name]                      # global_costmap: global_costmap: ros__parameters:
+    if isinstance(section, dict) and "ros__parameters" in section:
+        section = section["ros__parameters"] or {}
+    return section
+
+
+def costmap_section(doc: dict, name: str, source: str) -> dict:
+    """What a parameter file says about costmap `name`: its `name:` section when the file has
+    costmap sections, else (a common file) the whole mapping."""
+    doc = _unwrap_ros2(doc, name)
+    if any(key in doc for key in (*COSTMAP_NAMES, name)):
+        section = _unwrap_ros2(doc.get(name) or {}, name)
+    else:
+        section = doc
+    if not isinstance(section, dict):
+        raise ParamError(f"{source}: {name}: expected a mapping of parameters, got {section!r}")
+    return section
+
+
+def load_costmap_params(paths, name: str = "global_costmap") -> CostmapParams:
+    """Load costmap `name` from ROS parameter files, later files overriding earlier ones, as
+    move_base's `rosparam load` lines do (common file first)."""
+    paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
+    merged: dict = {}
+    for path in paths:
+        doc = read_yaml(path)
+        if not isinstance(doc, dict):
+            raise ParamError(f"{path}: expected a mapping of parameter names to values")
+        merged = _merge(merged, costmap_section(doc, name, str(path)))
+    return costmap_params_from_mapping(merged, ", ".join(map(str, paths)) + f": {name}")
+
+
+def _footprint(value: Any, source: str) -> Any:
+    """ROS 1 also accepts the footprint as a string '[[x, y], ...]'."""
+    if isinstance(value, str):
+        try:
+            value = yaml.safe_load(value)
+        except yaml.YAMLError:
+            raise ParamError(f"{source}: parameter 'footprint' is not a list of [x, y] points: {value!r}") from None
+    return value if value else ()
+
+
+def _plugins(value: Any, mapping: dict, source: str) -> list[tuple[str, str]]:
+    if not isinstance(value, list):
+        raise ParamError(f"{source}: 'plugins' must be a list, got {value!r}")
+    out = []
+    for item in value:
+        if isinstance(item, dict) and {"name", "type"} <= set(item):      # ROS 1
+            out.append((str(item["name"]), str(item["type"])))
+        elif isinstance(item, str) and isinstance(mapping.get(item), dict) and "plugin" in mapping[item]:
+            out.append((item, str(mapping[item]["plugin"])))               # Nav2
+        else:
+            raise ParamError(f"{source}: plugin entry {item!r} is neither {{name, type}} nor a name "
+                             "whose section gives `plugin:`")
+    return out
+
+
+def _source_names(value: Any, source: str) -> list[str]:
+    if isinstance(value, list):
+        return [str(v) for v in value]
+    if isinstance(value, str):
+        return value.split()
+    raise ParamError(f"{source}: 'observation_sources' must be a space-separated string, got {value!r}")
+
+
+def _without(values: dict, ignored: set[str]) -> dict:
+    return {k: v for k, v in values.items() if k not in ignored}
+
+
+def _obstacle_layer(name: str, section: dict, parent: dict, source: str) -> ObstacleLayerParams:
+    where = f"{source}/{name}"
+    names = _source_names(section.get("observation_sources", ""), where)
+    sources = []
+    for src in names:
+        raw = section.get(src)
+        if not isinstance(raw, dict):
+            raise ParamError(f"{where}: observation source {src!r} has no section of parameters")
+        values = {SOURCE_ALIASES.get(k, k): v for k, v in raw.items()}
+        for key in ("obstacle_range", "raytrace_range"):   # ROS searchParam: source, layer, costmap
+            for level in (section, parent):
+                if key not in values and key in level:
+                    values[key] = level[key]
+        sources.append(load_params(ObservationSource, {**_without(values, IGNORED["source"]), "name": src},
+                                   f"{where}/{src}"))
+    own = {k: v for k, v in section.items()
+           if k not in names and k not in ("observation_sources", "obstacle_range", "raytrace_range", "plugin")}
+    own = _without(own, IGNORED["obstacle"] | IGNORED["layer"])
+    return load_params(ObstacleLayerParams, {**own, "name": name, "observation_sources": tuple(sources)}, where)
+
+
+# costmap-level names Costmap2DROS copies into plugins of each type (copyParentParameters)
+_PARENT_COPIES = {
+    StaticLayerParams: ("map_topic", "unknown_cost_value", "lethal_cost_threshold", "track_unknown_space"),
+    ObstacleLayerParams: ("raytrace_range", "obstacle_range", "track_unknown_space"),
+    InflationLayerParams: ("cost_scaling_factor", "inflation_radius"),
+    KeepoutLayerParams: (),
+}
+_PARENT_COPIES_ALL = {key for keys in _PARENT_COPIES.values() for key in keys}
+
+
+def _layer(name: str, kind: type, section: dict, parent: dict, source: str) -> LayerParams:
+    section = dict(section)
+    for key in _PARENT_COPIES[kind]:
+        if key in parent:
+            section[key] = parent[key]
+    if kind is ObstacleLayerParams:
+        return _obstacle_layer(name, section, parent, source)
+    values = _without({k: v for k, v in section.items() if k != "plugin"}, IGNORED["layer"])
+    return load_params(kind, {**values, "name": name}, f"{source}/{name}")
+
+
+def costmap_params_from_mapping(mapping: dict, source: str = "costmap") -> CostmapParams:
+    """CostmapParams from one costmap's merged parameter mapping (ROS 1, Hydro+ or pre-Hydro, or
+    Nav2 plugin layout)."""
+    mapping = dict(mapping or {})
+    top_names = {f for f in CostmapParams.__dataclass_fields__ if f != "layers"}
+    if "plugins" in mapping:
+        specs = _plugins(mapping["plugins"], mapping, source)
+        section_names = {n for n, _ in specs}
+        layers = []
+        for layer_name, type_name in specs:
+            kind = LAYER_TYPES.get(type_name)
+            if kind is None:
+                raise ParamError(f"{source}: plugin {layer_name!r}: type {type_name!r} is not supported; "
+                                 f"known: {sorted(LAYER_TYPES)}")
+            section = mapping.get(layer_name) or {}
+            if not isinstance(section, dict):
+                raise ParamError(f"{source}: plugin {layer_name!r}: expected a section of parameters")
+            layers.append(_layer(layer_name, kind, section, mapping, source))
+        # a common file's pre-Hydro observation sources: ROS reads sources only inside the
+        # obstacle layer's own section, so with plugins these are ignored, as there
+        consumed = section_names | {"plugins", "static_map", "observation_sources"} | _PARENT_COPIES_ALL
+        sources_here = set(_source_names(mapping.get("observation_sources", ""), source))
+    else:
+        # pre-Hydro: Costmap2DROS::loadOldParameters builds the plugin list from top-level values
+        layers = []
+        if mapping.get("static_map") is True:
+            layers.append(_layer("static_layer", StaticLayerParams, {}, mapping, source))
+        sources_here = set(_source_names(mapping.get("observation_sources", ""), source))
+        obstacle_section = {k: mapping[k] for k in ("observation_sources", *sources_here) if k in mapping}
+        layers.append(_layer("obstacle_layer", ObstacleLayerParams, obstacle_section, mapping, source))
+        layers.append(_layer("inflation_layer", InflationLayerParams, {}, mapping, source))
+        consumed = {"static_map", "observation_sources"} | _PARENT_COPIES_ALL
+    unknown = sorted(set(mapping) - top_names - consumed - sources_here - IGNORED["costmap"])
+    if unknown:
+        raise ParamError(f"{source}: unknown parameter(s) {unknown} for a costmap; known: {sorted(top_names)}, "
+                         "plugins and their sections, observation_sources and the sources' sections")
+    values = {k: v for k, v in mapping.items() if k in top_names}
+    if "footprint" in values:
+        values["footprint"] = _footprint(values["footprint"], source)
+    return load_params(CostmapParams, {**values, "layers": tuple(layers)}, source)
+

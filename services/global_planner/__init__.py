@@ -1,0 +1,1 @@
+"""The global planner core: cost-aware A* and Dijkstra over a costmap, goal tolerance, path smoothing."""

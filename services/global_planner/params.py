@@ -1,0 +1,62 @@
+"""Global planner parameters with ROS global_planner's names and defaults (plus the smoother's).
+
+ROS files load unchanged: names global_planner reads that have no meaning for this planner
+(the potential-field interpolation and publishing settings) are in IGNORED and accepted without
+effect; anything else unknown is an error naming the key.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..runtime.params import load_params
+
+ORIENTATION_MODES = {0: "none", 1: "forward", 2: "interpolate", 3: "forward_then_interpolate",
+                     4: "backward", 5: "leftward", 6: "rightward"}
+
+# ROS global_planner settings of its potential field and its topics: no effect on a graph search.
+IGNORED = frozenset({"old_navfn_behavior", "use_quadratic", "planner_window_x", "planner_window_y",
+                     "publish_scale", "publish_potential", "planner_costmap_publish_frequency", "use_sim_time"})
+
+
+@dataclass(frozen=True)
+class GlobalPlannerParams:
+    use_dijkstra: bool = True          # Dijkstra; false: A* (same optimal cost, fewer cells expanded)
+    use_grid_path: bool = False        # true: the raw 8-connected cell path, unsmoothed
+    allow_unknown: bool = True         # plan through NO_INFORMATION cells
+    default_tolerance: float = 0.0     # m: a goal in an obstacle (or unreachable) may move this far
+    neutral_cost: int = 50             # cost of a free step (per cell length)
+    cost_factor: float = 3.0           # each costmap cost adds cost_factor × cost per cell length
+    lethal_cost: int = 253             # cells at or above this cost are impassable (unknown aside)
+    orientation_mode: int = 1          # ROS OrientationFilter: 0 none … 6 rightward (ORIENTATION_MODES)
+    orientation_window_size: int = 1   # cells either side used for the path direction
+    outline_map: bool = True           # the costmap's border cells are impassable
+    visualize_potential: bool = False  # return the search's cost-to-come grid with each plan
+    planner_frequency: float = 0.0     # Hz (move_base's name): replanning rate; 0 = once per goal
+    # the smoother (not in ROS): gradient smoothing that never moves a point to a costlier cell
+    smooth_weight_data: float = 0.2    # pull towards the original point
+    smooth_weight_smooth: float = 0.3  # pull towards the neighbours' midpoint
+    smooth_max_iterations: int = 100
+    smooth_tolerance: float = 1e-3     # cells: stop when no point moves more than this
+
+    def __post_init__(self):
+        if not 1 <= self.lethal_cost <= 255:
+            raise ValueError(f"lethal_cost must be within 1..255, got {self.lethal_cost}")
+        if not 1 <= self.neutral_cost <= 255:
+            raise ValueError(f"neutral_cost must be within 1..255, got {self.neutral_cost}")
+        if self.orientation_mode not in ORIENTATION_MODES:
+            raise ValueError(f"orientation_mode must be one of {ORIENTATION_MODES}, got {self.orientation_mode}")
+        if self.orientation_window_size < 1:
+            raise ValueError(f"orientation_window_size must be ≥ 1, got {self.orientation_window_size}")
+        if self.smooth_max_iterations < 0:
+            raise ValueError(f"smooth_max_iterations must be ≥ 0, got {self.smooth_max_iterations}")
+        for name in ("default_tolerance", "cost_factor", "planner_frequency", "smooth_weight_data",
+                     "smooth_weight_smooth", "smooth_tolerance"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a number ≥ 0, got {value}")
+
+    @classmethod
+    def from_mapping(cls, values: dict | None, source: str = "global_planner") -> GlobalPlannerParams:
+        """From a ROS parameter mapping, dropping the names in IGNORED."""
+        return load_params(cls, {k: v for k, v in (values or {}).items() if k not in IGNORED}, source)
