@@ -100,6 +100,17 @@ class OccupancyGrid:
     data: np.ndarray = array("|i1", (None, None))
 
 
+@message("Costmap", 1)
+@dataclass(slots=True)
+class Costmap:
+    """A costmap_2d grid with its raw costs (ROS squeezes them into OccupancyGrid's 0..100; planners
+    on the other side need the real values): 0 free .. 252 inflated, 253 inscribed, 254 lethal,
+    255 unknown (NO_INFORMATION)."""
+    header: Header = field(default_factory=Header)
+    info: MapMetaData = field(default_factory=MapMetaData)
+    data: np.ndarray = array("|u1", (None, None))       # row-major (height, width)
+
+
 @message("PoseWithCovariance", 1)
 @dataclass(slots=True)
 class PoseWithCovariance:
