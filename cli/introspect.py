@@ -38,7 +38,7 @@ class CommandError(Exception):
         self.code = code
 
 
-def _reports_errors(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
+def reports_errors(run: Callable[[argparse.Namespace], int]) -> Callable[[argparse.Namespace], int]:
     def wrapped(args: argparse.Namespace) -> int:
         try:
             return run(args)
@@ -50,7 +50,7 @@ def _reports_errors(run: Callable[[argparse.Namespace], int]) -> Callable[[argpa
 
 # ---------------------------------------------------------------- the bus
 
-def _connect(router: str | None, give_up_s: float | None = None) -> zenoh.Session:
+def connect(router: str | None, give_up_s: float | None = None) -> zenoh.Session:
     """A client session; says so on stderr when the router is not there yet (clients wait for it)."""
     try:
         endpoint = router_endpoint(router)
@@ -84,7 +84,7 @@ def _reason(exc: zenoh.ZError) -> str:
     return str(exc).split(" at /")[0]
 
 
-def _key_expression(text: str) -> str:
+def key_expression(text: str) -> str:
     """Check a key expression before connecting, so a typo fails at once and not after a wait."""
     try:
         zenoh.KeyExpr(text)
@@ -197,9 +197,9 @@ def add_topics_arguments(parser: argparse.ArgumentParser) -> None:
     parser.set_defaults(command_name="topics")
 
 
-@_reports_errors
+@reports_errors
 def main_topics(args: argparse.Namespace) -> int:
-    session = _connect(args.router)
+    session = connect(args.router)
     windows: dict[str, RateWindow] = {}
     types: dict[str, Counter[str]] = {}
     try:
@@ -238,12 +238,12 @@ def add_echo_arguments(parser: argparse.ArgumentParser) -> None:
     parser.set_defaults(command_name="echo")
 
 
-@_reports_errors
+@reports_errors
 def main_echo(args: argparse.Namespace) -> int:
     if args.count is not None and args.count < 1:
         raise CommandError("--count must be at least 1", 2)
-    key = _key_expression(args.key)
-    session = _connect(args.router)
+    key = key_expression(args.key)
+    session = connect(args.router)
     seen = 0
     try:
         for item in _receive(session, key, _stop_on_signals()):
@@ -278,12 +278,12 @@ def format_rate(key: str, stats: RateStats) -> str:
             f"window: {stats.periods}")
 
 
-@_reports_errors
+@reports_errors
 def main_hz(args: argparse.Namespace) -> int:
     if args.window < 1:
         raise CommandError("--window must be at least 1", 2)
-    key = _key_expression(args.key)
-    session = _connect(args.router)
+    key = key_expression(args.key)
+    session = connect(args.router)
     windows: dict[str, RateWindow] = {}
     fresh: set[str] = set()
     next_print = time.monotonic() + 1.0
@@ -326,14 +326,14 @@ def add_get_arguments(parser: argparse.ArgumentParser) -> None:
     parser.set_defaults(command_name="get")
 
 
-@_reports_errors
+@reports_errors
 def main_get(args: argparse.Namespace) -> int:
     if args.timeout <= 0:
         raise CommandError("--timeout must be positive", 2)
     key, params = split_selector(args.selector)
-    _key_expression(key)
+    key_expression(key)
     started = time.monotonic()
-    session = _connect(args.router, give_up_s=args.timeout)
+    session = connect(args.router, give_up_s=args.timeout)
     failed = answered = 0
     try:
         remaining = max(0.1, args.timeout - (time.monotonic() - started))

@@ -265,10 +265,22 @@ def _replace_atomically(path: Path, write) -> None:
     os.close(fd)
     try:
         write(Path(tmp))
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)   # mkstemp makes owner-only files; a saved map is for everyone
         os.replace(tmp, path)
     finally:
         if os.path.exists(tmp):
             os.unlink(tmp)
+
+
+def map_files(target: str | Path, mode: str = "trinary") -> tuple[Path, Path]:
+    """The YAML and image files `save_map(grid, target, mode)` writes."""
+    if mode not in MODES:
+        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
+    target = Path(target)
+    stem = target.with_suffix("") if target.suffix in (".yaml", ".yml") else target
+    return stem.parent / f"{stem.name}.yaml", stem.parent / f"{stem.name}.{'png' if mode == 'scale' else 'pgm'}"
 
 
 def save_map(grid: OccupancyGrid, target: str | Path, mode: str = "trinary",
@@ -278,12 +290,7 @@ def save_map(grid: OccupancyGrid, target: str | Path, mode: str = "trinary",
     trinary and raw write an 8-bit P5 PGM; scale writes a grey+alpha PNG, because map_server's scale
     mode marks unknown cells only by transparency, which PGM cannot hold.
     """
-    if mode not in MODES:
-        raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
-    target = Path(target)
-    stem = target.with_suffix("") if target.suffix in (".yaml", ".yml") else target
-    yaml_path = stem.parent / f"{stem.name}.yaml"
-    image_path = stem.parent / f"{stem.name}.{'png' if mode == 'scale' else 'pgm'}"
+    yaml_path, image_path = map_files(target, mode)
     yaml_path.parent.mkdir(parents=True, exist_ok=True)
     pixels = _pixels_for(grid.data, mode, occupied_thresh, free_thresh)[::-1]
     if mode == "scale":
