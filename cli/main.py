@@ -20,6 +20,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "get": ("omninav.cli.introspect", "query a queryable and print the reply"),
     "teleop": ("omninav.cli.teleop", "drive the robot from the keyboard"),
     "report": ("omninav.cli.report", "draw a picture of a recording"),
+    "map": ("omninav.cli.map", "save the map served on the bus, or draw a map file"),
     "import": ("omninav.cli.importers", "convert CARMEN logs or ROS bags into MCAP recordings"),
     "slam-eval": ("omninav.services.slam.evaluate", "run SLAM on a CARMEN log and score it with the relations metric"),
     "bench": ("omninav.cli.bench", "benchmarks (transport, recorder, sim, amcl, planner, ...)"),

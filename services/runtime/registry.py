@@ -13,6 +13,7 @@ SERVICES: dict[str, str] = {
     "sim": "omninav.sim.node:SimNode",
     "chassis": "omninav.services.chassis.node:ChassisNode",
     "lidar": "omninav.services.lidar.node:LidarNode",
+    "map_server": "omninav.services.map_server.node:MapServerNode",
 }
 
 
