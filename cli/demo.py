@@ -12,13 +12,15 @@ from pathlib import Path
 
 import yaml
 
-from ..services.runtime.zenoh_config import free_loopback_endpoint
+from ..schemas.keys import KeyLayout
+from ..services.runtime.zenoh_config import free_loopback_endpoint, open_client
 
 REPO = Path(__file__).resolve().parents[1]
 COMPOSE = REPO / "compose" / "sim.yaml"
 # along the wall, sideways into the open, a turn on the spot, diagonally on: what a mecanum robot can do
 ROUTE = "0.4,0,0,7;0,0.3,0,5;0,0,0.6,2.6;0.3,0.1,0,3"
 STEP_TIMEOUT_S = 300
+READY_TIMEOUT_S = 180
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -31,8 +33,21 @@ def _omninav(*args: str) -> list[str]:
     return [sys.executable, "-m", "omninav.cli.main", *args]
 
 
-def _compose_for(out: Path, rate: float) -> Path:
-    """compose/sim.yaml with the recording in the demo's folder and the chosen sim rate."""
+def _wait_until_ready(router: str, names: list[str], up: subprocess.Popen) -> bool:
+    """Until every service of the compose file has declared its liveliness token (or up died)."""
+    keys = KeyLayout()
+    deadline = time.monotonic() + READY_TIMEOUT_S
+    with open_client(router) as session:
+        while time.monotonic() < deadline and up.poll() is None:
+            if all(any(r.ok is not None for r in session.liveliness().get(keys.alive(n), timeout=0.2)) for n in names):
+                return True
+            time.sleep(0.2)
+    return False
+
+
+def _compose_for(out: Path, rate: float) -> tuple[Path, list[str]]:
+    """compose/sim.yaml with the recording in the demo's folder and the chosen sim rate, and the
+    names of its services."""
     compose = yaml.safe_load(COMPOSE.read_text())
     for service in compose["services"]:
         if service.get("service") == "recorder":
@@ -41,7 +56,7 @@ def _compose_for(out: Path, rate: float) -> Path:
             service.setdefault("params", {})["rate"] = rate
     path = out / "compose.yaml"
     path.write_text(yaml.safe_dump(compose, sort_keys=False))
-    return path
+    return path, [service.get("name") or service["service"] for service in compose["services"]]
 
 
 def _step(title: str, cmd: list[str], log: Path) -> int:
@@ -58,10 +73,14 @@ def main(args: argparse.Namespace) -> int:
     router = free_loopback_endpoint()
     log = out / "demo.log"
     print(f"== omninav up {COMPOSE.relative_to(REPO)}: recorder, sim, chassis, lidar (log: {log})", flush=True)
+    compose, names = _compose_for(out, args.rate)
     with open(log, "wb") as sink:
-        up = subprocess.Popen(_omninav("up", str(_compose_for(out, args.rate)), "--router", router),
+        up = subprocess.Popen(_omninav("up", str(compose), "--router", router),
                               cwd=REPO, stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
     try:
+        if not _wait_until_ready(router, names, up):
+            print(f"   the services did not all start; see {log}", file=sys.stderr)
+            return 1
         drove = _step(f"teleop --script {args.route}", _omninav("teleop", "--script", args.route, "--router", router), log)
     finally:
         up.send_signal(signal.SIGINT)

@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import argparse
 import importlib
+import os
 import sys
 
 # name -> (module with add_arguments(parser) and main(args) -> int, one-line help)
@@ -22,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("omninav.cli.report", "draw a picture of a recording"),
     "map": ("omninav.cli.map", "save the map served on the bus, or draw a map file"),
     "import": ("omninav.cli.importers", "convert CARMEN logs or ROS bags into MCAP recordings"),
+    "localize-eval": ("omninav.services.localizer.evaluate", "score AMCL in the simulator against the ground truth"),
     "slam-eval": ("omninav.services.slam.evaluate", "run SLAM on a CARMEN log and score it with the relations metric"),
     "bench": ("omninav.cli.bench", "benchmarks (transport, recorder, sim, amcl, planner, ...)"),
     "demo": ("omninav.cli.demo", "the main job: a short run of the stack, recorded and replayed"),
@@ -52,6 +54,9 @@ def main(argv: list[str] | None = None) -> int:
         return int(run(args) or 0)
     except KeyboardInterrupt:
         return 130
+    except BrokenPipeError:     # `omninav echo … | head`: the reader has what it wanted
+        sys.stdout = open(os.devnull, "w")
+        return 0
 
 
 if __name__ == "__main__":

@@ -25,6 +25,7 @@ ROBOT_TOPICS: dict[str, type] = {
     "map": m.OccupancyGrid,
     "pose": m.PoseWithCovariance,       # amcl_pose / slam pose in the map frame
     "initialpose": m.PoseWithCovariance,
+    "global_localization": m.PoseWithCovariance,  # request: particles over all free space (only the stamp counts)
     "particlecloud": m.ParticleCloud,
     "tf/map_odom": m.Transform,
     "tf/odom_base": m.Transform,
@@ -81,6 +82,10 @@ class KeyLayout:
 
     def diagnostics(self, service: str) -> str:
         return f"{ROOT}/{self.robot_name}/diagnostics/{_check_segment('service name', service)}"
+
+    def alive(self, service: str) -> str:
+        """The liveliness token a running service declares once its inputs and outputs are in place."""
+        return f"{ROOT}/{self.robot_name}/alive/{_check_segment('service name', service)}"
 
     def resolve(self, name: str) -> str:
         """A topic as services name it: 'scan', 'sim/clock', 'sim/truth' or a full key."""

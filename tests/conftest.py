@@ -12,7 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from omninav.services.runtime.zenoh_config import ROUTER_ENV, open_router
+from omninav.schemas.keys import KeyLayout
+from omninav.services.runtime.zenoh_config import ROUTER_ENV, open_client, open_router
 
 from launching import processes_using
 
@@ -35,6 +36,16 @@ def wait_until(predicate, timeout: float = 10.0, interval: float = 0.05, what: s
             return value
         time.sleep(interval)
     pytest.fail(f"timed out after {timeout}s waiting for {what}")
+
+
+def wait_alive(endpoint: str, names, timeout: float = 180.0, robot: str = "r1") -> None:
+    """Until every named service has declared its liveliness token (it can hear and speak)."""
+    keys = KeyLayout(robot)
+    with open_client(endpoint) as session:
+        def all_alive():
+            return all(any(r.ok is not None for r in session.liveliness().get(keys.alive(n), timeout=0.5))
+                       for n in names)
+        wait_until(all_alive, timeout, what=f"services {list(names)} to be ready")
 
 
 @pytest.fixture

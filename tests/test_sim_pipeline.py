@@ -8,7 +8,7 @@ import numpy as np
 from omninav.schemas import decode
 from omninav.services.recorder.mcap_io import read_records
 
-from conftest import wait_until
+from conftest import wait_alive, wait_until
 
 # forward 0.9 m, turn in place, strafe right: clear of the room's furniture from the start pose
 SCRIPT = "0.3,0,0,3;0,0,0.5,2;0,-0.1,0,1"
@@ -20,13 +20,14 @@ def run_omninav(processes, *args, timeout=180):
     return code, processes.log_of(proc)
 
 
-def test_drive_record_replay_and_report(processes, tmp_path):
+def test_drive_record_replay_and_report(processes, router_endpoint, tmp_path):
     recording = tmp_path / "sim.mcap"
     recorder = processes.omninav("record", "-o", str(recording))
     wait_until(lambda: "recording" in processes.log_of(recorder), 60, what="the recorder to start")
     services = [processes.omninav("run", "sim", "--set", "rate=2"),
                 processes.omninav("run", "chassis"),
                 processes.omninav("run", "lidar")]
+    wait_alive(router_endpoint, ["sim", "chassis", "lidar"])
     code, log = run_omninav(processes, "teleop", "--script", SCRIPT)
     assert code == 0, log
     for proc in reversed(services):      # lidar and chassis first: their final diagnostics get recorded

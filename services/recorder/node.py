@@ -160,11 +160,13 @@ class RecorderNode(Node):
             subscribers = [session.declare_subscriber(ke, zenoh.handlers.FifoChannel(_FIFO_CAPACITY))
                            for ke in self.key_exprs]
             handlers = [s.handler for s in subscribers]
+            alive = session.liveliness().declare_token(self.keys.alive(self.name))
             self.log.info("recording %s to %s%s", " ".join(map(str, self.key_exprs)), self.out.files[0],
                           " and the next numbered files" if self.out.split else "")
             try:
                 self._record(handlers, stop_event)
             finally:
+                alive.undeclare()
                 for sub in subscribers:
                     sub.undeclare()
             self._drain(handlers)   # what was queued before the undeclare

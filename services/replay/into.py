@@ -23,6 +23,7 @@ from mcap.exceptions import McapError
 from ...schemas import MessageError, decode
 from ...schemas.messages import Diagnostic
 from ..recorder.mcap_io import Record, RecordingWriter, read_records
+from ..runtime.live import RUN_STARTED
 from ..runtime.merge import order_key
 from ..runtime.node import NS_PER_S, Node, Publisher
 from ..runtime.params import ParamError, parse_overrides
@@ -44,11 +45,19 @@ class ReplayError(Exception):
 class Alignment:
     first_seq: dict[str, int] | None            # None: the recording has no Diagnostic of the service
     not_replayable: dict[str, int]              # live counters that break exact replay (late, sync timeouts)
+    run_started_ns: int | None = None           # wall time the last recorded run started (restarts)
+    earlier_runs: int = 0                       # runs of the service before that one in the recording
+
+
+def _run_of(diag: Diagnostic) -> int:
+    value = diag.values.get(RUN_STARTED, 0)
+    return int(value) if isinstance(value, (int, float)) else 0
 
 
 def find_alignment(records: Iterable[Record], diagnostics_key: str) -> Alignment:
-    """Where the live service started, from the last Diagnostic (highest seq) it published."""
+    """Where the live service started, from the last Diagnostic of its last run in the recording."""
     last: Diagnostic | None = None
+    runs: set[int] = set()
     for rec in records:
         if rec.key != diagnostics_key:
             continue
@@ -56,7 +65,8 @@ def find_alignment(records: Iterable[Record], diagnostics_key: str) -> Alignment
             diag = decode(rec.payload, Diagnostic, key=rec.key)
         except MessageError:
             continue            # a damaged diagnostic says nothing about alignment
-        if last is None or diag.header.seq > last.header.seq:
+        runs.add(_run_of(diag))
+        if last is None or (_run_of(diag), diag.header.seq) > (_run_of(last), last.header.seq):
             last = diag
     if last is None:
         return Alignment(None, {})
@@ -64,7 +74,7 @@ def find_alignment(records: Iterable[Record], diagnostics_key: str) -> Alignment
                  if name.startswith(FIRST_SEQ) and isinstance(v, (int, float))}
     trouble = {name: int(v) for name, v in last.values.items()
                if name.startswith(NOT_REPLAYABLE) and isinstance(v, (int, float)) and v}
-    return Alignment(first_seq, trouble)
+    return Alignment(first_seq, trouble, _run_of(last) or None, len(runs) - 1)
 
 
 # ---------------------------------------------------------------- feeding the node
@@ -306,7 +316,11 @@ def _main(args: argparse.Namespace) -> int:
     if not args.compare:
         return 0
 
-    recorded = [rec for rec in records if rec.key in node.outputs]
+    # a restarted service starts its seqs again: compare only what its last run published
+    since = alignment.run_started_ns or 0
+    recorded = [rec for rec in records if rec.key in node.outputs and rec.log_time_ns >= since]
+    if alignment.earlier_runs:
+        print(f"  the recording holds {alignment.earlier_runs} earlier run(s) of {node.name}: comparing the last")
     if not recorded:
         raise ReplayError(f"{args.file} has no outputs of {node.name} (keys {sorted(node.outputs)}) to compare with")
     result = compare(recorded, run.outputs)

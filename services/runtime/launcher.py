@@ -21,6 +21,7 @@ from pathlib import Path
 import yaml
 import zenoh
 
+from ...schemas.keys import KeyLayout
 from .compose import ComposeError, ServiceSpec, load_compose
 from .zenoh_config import ROUTER_ENV, open_router, router_endpoint
 
@@ -32,6 +33,7 @@ START_WINDOW_S = 10.0    # a first run that exits with an error sooner than this
 STOP_TIMEOUT_S = 10.0    # after SIGINT, then SIGKILL
 TAIL_LINES = 20          # output lines kept per service, shown when it cannot start
 _POLL_S = 0.1
+_READY_TIMEOUT_S = 60.0     # numba warm-up and imports on a loaded 2-core machine take a while
 
 
 class Output:
@@ -184,6 +186,13 @@ class Supervised:
             pass
 
 
+def _cannot_start(exc: CannotStart, out: Output) -> int:
+    out.say(f"error: {exc}; its last output:", sys.stderr)
+    for text in exc.service.tail:
+        out.line(exc.service.spec.name, text, sys.stderr)
+    return 1
+
+
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("compose", nargs="?", default=DEFAULT_COMPOSE,
                         help=f"compose file (default {DEFAULT_COMPOSE}; format: docs/compose.md)")
@@ -213,17 +222,38 @@ def main(args: argparse.Namespace) -> int:
         out.say(f"router listening on {endpoint}")
         services = [Supervised(spec, endpoint, Path(params_dir), out) for spec in compose.services]
         try:
-            return _supervise(services, stop, args.duration, out)
+            return _supervise(services, stop, args.duration, out, router)
         finally:
             for service in reversed(services):
                 service.stop()
             out.say("stopped")
 
 
-def _supervise(services: list[Supervised], stop: threading.Event, duration: float | None, out: Output) -> int:
+def _wait_ready(service: Supervised, session: zenoh.Session, stop: threading.Event, out: Output) -> None:
+    """Until the service's liveliness token appears, so what it records or answers is in place
+    before the next one starts publishing (raises CannotStart if it dies meanwhile)."""
+    key = KeyLayout(service.spec.robot).alive(service.spec.name)
+    deadline = time.monotonic() + _READY_TIMEOUT_S
+    while not stop.is_set() and time.monotonic() < deadline:
+        if any(reply.ok is not None for reply in session.liveliness().get(key, timeout=_POLL_S)):
+            return
+        service.step(time.monotonic())
+        if service.finished:
+            return
+        stop.wait(_POLL_S)
+    if not stop.is_set():
+        out.say(f"{service.spec.name} did not report ready within {_READY_TIMEOUT_S:.0f}s; starting the rest anyway")
+
+
+def _supervise(services: list[Supervised], stop: threading.Event, duration: float | None, out: Output,
+               session: zenoh.Session) -> int:
+    try:
+        for service in services:
+            service.start()
+            _wait_ready(service, session, stop, out)
+    except CannotStart as exc:
+        return _cannot_start(exc, out)
     deadline = None if duration is None else time.monotonic() + duration
-    for service in services:
-        service.start()
     while not stop.wait(_POLL_S):
         now = time.monotonic()
         if deadline is not None and now >= deadline:
@@ -232,10 +262,7 @@ def _supervise(services: list[Supervised], stop: threading.Event, duration: floa
             for service in services:
                 service.step(now)
         except CannotStart as exc:
-            out.say(f"error: {exc}; its last output:", sys.stderr)
-            for text in exc.service.tail:
-                out.line(exc.service.spec.name, text, sys.stderr)
-            return 1
+            return _cannot_start(exc, out)
         if all(s.finished for s in services):
             out.say("every service has ended")
             return 0 if all(s.returncode == 0 for s in services) else 1

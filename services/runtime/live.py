@@ -21,6 +21,7 @@ from .selector import parse_parameters
 from .zenoh_config import open_client
 
 _POLL_S = 0.05
+RUN_STARTED = "run_started_ns"
 
 
 class LiveRunner:
@@ -34,6 +35,9 @@ class LiveRunner:
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()
         self._merger = StampMerger([i.synced for i in node.inputs])
         self._zpubs: dict[str, zenoh.Publisher] = {}
+        # identifies this run of the service in its diagnostics, so replay can tell a restarted
+        # service's runs apart in one recording (wall time: diagnostics are never compared)
+        self.started_ns = time.time_ns()
 
     def stop(self) -> None:
         """Ask the loop to finish; safe from a signal handler. The wake-up item matters: on
@@ -61,6 +65,8 @@ class LiveRunner:
                 inp.key, lambda s, i=index: self._inbox.put(("msg", i, s.payload.to_bytes(), str(s.key_expr)))))
         for key in self.node.queryables:
             handles.append(session.declare_queryable(key, lambda q: self._inbox.put(("query", q))))
+        # last: `omninav up` starts the next service only once this one can hear and speak
+        handles.append(session.liveliness().declare_token(self.node.keys.alive(self.node.name)))
         return handles
 
     # ------------------------------------------------------------ the processing thread
@@ -144,7 +150,9 @@ class LiveRunner:
             query.drop()
 
     def _publish_diagnostic(self) -> None:
-        self.node.diagnostics.publish(self.node.diagnostic())
+        diag = self.node.diagnostic()
+        diag.values[RUN_STARTED] = self.started_ns
+        self.node.diagnostics.publish(diag)
 
     def _finish(self) -> None:
         for index, msg in self._merger.drain():
