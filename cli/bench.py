@@ -12,6 +12,7 @@ BENCHES: dict[str, str] = {
     "sim": "omninav.sim.bench",
     "amcl": "omninav.services.localizer.bench",
     "planner": "omninav.services.global_planner.bench",
+    "local": "omninav.services.local_planner.bench",
 }
 
 

@@ -1,0 +1,337 @@
+"""Holonomic DWA / trajectory rollout after ROS base_local_planner and dwa_local_planner.
+
+One control cycle (`DwaPlanner.compute`):
+1. the local part of the global path (from the path point nearest the robot to where the path
+   leaves the local costmap) is drawn into the grid and two distance maps are computed once:
+   metres to the nearest path cell and to the local goal (the last local path point);
+2. velocities are sampled over the dynamic window — what the acceleration limits allow from the
+   current velocity within one control period (dwa: true) or within sim_time (trajectory
+   rollout) — and clipped to the velocity limits: vx × vy × ω (vy ≡ 0 for a differential drive;
+   holonomic robots also get base_local_planner's y_vels strafe samples);
+3. every sample is rolled out for sim_time in one numba call (exact constant-twist arcs; in
+   trajectory-rollout mode the twist ramps towards the sample at the acceleration limits, as
+   base_local_planner does) and checked against the costmap: a pose is illegal when its centre
+   cell is inscribed, lethal, unknown or off the grid, or — when the centre cost says an obstacle
+   is within the circumscribed radius — when any point of the footprint's outline lies on a lethal
+   or unknown cell;
+4. legal trajectories are scored as dwa_local_planner does, lower is better:
+   path_distance_bias·(path distance of the end pose + of the point forward_point_distance ahead
+   of it) + goal_distance_bias·(goal distance of both) + occdist_scale·(highest cost met);
+   the point ahead is the heading term (DWA's alignment and goal-front critics), dropped within
+   forward_point_distance of the local goal as DWA does.
+With no legal trajectory, backing up at escape_vel is tried; else the command brakes as hard as
+the window allows. Distances are straight-line (scipy's Euclidean distance transform); ROS's
+MapGrid propagates them around obstacles instead, which matters only behind walls the
+illegality check already rules out.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+from scipy import ndimage
+
+from ...schemas.messages import MapMetaData
+from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
+from ..map_server.mapio import in_grid, world_to_cell
+from .params import DwaParams
+
+SMALL_ANGLE = 1e-9   # rad: below this a step is a straight line (sin x / x = 1)
+
+
+# ---------------------------------------------------------------- path distance maps
+
+@dataclass(frozen=True)
+class PathMaps:
+    path: np.ndarray          # (M, 3) the local part of the path
+    path_dist: np.ndarray     # (H, W) float32, m to the nearest local path cell
+    goal_dist: np.ndarray     # (H, W) float32, m to the local goal's cell
+
+    @property
+    def local_goal(self) -> np.ndarray:
+        return self.path[-1]
+
+
+def local_path(path: np.ndarray, pose, info: MapMetaData) -> np.ndarray:
+    """From the path point nearest the robot (among those on the grid) to where the path leaves the
+    grid; (0, 3) when no point is on the grid."""
+    path = np.asarray(path, np.float64).reshape(-1, 3)
+    inside = in_grid(info, *world_to_cell(info, path[:, 0], path[:, 1]))
+    if not inside.any():
+        return path[:0]
+    distance = np.where(inside, np.hypot(path[:, 0] - pose[0], path[:, 1] - pose[1]), np.inf)
+    first = int(np.argmin(distance))
+    leaves = np.flatnonzero(~inside[first:])
+    return path[first:first + (int(leaves[0]) if leaves.size else len(path) - first)]
+
+
+def _densify(points: np.ndarray, spacing: float) -> np.ndarray:
+    """(K, 2) points along the polyline, at most `spacing` apart, ends included."""
+    xy = points[:, :2]
+    if len(xy) < 2:
+        return xy
+    steps = np.maximum(1, np.ceil(np.hypot(*np.diff(xy, axis=0).T) / spacing).astype(np.int64))
+    segment = np.repeat(np.arange(len(steps)), steps)
+    fraction = (np.arange(segment.size) - np.repeat(np.cumsum(steps) - steps, steps)) / steps[segment]
+    inner = xy[segment] + (xy[segment + 1] - xy[segment]) * fraction[:, None]
+    return np.vstack([inner, xy[-1:]])
+
+
+def _distance_to(mask: np.ndarray, resolution: float) -> np.ndarray:
+    return (ndimage.distance_transform_edt(~mask) * resolution).astype(np.float32)
+
+
+def path_maps(path: np.ndarray, pose, info: MapMetaData) -> PathMaps | None:
+    """The distance maps of one cycle, or None when no path point lies on the grid."""
+    local = local_path(path, pose, info)
+    if len(local) == 0:
+        return None
+    shape = (info.height, info.width)
+    points = _densify(local, info.resolution / 2)
+    rows, cols = world_to_cell(info, points[:, 0], points[:, 1])
+    keep = in_grid(info, rows, cols)
+    on_path = np.zeros(shape, bool)
+    on_path[rows[keep], cols[keep]] = True
+    at_goal = np.zeros(shape, bool)
+    at_goal[rows[keep][-1], cols[keep][-1]] = True
+    return PathMaps(local, _distance_to(on_path, info.resolution), _distance_to(at_goal, info.resolution))
+
+
+# ---------------------------------------------------------------- rollout kernel
+
+@njit(cache=True)
+def _cell_cost(costs, x, y, ox, oy, cos_o, sin_o, inv_res):
+    """The cost under a world point; -1 off the grid."""
+    dx, dy = x - ox, y - oy
+    u = (cos_o * dx + sin_o * dy) * inv_res
+    v = (-sin_o * dx + cos_o * dy) * inv_res
+    if u < 0.0 or v < 0.0:
+        return -1
+    col, row = int(u), int(v)
+    if row >= costs.shape[0] or col >= costs.shape[1]:
+        return -1
+    return int(costs[row, col])
+
+
+@njit(cache=True)
+def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, grid, outline, check_cost,
+             poses, max_cost, legal):
+    """Roll out and check every sample; fills poses (T, n_steps+1, 3), max_cost (T,), legal (T,).
+
+    grid = (origin x, origin y, cos origin yaw, sin origin yaw, 1/resolution)."""
+    ox, oy, cos_o, sin_o, inv_res = grid[0], grid[1], grid[2], grid[3], grid[4]
+    for t in range(samples.shape[0]):
+        if ramp:
+            vx, vy, w = v0[0], v0[1], v0[2]
+        else:
+            vx, vy, w = samples[t, 0], samples[t, 1], samples[t, 2]
+        x, y, th = pose0[0], pose0[1], pose0[2]
+        poses[t, 0, 0], poses[t, 0, 1], poses[t, 0, 2] = x, y, th
+        worst, ok, k = 0, True, 0
+        while k < n_steps and ok:
+            if ramp:
+                vx += min(max(samples[t, 0] - vx, -step_limit[0]), step_limit[0])
+                vy += min(max(samples[t, 1] - vy, -step_limit[1]), step_limit[1])
+                w += min(max(samples[t, 2] - w, -step_limit[2]), step_limit[2])
+            # the exact pose increment of a constant twist (odometry.se2_exp, inlined)
+            phi = w * dt
+            if abs(phi) < SMALL_ANGLE:
+                along, across = 1.0, 0.5 * phi
+            else:
+                along, across = math.sin(phi) / phi, (1.0 - math.cos(phi)) / phi
+            bx = (along * vx - across * vy) * dt
+            by = (across * vx + along * vy) * dt
+            c, s = math.cos(th), math.sin(th)
+            x, y, th = x + c * bx - s * by, y + s * bx + c * by, th + phi
+            k += 1
+            poses[t, k, 0], poses[t, k, 1], poses[t, k, 2] = x, y, th
+            cost = _cell_cost(costs, x, y, ox, oy, cos_o, sin_o, inv_res)
+            if cost < 0 or cost >= INSCRIBED_INFLATED_OBSTACLE:
+                ok = False
+                break
+            if cost >= check_cost:
+                c, s = math.cos(th), math.sin(th)
+                for p in range(outline.shape[0]):
+                    px = x + c * outline[p, 0] - s * outline[p, 1]
+                    py = y + s * outline[p, 0] + c * outline[p, 1]
+                    edge = _cell_cost(costs, px, py, ox, oy, cos_o, sin_o, inv_res)
+                    if edge < 0 or edge >= LETHAL_OBSTACLE:
+                        ok = False
+                        break
+                if not ok:
+                    break
+            if cost > worst:
+                worst = cost
+        for j in range(k + 1, n_steps + 1):   # a stopped rollout keeps its last pose
+            poses[t, j, 0], poses[t, j, 1], poses[t, j, 2] = x, y, th
+        legal[t] = ok
+        max_cost[t] = worst
+
+
+def footprint_outline(points: np.ndarray, spacing: float) -> np.ndarray:
+    """Points along the closed footprint polygon, at most `spacing` apart (robot frame)."""
+    points = np.asarray(points, np.float64).reshape(-1, 2)
+    return _densify(np.vstack([points, points[:1]]), spacing)[:-1]
+
+
+def footprint_check_cost(inscribed_radius: float, circumscribed_radius: float, inflation_radius: float,
+                         cost_scaling_factor: float) -> int:
+    """The centre cost from which the footprint may touch an obstacle (ROS's circumscribed cost);
+    0 (check every pose) when the inflation does not reach the circumscribed radius."""
+    if inflation_radius < circumscribed_radius:
+        return 0
+    return inflation_cost(circumscribed_radius, inscribed_radius, cost_scaling_factor)
+
+
+# ---------------------------------------------------------------- the planner
+
+@dataclass(frozen=True)
+class DwaResult:
+    status: str                # ok | escape | no_valid_trajectory | no_path
+    cmd: np.ndarray            # (3,) vx, vy, wz to send
+    samples: np.ndarray        # (T, 3) sampled twists
+    poses: np.ndarray          # (T, S + 1, 3) rolled-out poses in the costmap frame
+    scores: np.ndarray         # (T,) lower is better; inf for illegal trajectories
+    best: int                  # index of the chosen sample, -1 if none
+    message: str = ""
+
+    @property
+    def legal(self) -> np.ndarray:
+        return np.isfinite(self.scores)
+
+
+def reachable(params: DwaParams, velocity) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) per axis: what the acceleration limits reach from `velocity` within the window's
+    duration (one control period with dwa, else sim_time), whatever the velocity limits."""
+    period = 1.0 / params.controller_frequency if params.dwa else params.sim_time
+    v = np.asarray(velocity, np.float64)
+    reach = np.array([params.acc_lim_x, params.acc_lim_y, params.acc_lim_theta]) * period
+    return v - reach, v + reach
+
+
+def dynamic_window(params: DwaParams, velocity) -> tuple[np.ndarray, np.ndarray]:
+    """(low, high) per axis: the reachable velocities inside the velocity limits; when the current
+    velocity is outside them, the reachable value nearest to the limits."""
+    v = np.asarray(velocity, np.float64)
+    soonest, furthest = reachable(params, v)
+    lowest = np.array([params.min_vel_x, params.min_vel_y if params.holonomic_robot else 0.0, params.min_vel_theta])
+    highest = np.array([params.max_vel_x, params.max_vel_y if params.holonomic_robot else 0.0, params.max_vel_theta])
+    low, high = np.maximum(lowest, soonest), np.minimum(highest, furthest)
+    stuck = low > high
+    nearest = np.clip(np.clip(v, lowest, highest), soonest, furthest)
+    return np.where(stuck, nearest, low), np.where(stuck, nearest, high)
+
+
+def _axis(low: float, high: float, count: int, extra=()) -> np.ndarray:
+    values = [*np.linspace(low, high, count), *(e for e in extra if low <= e <= high)]
+    if low <= 0.0 <= high:
+        values.append(0.0)
+    return np.unique(np.asarray(values, np.float64))
+
+
+def sample_velocities(params: DwaParams, velocity) -> np.ndarray:
+    """(T, 3) twists over the dynamic window; no standing still, no turning on the spot slower than
+    min_in_place_vel_theta."""
+    low, high = dynamic_window(params, velocity)
+    vx = _axis(low[0], high[0], params.vx_samples)
+    vy = _axis(low[1], high[1], params.vy_samples, params.y_vels) if params.holonomic_robot else np.zeros(1)
+    wz = _axis(low[2], high[2], params.vtheta_samples)
+    grid = np.stack(np.meshgrid(vx, vy, wz, indexing="ij"), axis=-1).reshape(-1, 3)
+    in_place = (grid[:, 0] == 0.0) & (grid[:, 1] == 0.0)
+    return grid[~(in_place & (np.abs(grid[:, 2]) < params.min_in_place_vel_theta))]
+
+
+class DwaPlanner:
+    """The pure DWA core: `compute` is one control cycle. `footprint` is the (padded) polygon in the
+    robot frame; `check_cost` the centre cost from which the footprint's outline is checked
+    (footprint_check_cost; 0 checks every pose)."""
+
+    def __init__(self, params: DwaParams, footprint: np.ndarray, check_cost: int = 0):
+        self.params = params
+        self.footprint = np.asarray(footprint, np.float64).reshape(-1, 2)
+        self.check_cost = int(check_cost)
+        self._outlines: dict[float, np.ndarray] = {}
+
+    def _outline(self, resolution: float) -> np.ndarray:
+        if resolution not in self._outlines:
+            self._outlines[resolution] = footprint_outline(self.footprint, resolution / 2)
+        return self._outlines[resolution]
+
+    def n_steps(self, samples: np.ndarray) -> int:
+        """Poses per rollout: the fastest sample moves at most sim_granularity (m, or rad) per step."""
+        p = self.params
+        fastest = max(float(np.max(np.hypot(samples[:, 0], samples[:, 1]), initial=0.0)),
+                      float(np.max(np.abs(samples[:, 2]), initial=0.0)))
+        return max(1, int(math.ceil(p.sim_time * fastest / p.sim_granularity)))
+
+    def rollout(self, samples, pose, velocity, costs: np.ndarray, info: MapMetaData):
+        """(poses (T, S+1, 3), max_cost (T,), legal (T,)) of the samples, one batch."""
+        samples = np.ascontiguousarray(samples, np.float64).reshape(-1, 3)
+        p = self.params
+        n = self.n_steps(samples)
+        dt = p.sim_time / n
+        step_limit = np.array([p.acc_lim_x, p.acc_lim_y, p.acc_lim_theta]) * dt
+        poses = np.empty((len(samples), n + 1, 3))
+        max_cost = np.empty(len(samples), np.int64)
+        legal = np.empty(len(samples), np.bool_)
+        theta = info.origin.theta
+        grid = np.array([info.origin.x, info.origin.y, math.cos(theta), math.sin(theta), 1.0 / info.resolution])
+        _rollout(samples, np.asarray(velocity, np.float64), step_limit, not p.dwa, n, dt,
+                 np.asarray(pose, np.float64), np.ascontiguousarray(costs, np.uint8), grid,
+                 self._outline(info.resolution), self.check_cost, poses, max_cost, legal)
+        return poses, max_cost, legal
+
+    def score(self, poses, max_cost, legal, maps: PathMaps, info: MapMetaData) -> np.ndarray:
+        """Scores (T,) of rolled-out trajectories; inf where illegal."""
+        p = self.params
+        end = poses[:, -1]
+        points = [(end[:, 0], end[:, 1])]
+        # within forward_point_distance of the local goal the point ahead would hold the robot that
+        # far short of it, so (as DWA) only the end pose counts there
+        if np.hypot(*(poses[0, 0, :2] - maps.local_goal[:2])) > p.forward_point_distance:
+            ahead = end[:, :2] + p.forward_point_distance * np.stack([np.cos(end[:, 2]), np.sin(end[:, 2])], axis=1)
+            points.append((ahead[:, 0], ahead[:, 1]))
+        total = p.occdist_scale * max_cost.astype(np.float64)
+        for x, y in points:
+            rows, cols = world_to_cell(info, x, y)
+            # a point ahead may leave the window near its edge: take the nearest cell's distance
+            rows, cols = np.clip(rows, 0, info.height - 1), np.clip(cols, 0, info.width - 1)
+            total += p.path_distance_bias * maps.path_dist[rows, cols] + p.goal_distance_bias * maps.goal_dist[rows, cols]
+        return np.where(legal, total, np.inf)
+
+    def compute(self, pose, velocity, costs: np.ndarray, info: MapMetaData, path: np.ndarray,
+                maps: PathMaps | None = None) -> DwaResult:
+        """One cycle: pose (x, y, yaw) and path (N, 3) in the costmap's frame, velocity (vx, vy, wz)
+        in the robot frame. `maps` may be passed when already computed for this cycle."""
+        maps = maps if maps is not None else path_maps(path, pose, info)
+        low, high = reachable(self.params, velocity)
+        brake = np.clip(0.0, low, high)   # as hard as the acceleration limits allow
+        if not self.params.holonomic_robot:
+            brake[1] = 0.0
+        samples = sample_velocities(self.params, velocity)
+        if maps is None:
+            return DwaResult("no_path", brake, samples, np.zeros((0, 1, 3)), np.zeros(0), -1,
+                             "no point of the path lies on the local costmap")
+        poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info)
+        scores = self.score(poses, max_cost, legal, maps, info)
+        if legal.any():
+            best = int(np.argmin(scores))
+            return DwaResult("ok", samples[best].copy(), samples, poses, scores, best)
+        if self.params.escape_vel < 0:
+            escape = np.clip(np.array([self.params.escape_vel, 0.0, 0.0]), low, high)
+            if escape[0] < 0 and self.rollout(escape[None], pose, velocity, costs, info)[2][0]:
+                return DwaResult("escape", escape, samples, poses, scores, -1,
+                                 f"every one of {len(samples)} trajectories collides; backing up")
+        return DwaResult("no_valid_trajectory", brake, samples, poses, scores, -1,
+                         f"every one of {len(samples)} trajectories collides; braking")
+
+
+def warm_up() -> None:
+    """Compile (or load from cache) the rollout kernel, outside any control cycle."""
+    info = MapMetaData(resolution=0.1, width=4, height=4)
+    square = np.array([[0.1, 0.1], [-0.1, 0.1], [-0.1, -0.1], [0.1, -0.1]])
+    for dwa in (True, False):
+        DwaPlanner(DwaParams(dwa=dwa), square).rollout(np.array([[0.1, 0.0, 0.1]]), (0.2, 0.2, 0.0), (0.0, 0.0, 0.0),
+                        np.zeros((4, 4), np.uint8), info)

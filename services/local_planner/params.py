@@ -1,0 +1,169 @@
+"""Local planning parameters: one frozen dataclass per core, with ROS names and defaults.
+
+DwaParams holds base_local_planner's TrajectoryPlannerROS names (the ones the mecanum paper's table
+lists) and dwa_local_planner's where base_local_planner has none. Defaults are the ROS wiki's:
+base_local_planner for acc_lim_*, max/min_vel_x, max/min_vel_theta, min_in_place_vel_theta,
+escape_vel, holonomic_robot, y_vels, sim_granularity, vx_samples, vtheta_samples,
+controller_frequency, xy/yaw_goal_tolerance, dwa; dwa_local_planner for max/min_vel_y, vy_samples,
+sim_time (1.7), path_distance_bias (32), goal_distance_bias (24), occdist_scale (0.01),
+forward_point_distance (0.325). The biases weigh metres as DWA does (DWA multiplies them by the
+costmap resolution and measures distances in cells, which is the same thing).
+VelocitySmootherParams and CollisionMonitorParams use Nav2's names and defaults; FollowerParams has
+no ROS counterpart (the omni-wheel paper's follower).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..runtime.params import load_params
+
+DRIVE_MODES = ("holonomic", "diff")
+
+
+def _check(obj, names, minimum=0.0, strict=False):
+    for name in names:
+        value = getattr(obj, name)
+        ok = math.isfinite(value) and (value > minimum if strict else value >= minimum)
+        if not ok:
+            raise ValueError(f"{name} must be a number {'>' if strict else '≥'} {minimum}, got {value}")
+
+
+@dataclass(frozen=True)
+class DwaParams:
+    # robot configuration
+    acc_lim_x: float = 2.5               # m/s²
+    acc_lim_y: float = 2.5               # m/s²
+    acc_lim_theta: float = 3.2           # rad/s²
+    max_vel_x: float = 0.5               # m/s
+    min_vel_x: float = 0.1               # m/s (negative allows reversing)
+    max_vel_y: float = 0.1               # m/s (dwa_local_planner)
+    min_vel_y: float = -0.1              # m/s (dwa_local_planner)
+    max_vel_theta: float = 1.0           # rad/s
+    min_vel_theta: float = -1.0          # rad/s
+    min_in_place_vel_theta: float = 0.4  # rad/s: slower turns on the spot are not sampled
+    escape_vel: float = -0.1             # m/s: backing up when no trajectory is legal
+    holonomic_robot: bool = True         # false: differential drive, vy is always 0
+    y_vels: tuple[float, ...] = (-0.3, -0.1, 0.1, 0.3)   # m/s: extra strafe samples (within the window)
+    # forward simulation
+    sim_time: float = 1.7                # s (dwa_local_planner; base_local_planner: 1.0)
+    sim_granularity: float = 0.025       # m between simulated poses
+    vx_samples: int = 3
+    vy_samples: int = 10                 # (dwa_local_planner)
+    vtheta_samples: int = 20
+    controller_frequency: float = 20.0   # Hz: with dwa, the window spans one control period
+    dwa: bool = True                     # false: trajectory rollout (window over sim_time, ramped rollouts)
+    # scoring
+    path_distance_bias: float = 32.0     # per m from the local path
+    goal_distance_bias: float = 24.0     # per m from the local goal
+    occdist_scale: float = 0.01          # per unit of the highest cost met
+    forward_point_distance: float = 0.325  # m: the point ahead of the robot scored for heading
+    # goal
+    xy_goal_tolerance: float = 0.10      # m
+    yaw_goal_tolerance: float = 0.05     # rad
+
+    def __post_init__(self):
+        _check(self, ("acc_lim_x", "acc_lim_theta", "max_vel_theta", "min_in_place_vel_theta",
+                      "sim_time", "sim_granularity", "controller_frequency"), strict=True)
+        _check(self, ("acc_lim_y", "path_distance_bias", "goal_distance_bias", "occdist_scale",
+                      "forward_point_distance", "xy_goal_tolerance", "yaw_goal_tolerance"))
+        for low, high in (("min_vel_x", "max_vel_x"), ("min_vel_y", "max_vel_y"),
+                          ("min_vel_theta", "max_vel_theta")):
+            if not getattr(self, low) <= getattr(self, high):
+                raise ValueError(f"{low} ({getattr(self, low)}) must not exceed {high} ({getattr(self, high)})")
+        for name in ("vx_samples", "vy_samples", "vtheta_samples"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be ≥ 1, got {getattr(self, name)}")
+        if not all(math.isfinite(v) for v in self.y_vels):
+            raise ValueError(f"y_vels must be finite numbers, got {self.y_vels}")
+
+    @classmethod
+    def from_mapping(cls, values: dict | None, source: str = "local_planner") -> DwaParams:
+        return load_params(cls, values, source)
+
+
+@dataclass(frozen=True)
+class FollowerParams:
+    """The omni-wheel paper's follower: cruise speed along the path, PID on cross-track and heading
+    error, and V = ((l − s)/l)^a · V0 over the last l metres."""
+    drive: str = "holonomic"             # holonomic | diff
+    cruise_speed: float = 0.5            # m/s: V0
+    acc_lim: float = 2.5                 # m/s²: speed-up along the path
+    decel_distance: float = 0.6          # m: l, the final approach
+    decel_exponent: float = 0.5          # a; below 1 the approach ends in finite time
+    kp_cross: float = 4.5                # per s: m of cross-track error → m/s (holonomic) or rad/s per m (diff);
+                                         # with kp_heading 3 a diff drive at V0 = 0.5 is critically damped
+    ki_cross: float = 0.0
+    kd_cross: float = 0.0
+    kp_heading: float = 3.0              # per s: rad of heading error → rad/s
+    ki_heading: float = 0.0
+    kd_heading: float = 0.0
+    integral_limit: float = 0.5          # bound on each PID's integral term (its units × s)
+    max_vel_theta: float = 1.0           # rad/s
+    goal_tolerance: float = 0.002        # m: done when this close to the end along the path
+
+    def __post_init__(self):
+        if self.drive not in DRIVE_MODES:
+            raise ValueError(f"drive must be one of {DRIVE_MODES}, got {self.drive!r}")
+        _check(self, ("cruise_speed", "acc_lim", "decel_distance", "decel_exponent", "max_vel_theta"), strict=True)
+        _check(self, ("kp_cross", "ki_cross", "kd_cross", "kp_heading", "ki_heading", "kd_heading",
+                      "integral_limit", "goal_tolerance"))
+
+    @classmethod
+    def from_mapping(cls, values: dict | None, source: str = "path_follower") -> FollowerParams:
+        return load_params(cls, values, source)
+
+
+@dataclass(frozen=True)
+class VelocitySmootherParams:
+    """Nav2 velocity_smoother's names and defaults; axes are (vx, vy, wz)."""
+    smoothing_frequency: float = 20.0                   # Hz
+    max_velocity: tuple[float, float, float] = (0.5, 0.0, 2.5)
+    min_velocity: tuple[float, float, float] = (-0.5, 0.0, -2.5)
+    max_accel: tuple[float, float, float] = (2.5, 0.0, 3.2)
+    max_decel: tuple[float, float, float] = (-2.5, 0.0, -3.2)
+    deadband_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    velocity_timeout: float = 1.0                       # s without a command → decelerate to a stop
+
+    def __post_init__(self):
+        _check(self, ("smoothing_frequency", "velocity_timeout"), strict=True)
+        for name in ("max_velocity", "min_velocity", "max_accel", "max_decel", "deadband_velocity"):
+            value = getattr(self, name)
+            if len(value) != 3 or not all(math.isfinite(v) for v in value):
+                raise ValueError(f"{name} must be three finite numbers [vx, vy, wz], got {value}")
+        for i in range(3):
+            if self.min_velocity[i] > self.max_velocity[i]:
+                raise ValueError(f"min_velocity {self.min_velocity} exceeds max_velocity {self.max_velocity}")
+            if self.max_accel[i] < 0 or self.max_decel[i] > 0:
+                raise ValueError("max_accel must be ≥ 0 and max_decel ≤ 0 on every axis "
+                                 f"(got {self.max_accel}, {self.max_decel})")
+
+    @classmethod
+    def from_mapping(cls, values: dict | None, source: str = "velocity_smoother") -> VelocitySmootherParams:
+        return load_params(cls, values, source)
+
+
+@dataclass(frozen=True)
+class CollisionMonitorParams:
+    """Nav2 collision_monitor's stop and slowdown polygons, here grown from the footprint."""
+    footprint: tuple[tuple[float, float], ...] = ((0.416, 0.318), (-0.416, 0.318), (-0.416, -0.318),
+                                                  (0.416, -0.318))   # m, robot frame (the mecanum paper's)
+    stop_padding: float = 0.05           # m added around the footprint for the stop zone
+    slowdown_padding: float = 0.30       # m added around the footprint for the slowdown zone
+    slowdown_ratio: float = 0.5          # Nav2's default
+    min_points: int = 4                  # Nav2's default: fewer points inside a zone are noise
+
+    def __post_init__(self):
+        if len(self.footprint) < 3:
+            raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
+        _check(self, ("stop_padding", "slowdown_padding"))
+        if self.slowdown_padding < self.stop_padding:
+            raise ValueError("slowdown_padding must be at least stop_padding")
+        if not 0.0 <= self.slowdown_ratio <= 1.0:
+            raise ValueError(f"slowdown_ratio must be within [0, 1], got {self.slowdown_ratio}")
+        if self.min_points < 1:
+            raise ValueError(f"min_points must be ≥ 1, got {self.min_points}")
+
+    @classmethod
+    def from_mapping(cls, values: dict | None, source: str = "collision_monitor") -> CollisionMonitorParams:
+        return load_params(cls, values, source)

@@ -1,0 +1,54 @@
+"""Velocity smoother after Nav2's velocity_smoother (open loop): between the planner and the chassis,
+run at smoothing_frequency in sim time.
+
+Each step the latest command, clipped to [min_velocity, max_velocity], is approached per axis from
+the last output: speeding up (same sign, larger magnitude) by at most max_accel·dt, anything else
+(slowing down, reversing) by at most |max_decel|·dt, as Nav2 does. An output component within the
+deadband becomes 0. No command for velocity_timeout seconds (sim time) makes the target zero, so
+the robot stops at the deceleration limits rather than at once.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .params import VelocitySmootherParams
+
+
+def smooth_step(target, current, dt: float, params: VelocitySmootherParams) -> np.ndarray:
+    """One step from `current` towards `target` (both (3,)) within the acceleration limits."""
+    target = np.clip(np.asarray(target, float), params.min_velocity, params.max_velocity)
+    current = np.asarray(current, float)
+    speeding_up = (np.abs(target) >= np.abs(current)) & (target * current >= 0)
+    step = np.where(speeding_up, np.asarray(params.max_accel), -np.asarray(params.max_decel)) * dt
+    out = current + np.clip(target - current, -step, step)
+    return np.where(np.abs(out) < np.asarray(params.deadband_velocity), 0.0, out)
+
+
+@dataclass(frozen=True)
+class SmootherOutput:
+    twist: np.ndarray     # (3,) to send
+    timed_out: bool       # no command within velocity_timeout: stopping
+
+
+class VelocitySmoother:
+    def __init__(self, params: VelocitySmootherParams):
+        self.params = params
+        self._target = np.zeros(3)
+        self._last_command_ns: int | None = None
+        self._output = np.zeros(3)
+
+    def command(self, twist, stamp_ns: int) -> None:
+        """A new command from the planner, stamped in sim time."""
+        self._target = np.asarray(twist, float).copy()
+        self._last_command_ns = int(stamp_ns)
+
+    def step(self, stamp_ns: int) -> SmootherOutput:
+        """The output at sim time stamp_ns (called every 1/smoothing_frequency seconds)."""
+        p = self.params
+        timed_out = (self._last_command_ns is None
+                     or (stamp_ns - self._last_command_ns) * 1e-9 > p.velocity_timeout)
+        target = np.zeros(3) if timed_out else self._target
+        self._output = smooth_step(target, self._output, 1.0 / p.smoothing_frequency, p)
+        return SmootherOutput(self._output.copy(), timed_out)

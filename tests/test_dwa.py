@@ -1,0 +1,197 @@
+"""DWA / trajectory rollout: behaviour on inflated costmaps built by the costmap core."""
+import math
+
+import numpy as np
+import pytest
+
+from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
+from omninav.services.chassis.odometry import integrate, wrap_angle
+from omninav.services.costmap.costmap import Costmap
+from omninav.services.costmap.footprint import make_footprint
+from omninav.services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
+from omninav.services.local_planner.bench import reference_rollout
+from omninav.services.local_planner.dwa import (DwaPlanner, dynamic_window, footprint_check_cost, path_maps,
+                                                sample_velocities)
+from omninav.services.local_planner.params import DwaParams
+
+RES = 0.05
+SQUARE = ((0.2, 0.2), (-0.2, 0.2), (-0.2, -0.2), (0.2, -0.2))   # a small robot, 0.4 m square
+FOOTPRINT = make_footprint(SQUARE, padding=0.0)
+HOLO = DwaParams(min_vel_x=0.0, max_vel_y=0.5, min_vel_y=-0.5)
+DIFF = DwaParams(min_vel_x=0.0, holonomic_robot=False)
+
+
+def costmap(boxes=(), size_m=6.0, origin=(-3.0, -3.0)):
+    """Inflated costs (static + inflation, ROS defaults) of a free map with lethal boxes (x0, y0, x1, y1)."""
+    n = int(round(size_m / RES))
+    info = MapMetaData(resolution=RES, width=n, height=n, origin=Pose2D(*origin, 0.0))
+    data = np.zeros((n, n), np.int8)
+    for x0, y0, x1, y1 in boxes:
+        data[int((y0 - origin[1]) / RES):int((y1 - origin[1]) / RES),
+             int((x0 - origin[0]) / RES):int((x1 - origin[0]) / RES)] = 100
+    inflation = InflationLayerParams()
+    cm = Costmap(CostmapParams(footprint=SQUARE, footprint_padding=0.0,
+                               layers=(StaticLayerParams(), inflation)),
+                 OccupancyGrid(info=info, data=data))
+    cm.update()
+    check = footprint_check_cost(FOOTPRINT.inscribed_radius, FOOTPRINT.circumscribed_radius,
+                                 inflation.inflation_radius, inflation.cost_scaling_factor)
+    return cm.costs.copy(), cm.info, check
+
+
+def straight(x0, y0, x1, y1, n=60):
+    t = np.linspace(0.0, 1.0, n)[:, None]
+    xy = np.array([x0, y0]) + t * np.array([x1 - x0, y1 - y0])
+    return np.column_stack([xy, np.full(n, math.atan2(y1 - y0, x1 - x0))])
+
+
+def footprint_hits_lethal(costs, info, pose):
+    """Whether any cell under the footprint at `pose` is lethal (brute force over the cells)."""
+    c, s = math.cos(pose[2]), math.sin(pose[2])
+    u, v = np.meshgrid(np.linspace(-0.2, 0.2, 41), np.linspace(-0.2, 0.2, 41))
+    x, y = pose[0] + c * u - s * v, pose[1] + s * u + c * v
+    rows, cols = ((y - info.origin.y) / RES).astype(int), ((x - info.origin.x) / RES).astype(int)
+    return bool((costs[rows, cols] >= 254).any())
+
+
+def drive(planner, costs, info, path, pose, cycles, velocity=(0.0, 0.0, 0.0)):
+    """Closed loop in a kinematic sim: each cycle's command is driven for one control period."""
+    dt = 1.0 / planner.params.controller_frequency
+    pose, velocity = np.array(pose, float), np.array(velocity, float)
+    trace, results = [pose], []
+    for _ in range(cycles):
+        result = planner.compute(pose, velocity, costs, info, path)
+        results.append(result)
+        velocity = result.cmd
+        pose = integrate(pose, velocity, dt)
+        trace.append(pose)
+    return np.array(trace), results
+
+
+def test_free_space_drives_along_the_path_to_the_goal():
+    costs, info, check = costmap()
+    path = straight(-2.0, 0.0, 2.0, 0.0)
+    planner = DwaPlanner(HOLO, FOOTPRINT.points, check)
+    trace, results = drive(planner, costs, info, path, (-2.0, 0.0, 0.0), 300)
+    assert all(r.status == "ok" for r in results)
+    near = np.hypot(trace[:, 0] - 2.0, trace[:, 1]) < HOLO.xy_goal_tolerance
+    assert near.any(), "reaches the goal within xy_goal_tolerance"
+    # until then (a goal checker stops it there) it keeps on the path, never backing away
+    approach = trace[:int(np.argmax(near)) + 1]
+    assert np.max(np.abs(approach[:, 1])) < 0.05
+    assert np.all(np.maximum.accumulate(approach[:, 0]) - approach[:, 0] < 0.01)
+    assert np.max(np.abs([r.cmd[0] for r in results])) == HOLO.max_vel_x   # cruising at full speed on the way
+
+
+@pytest.mark.parametrize("params", [HOLO, DIFF], ids=["holonomic", "diff"])
+def test_an_obstacle_on_the_path_is_avoided_and_never_entered(params):
+    costs, info, check = costmap(boxes=[(0.0, -0.3, 0.3, 0.3)])
+    planner = DwaPlanner(params, FOOTPRINT.points, check)
+    # an obstacle that appeared on the path after planning: driving on would hit it
+    through = straight(-2.5, 0.0, 2.5, 0.0)
+    first = planner.compute((-1.0, 0.0, 0.0), (0.5, 0.0, 0.0), costs, info, through)
+    straight_on = np.flatnonzero((np.abs(first.samples[:, 1]) < 1e-9) & (np.abs(first.samples[:, 2]) < 1e-9)
+                                 & (first.samples[:, 0] >= 0.45))
+    assert straight_on.size and not first.legal[straight_on].any()
+    assert first.best >= 0 and first.legal[first.best]
+    trace, results = drive(planner, costs, info, through, (-2.0, 0.0, 0.0), 120)
+    # and once the global planner has bent the path around it, the robot follows it past
+    around = np.concatenate([straight(-2.5, 0.0, -0.8, 0.0), straight(-0.8, 0.0, -0.4, 0.8),
+                             straight(-0.4, 0.8, 0.7, 0.8), straight(0.7, 0.8, 1.1, 0.0), straight(1.1, 0.0, 2.5, 0.0)])
+    detour, detour_results = drive(planner, costs, info, around, (-2.0, 0.0, 0.0), 240)
+    for result in results + detour_results:
+        if result.best >= 0:   # the chosen rollout never touches a lethal cell
+            assert not any(footprint_hits_lethal(costs, info, p) for p in result.poses[result.best])
+    assert not any(footprint_hits_lethal(costs, info, p) for p in np.concatenate([trace, detour]))
+    assert trace[:, 0].max() < 0.0            # blocked: it stays short of the box
+    assert detour[-1, 0] > 1.0                # past the box
+
+
+def test_holonomic_mode_strafes_towards_a_goal_on_the_left():
+    costs, info, check = costmap()
+    result = DwaPlanner(HOLO, FOOTPRINT.points, check).compute(
+        (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), costs, info, straight(0.0, 0.0, 0.0, 2.0))
+    low, high = dynamic_window(HOLO, (0.0, 0.0, 0.0))
+    assert result.status == "ok"
+    assert result.cmd[1] >= 0.5 * high[1] > 0        # sideways, left
+    assert abs(result.cmd[0]) < result.cmd[1]
+
+
+def test_diff_mode_never_commands_vy():
+    costs, info, check = costmap(boxes=[(0.8, -0.3, 1.1, 0.3)])
+    planner = DwaPlanner(DIFF, FOOTPRINT.points, check)
+    assert np.all(sample_velocities(DIFF, (0.2, 0.3, 0.1))[:, 1] == 0.0)
+    for goal in ((0.0, 2.0), (2.0, 0.0), (-2.0, -1.0)):
+        result = planner.compute((0.0, 0.0, 0.0), (0.1, 0.0, 0.0), costs, info, straight(0.0, 0.0, *goal))
+        assert result.cmd[1] == 0.0 and np.all(result.samples[:, 1] == 0.0)
+
+
+@pytest.mark.parametrize("velocity", [(0.0, 0.0, 0.0), (0.3, -0.2, 0.5), (0.5, 0.5, -1.0), (0.9, 0.0, 0.0)])
+@pytest.mark.parametrize("dwa", [True, False])
+def test_commands_stay_within_the_dynamic_window(velocity, dwa):
+    params = DwaParams(min_vel_x=0.0, max_vel_y=0.5, min_vel_y=-0.5, dwa=dwa)
+    costs, info, check = costmap()
+    result = DwaPlanner(params, FOOTPRINT.points, check).compute(
+        (0.0, 0.0, 0.0), velocity, costs, info, straight(0.0, 0.0, 2.0, 1.0))
+    period = 1.0 / params.controller_frequency if dwa else params.sim_time
+    reach = np.array([params.acc_lim_x, params.acc_lim_y, params.acc_lim_theta]) * period + 1e-12
+    assert np.all(np.abs(result.samples - velocity) <= reach)
+    assert np.all(np.abs(result.cmd - velocity) <= reach)
+    inside = [(params.min_vel_x, params.max_vel_x), (params.min_vel_y, params.max_vel_y),
+              (params.min_vel_theta, params.max_vel_theta)]
+    for axis, (low, high) in enumerate(inside):
+        if low <= velocity[axis] <= high:   # starting inside the limits: every sample stays inside
+            assert np.all((result.samples[:, axis] >= low - 1e-12) & (result.samples[:, axis] <= high + 1e-12))
+    if velocity[0] - reach[0] > params.max_vel_x:   # too fast to get within the limits: brake fully
+        assert np.allclose(result.samples[:, 0], velocity[0] - reach[0] + 1e-12)
+
+
+def test_no_legal_trajectory_backs_up_or_brakes():
+    costs, info, check = costmap(boxes=[(0.25, -1.0, 0.5, 1.0)])   # a wall just ahead
+    planner = DwaPlanner(DwaParams(min_vel_x=0.1, holonomic_robot=False), FOOTPRINT.points, check)
+    result = planner.compute((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), costs, info, straight(0.0, 0.0, 2.0, 0.0))
+    assert not result.legal.any()
+    assert result.status == "escape" and result.cmd[0] < 0 and result.cmd[1] == 0
+    no_escape = DwaPlanner(DwaParams(min_vel_x=0.1, holonomic_robot=False, escape_vel=0.0), FOOTPRINT.points, check)
+    result = no_escape.compute((0.0, 0.0, 0.0), (0.3, 0.0, 0.2), costs, info, straight(0.0, 0.0, 2.0, 0.0))
+    assert result.status == "no_valid_trajectory"
+    assert np.allclose(result.cmd, [0.3 - 2.5 / 20, 0.0, 0.2 - 3.2 / 20])   # braking as hard as allowed
+
+
+def test_no_path_on_the_costmap_brakes():
+    costs, info, check = costmap()
+    result = DwaPlanner(HOLO, FOOTPRINT.points, check).compute(
+        (0.0, 0.0, 0.0), (0.1, 0.0, 0.0), costs, info, straight(10.0, 10.0, 12.0, 10.0))
+    assert result.status == "no_path" and np.allclose(result.cmd, 0.0)
+
+
+def test_path_maps_measure_metres_to_the_local_path_and_goal():
+    costs, info, _ = costmap()
+    path = straight(-5.0, 0.0, 5.0, 0.0, n=201)   # runs off both edges
+    maps = path_maps(path, (0.5, 0.3, 0.0), info)
+    assert np.isclose(maps.path[0, 0], 0.5, atol=0.05)            # starts at the point nearest the robot
+    assert np.all(maps.path[:, 0] < 3.0)                          # ends where the path leaves the grid
+    rows, cols = np.array([60 + 20]), np.array([60 + 20])         # (1.025, 1.025)
+    assert np.isclose(maps.path_dist[rows, cols][0], 1.0, atol=0.051)
+    goal_col = int((maps.local_goal[0] + 3.0) / RES)
+    assert np.isclose(maps.goal_dist[60, goal_col - 30], 1.5, atol=0.051)
+
+
+def test_batch_rollout_matches_a_per_trajectory_python_loop():
+    costs, info, check = costmap(boxes=[(0.4, -0.5, 0.7, 0.1), (-1.0, 0.6, 0.5, 0.9)])
+    rng = np.random.default_rng(3)
+    for dwa in (True, False):
+        params = DwaParams(min_vel_x=-0.3, max_vel_y=0.5, min_vel_y=-0.5, dwa=dwa)
+        planner = DwaPlanner(params, FOOTPRINT.points, check)
+        samples = rng.uniform([-0.3, -0.5, -1.0], [0.5, 0.5, 1.0], size=(60, 3))
+        velocity = np.array([0.2, -0.1, 0.3])
+        poses, max_cost, legal = planner.rollout(samples, (0.0, 0.0, 0.2), velocity, costs, info)
+        assert 0 < legal.sum() < len(samples)   # the case exercises both outcomes
+        for i, twist in enumerate(samples):
+            ref_poses, ref_cost, ref_legal = reference_rollout(planner, twist, planner.n_steps(samples),
+                                                               (0.0, 0.0, 0.2), velocity, costs, info)
+            assert ref_legal == legal[i]
+            assert ref_cost == max_cost[i]
+            ours = poses[i, :len(ref_poses)]
+            assert np.allclose(ref_poses[:, :2], ours[:, :2], atol=1e-9)
+            assert np.allclose(wrap_angle(ref_poses[:, 2] - ours[:, 2]), 0.0, atol=1e-9)

@@ -1,0 +1,92 @@
+"""Velocity smoother and collision monitor."""
+import math
+
+import numpy as np
+import pytest
+
+from omninav.schemas.messages import LaserScan
+from omninav.services.local_planner.collision import CollisionMonitor, robot_frame_points
+from omninav.services.local_planner.params import CollisionMonitorParams, VelocitySmootherParams
+from omninav.services.local_planner.smoother import VelocitySmoother
+
+PARAMS = VelocitySmootherParams(max_velocity=(0.5, 0.5, 2.0), min_velocity=(-0.5, -0.5, -2.0),
+                                max_accel=(1.0, 0.8, 2.0), max_decel=(-2.0, -1.6, -4.0))
+SEC = 1_000_000_000
+
+
+def run(smoother, commands, steps):
+    """Step the smoother at its frequency; commands maps a step index to a twist sent just before."""
+    period_ns = int(SEC / smoother.params.smoothing_frequency)
+    outputs = []
+    for k in range(steps):
+        if k in commands:
+            smoother.command(commands[k], k * period_ns)
+        outputs.append(smoother.step(k * period_ns))
+    return outputs
+
+
+def test_the_smoother_respects_acceleration_and_deceleration_limits():
+    smoother = VelocitySmoother(PARAMS)
+    # full speed ahead, then a hard reverse, resent every step so no timeout
+    commands = {k: (0.5, -0.5, 2.0) if k < 30 else (-0.5, 0.5, -2.0) for k in range(60)}
+    twists = np.array([o.twist for o in run(smoother, commands, 60)])
+    dt = 1.0 / PARAMS.smoothing_frequency
+    change = np.abs(np.diff(np.vstack([np.zeros(3), twists]), axis=0))
+    assert np.all(change <= np.array([2.0, 1.6, 4.0]) * dt + 1e-12)   # never beyond the deceleration limit
+    speeding_up = (np.abs(twists[1:]) > np.abs(twists[:-1])) & (twists[1:] * twists[:-1] > 0)
+    assert np.all(change[1:][speeding_up] <= (np.array([1.0, 0.8, 2.0]) * dt + 1e-12)[np.nonzero(speeding_up)[1]])
+    assert np.allclose(twists[29], (0.5, -0.5, 2.0))                   # reached the target
+    assert np.isclose(twists[5, 0], 6 * 1.0 * dt)                      # ramping at max_accel
+    assert np.allclose(twists[-1], (-0.5, 0.5, -2.0))
+    assert np.all(np.abs(twists) <= np.array([0.5, 0.5, 2.0]) + 1e-12)
+
+
+def test_the_smoother_stops_when_commands_time_out():
+    smoother = VelocitySmoother(PARAMS)
+    outputs = run(smoother, {k: (0.5, 0.0, 1.0) for k in range(20)}, 60)
+    timeout_steps = PARAMS.velocity_timeout * PARAMS.smoothing_frequency
+    assert not any(o.timed_out for o in outputs[:20 + int(timeout_steps)])
+    late = [o for o in outputs[20 + int(timeout_steps) + 1:]]
+    assert late and all(o.timed_out for o in late)
+    assert np.allclose(outputs[-1].twist, 0.0)
+    # the stop is at the deceleration limit, not a jump
+    speeds = np.array([o.twist[0] for o in outputs])
+    assert np.all(np.diff(speeds) >= -2.0 / PARAMS.smoothing_frequency - 1e-12)
+
+
+def test_the_smoother_without_any_command_stays_still_and_applies_the_deadband():
+    assert np.allclose(run(VelocitySmoother(PARAMS), {}, 5)[-1].twist, 0.0)
+    params = VelocitySmootherParams(deadband_velocity=(0.05, 0.0, 0.1))
+    out = run(VelocitySmoother(params), {0: (0.03, 0.0, 0.05), 1: (0.03, 0.0, 0.05)}, 2)
+    assert np.allclose(out[-1].twist, 0.0)
+
+
+def scan_with_obstacle(distance, bearing=0.0, width=0.3):
+    """A 360-beam scan, everything out of range except an obstacle `width` wide at `distance`."""
+    angles = -math.pi + np.arange(360) * (2 * math.pi / 360)
+    ranges = np.full(360, np.inf, np.float32)
+    half = math.atan2(width / 2, distance)
+    ranges[np.abs(np.angle(np.exp(1j * (angles - bearing)))) <= half] = distance
+    return LaserScan(angle_min=-math.pi, angle_max=math.pi - 2 * math.pi / 360, angle_increment=2 * math.pi / 360,
+                     range_min=0.05, range_max=10.0, ranges=ranges)
+
+
+@pytest.mark.parametrize("bearing", [0.0, math.pi / 2, math.pi])
+def test_the_collision_monitor_stops_slows_or_lets_pass(bearing):
+    monitor = CollisionMonitor(CollisionMonitorParams())    # 0.832 x 0.636 m footprint
+    edge = 0.416 if bearing in (0.0, math.pi) else 0.318     # footprint half-size towards the obstacle
+    cmd = np.array([0.4, 0.1, 0.5])
+    near = monitor.check(cmd, robot_frame_points(scan_with_obstacle(edge + 0.03, bearing), (0.0, 0.0, 0.0)))
+    assert near.action == "stop" and np.all(near.twist == 0.0) and near.points >= 4
+    middle = monitor.check(cmd, robot_frame_points(scan_with_obstacle(edge + 0.2, bearing), (0.0, 0.0, 0.0)))
+    assert middle.action == "slowdown" and np.allclose(middle.twist, cmd * 0.5)
+    far = monitor.check(cmd, robot_frame_points(scan_with_obstacle(edge + 0.5, bearing), (0.0, 0.0, 0.0)))
+    assert far.action == "none" and np.array_equal(far.twist, cmd)
+
+
+def test_the_collision_monitor_ignores_fewer_than_min_points_and_uses_the_sensor_pose():
+    monitor = CollisionMonitor(CollisionMonitorParams(min_points=4))
+    assert monitor.check((0.3, 0, 0), [[0.43, 0.0], [0.43, 0.05], [0.43, -0.05]]).action == "none"
+    # a laser mounted 0.3 m ahead sees an obstacle 0.15 m in front of it: 0.45 m from the centre
+    result = monitor.check((0.3, 0, 0), robot_frame_points(scan_with_obstacle(0.15, width=0.2), (0.3, 0.0, 0.0)))
+    assert result.action == "stop"
