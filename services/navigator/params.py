@@ -1,0 +1,68 @@
+"""Navigator parameters with move_base's names and defaults (ROS 1 noetic move_base.cpp).
+
+xy_goal_tolerance, yaw_goal_tolerance and escape_vel are base_local_planner's (in ROS the local
+planner decides arrival; here the navigator does, so both see the same numbers). The recovery
+behaviours' own settings (rotate_angle, max_rotational_vel, backup_dist, wait_duration) carry the
+names of rotate_recovery and Nav2's BackUp/Wait behaviours.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from ..runtime.params import load_params
+
+RECOVERY_NAMES = ("clear_costmaps", "rotate", "back_up", "wait")
+
+
+@dataclass(frozen=True)
+class NavigatorParams:
+    planner_frequency: float = 0.0        # Hz: replanning while controlling; 0 = only on a new goal or a failure
+    controller_frequency: float = 20.0    # Hz: the rate step() is called at; sets the recovery command period
+    planner_patience: float = 5.0         # s without a valid plan → recovery
+    controller_patience: float = 15.0     # s without a valid command → recovery
+    max_planning_retries: int = -1        # failed plans tolerated before recovery; -1 = unlimited (patience only)
+    oscillation_timeout: float = 0.0      # s without moving oscillation_distance → recovery; 0 = off
+    oscillation_distance: float = 0.5     # m
+    conservative_reset_dist: float = 3.0  # m: clear_costmaps keeps obstacles within this square around the robot
+    recovery_behavior_enabled: bool = True
+    clearing_rotation_allowed: bool = True  # false drops "rotate" from the recovery order
+    shutdown_costmaps: bool = False       # accepted for ROS files; costmaps here run independently
+    recovery_behaviors: tuple[str, ...] = RECOVERY_NAMES
+    xy_goal_tolerance: float = 0.10       # m
+    yaw_goal_tolerance: float = 0.05      # rad (final pose only; waypoints check xy only)
+    escape_vel: float = -0.1              # m/s along x while backing up (negative: backwards)
+    rotate_angle: float = 2 * math.pi     # rad: rotate_recovery turns a full circle
+    max_rotational_vel: float = 1.0       # rad/s for rotate
+    backup_dist: float = 0.15             # m for back_up
+    wait_duration: float = 1.0            # s for wait
+
+    def __post_init__(self):
+        unknown = [name for name in self.recovery_behaviors if name not in RECOVERY_NAMES]
+        if unknown:
+            raise ValueError(f"recovery_behaviors: unknown {unknown}; known: {list(RECOVERY_NAMES)}")
+        if self.controller_frequency <= 0:
+            raise ValueError(f"controller_frequency must be > 0, got {self.controller_frequency}")
+        if self.max_rotational_vel <= 0:
+            raise ValueError(f"max_rotational_vel must be > 0, got {self.max_rotational_vel}")
+        if self.escape_vel == 0 and self.backup_dist > 0 and "back_up" in self.recovery_behaviors:
+            raise ValueError("escape_vel must be non-zero when back_up is a recovery behaviour")
+        if self.max_planning_retries < -1:
+            raise ValueError(f"max_planning_retries must be ≥ -1, got {self.max_planning_retries}")
+        for name in ("planner_frequency", "planner_patience", "controller_patience", "oscillation_timeout",
+                     "oscillation_distance", "conservative_reset_dist", "xy_goal_tolerance",
+                     "yaw_goal_tolerance", "backup_dist", "wait_duration"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a number ≥ 0, got {value}")
+
+    @property
+    def recovery_order(self) -> tuple[str, ...]:
+        """The behaviours actually run, in order (rotate only when clearing_rotation_allowed)."""
+        if not self.recovery_behavior_enabled:
+            return ()
+        return tuple(n for n in self.recovery_behaviors if n != "rotate" or self.clearing_rotation_allowed)
+
+    @classmethod
+    def from_mapping(cls, values: dict | None, source: str = "navigator") -> NavigatorParams:
+        return load_params(cls, values, source)
