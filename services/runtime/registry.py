@@ -14,6 +14,8 @@ SERVICES: dict[str, str] = {
     "chassis": "omninav.services.chassis.node:ChassisNode",
     "lidar": "omninav.services.lidar.node:LidarNode",
     "map_server": "omninav.services.map_server.node:MapServerNode",
+    "costmap": "omninav.services.costmap.node:CostmapNode",
+    "global_planner": "omninav.services.global_planner.node:PlannerNode",
 }
 
 

@@ -1,0 +1,57 @@
+"""Where the robot is in the odom and map frames, for the costmap and planner nodes (there is no tf
+tree: odometry gives odom→base_link, tf/map_odom gives map→odom).
+
+Until a localizer publishes map→odom, it is `start`: the pose in the map of the odom frame's
+origin, i.e. where the robot stood when odometry started (the chassis starts odometry at zero),
+as if odometry were exact. In the sim that is the world's robot start; a localizer replaces it.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...schemas.messages import Odometry, Pose2D, Transform
+from ..chassis.odometry import compose
+
+
+class RobotFrames:
+    def __init__(self, map_frame: str, odom_frame: str, start=(0.0, 0.0, 0.0)):
+        self.map_frame, self.odom_frame = map_frame, odom_frame
+        self.map_odom = np.asarray(start, np.float64)
+        self.odom: np.ndarray | None = None       # the robot in the odom frame, latest odometry
+        self.odom_stamp_ns: int | None = None
+
+    def check_frame(self, frame: str, owner: str) -> None:
+        if frame not in (self.map_frame, self.odom_frame):
+            raise ValueError(f"{owner}: frame {frame!r} is neither the map frame {self.map_frame!r} nor the "
+                             f"odom frame {self.odom_frame!r}")
+
+    def set_odom(self, msg: Odometry) -> None:
+        self.odom = np.array([msg.pose.x, msg.pose.y, msg.pose.theta])
+        self.odom_stamp_ns = msg.header.stamp_ns
+
+    def transform_problem(self, msg: Transform) -> str:
+        """Why a map→odom transform cannot be used, or ''."""
+        frames = (msg.header.frame_id, msg.child_frame_id)
+        if frames != (self.map_frame, self.odom_frame):
+            return f"transform from {frames[0]!r} to {frames[1]!r}, expected {self.map_frame!r} to {self.odom_frame!r}"
+        return ""
+
+    def set_map_odom(self, msg: Transform) -> None:
+        self.map_odom = np.array([msg.transform.x, msg.transform.y, msg.transform.theta])
+
+    def in_frame(self, frame: str, pose_in_odom) -> np.ndarray:
+        """A pose given in the odom frame, expressed in `frame` (the map or the odom frame)."""
+        if frame == self.odom_frame:
+            return np.asarray(pose_in_odom, np.float64)
+        return compose(self.map_odom, pose_in_odom)
+
+    def robot(self, frame: str) -> np.ndarray | None:
+        """The robot's latest pose in `frame`, or None before any odometry."""
+        return None if self.odom is None else self.in_frame(frame, self.odom)
+
+    def frame_in_map(self, frame: str) -> Pose2D | None:
+        """The pose of `frame` in the map frame (None: it is the map frame)."""
+        if frame == self.map_frame:
+            return None
+        x, y, theta = (float(v) for v in self.map_odom)
+        return Pose2D(x, y, theta)

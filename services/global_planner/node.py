@@ -1,0 +1,226 @@
+"""The global_planner service: plans over the global costmap with the A*/Dijkstra core (astar.py).
+
+Plan as a service: `get` on the plan key with `start=x,y[,yaw];goal=x,y[,yaw]` (metres and radians
+in the costmap's frame, the map; yaw 0 when left out) answers a Path planned on the newest global
+costmap received; without `start` the plan starts at the robot's pose. A plan that fails answers
+an error whose text begins with the status (`no_path`, `goal_in_obstacle`, `off_map`) and says why;
+malformed parameters, or no costmap yet, answer an error saying so. `get` without parameters
+answers the plan last published.
+
+For the navigator: a goal (Goal; its pose — waypoints are the navigator's to send one by one) is
+planned from the robot's pose when it takes effect, and again every 1/planner_frequency of sim
+time while it is active (planner_frequency 0: once per goal, as move_base), until a cancel naming
+it (or naming no goal). Each plan is published on the plan key, stamped with the sim time it was
+made; a failed one as an empty Path, as ROS global_planner does, counted in the Diagnostic as
+plans/<status>. A goal that comes before a costmap or a pose is planned when they are there.
+
+Inputs, in merge order: odom (synced); costmap/global, tf/map_odom, pose, goal, cancel (sporadic).
+A sporadic message stamped t takes effect at the first odometry or planning tick stamped after
+t + request_delay_s, as the localizer defers its requests: the costmap service runs up to a scan
+period behind the clock (it waits for the scans), so its costmaps come after the odometry of their
+stamp; deferred, whether one reached the node before or after the odometry stamped in
+(t, t + delay] cannot change the plans, and a live run replays byte for byte.
+
+The robot's pose: the latest `pose` (a localizer's PoseWithCovariance, map frame) when it is newer
+than the odometry, else the odometry carried into the map by tf/map_odom, or by initial_pose_*
+until a localizer sends one (frames.py).
+"""
+from __future__ import annotations
+
+import bisect
+import math
+import statistics
+import time
+from collections import deque
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...schemas import MessageError
+from ...schemas.messages import Costmap, Diagnostic, Goal, Header, Odometry, Path, PoseWithCovariance
+from ..costmap.frames import RobotFrames
+from ..runtime.node import NS_PER_S, Node, QueryError
+from .astar import GlobalPlanner, PlanResult, warm_up
+from .params import GlobalPlannerParams
+
+TIMES_KEPT = 10_000     # plan times kept for the diagnostic's median
+QUERY_PARAMETERS = ("start", "goal")
+COSTMAP, MAP_ODOM, POSE, GOAL, CANCEL = range(5)   # sporadic inputs, in input order (the order of equal stamps)
+
+
+@dataclass(frozen=True)
+class PlannerNodeParams(GlobalPlannerParams):
+    """ROS global_planner's parameters (and move_base's planner_frequency) plus the frames."""
+    initial_pose_x: float = 0.0   # the odom frame's pose in the map (where odometry started) until tf/map_odom
+    initial_pose_y: float = 0.0
+    initial_pose_a: float = 0.0
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+    request_delay_s: float = 0.3  # sim s from a costmap / tf / pose / goal / cancel stamp to its effect
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not (math.isfinite(self.request_delay_s) and self.request_delay_s >= 0):
+            raise ValueError(f"request_delay_s must be zero or positive, got {self.request_delay_s}")
+
+
+def parse_pose(name: str, text: str) -> np.ndarray:
+    """'x,y' or 'x,y,yaw' -> (x, y, yaw); QueryError naming the parameter otherwise."""
+    try:
+        values = [float(v) for v in text.split(",")]
+    except ValueError:
+        values = []
+    if len(values) not in (2, 3) or not all(math.isfinite(v) for v in values):
+        raise QueryError(f"{name}={text!r}: expected x,y or x,y,yaw (metres, radians, in the map frame)")
+    return np.array(values + [0.0] * (3 - len(values)))
+
+
+class PlannerNode(Node):
+    service = "global_planner"
+    Params = PlannerNodeParams
+
+    def setup(self) -> None:
+        p = self.params
+        warm_up()   # compile (or load) the search and smoothing kernels now, never inside a cycle
+        self.planner = GlobalPlanner(p)
+        self.frames = RobotFrames(p.map_frame, p.odom_frame, (p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
+        self.delay_ns = round(p.request_delay_s * NS_PER_S)
+        self.pending: list[tuple[int, int, int, object]] = []   # (stamp, kind, seq, message) not yet in effect
+        self.costmap: Costmap | None = None          # in effect
+        self.newest_costmap: Costmap | None = None   # received (queries are answered now, not replayed)
+        self.pose: PoseWithCovariance | None = None
+        self.goal: Goal | None = None
+        self.waiting = False               # the active goal is not planned yet: no costmap or pose
+        self.plan: Path | None = None      # last published
+        self.plan_ms: deque[float] = deque(maxlen=TIMES_KEPT)
+        self.plan_pub = self.publisher("plan")
+        self.plan_key = self.plan_pub.key
+        self.subscribe("odom", self.on_odom)
+        self.in_keys: dict[int, str] = {}
+        for kind, topic, check in ((COSTMAP, "costmap/global", self._check_costmap),
+                                   (MAP_ODOM, "tf/map_odom", self.frames.transform_problem),
+                                   (POSE, "pose", self._check_pose), (GOAL, "goal", self._check_goal),
+                                   (CANCEL, "cancel", None)):
+            self.in_keys[kind] = self.keys.resolve(topic)
+            self.subscribe(topic, lambda msg, k=kind, c=check: self._receive(k, c, msg), synced=False,
+                           max_delay_s=p.request_delay_s)
+        self.queryable("plan", self.answer_plan)
+        if p.planner_frequency > 0:
+            self.every(1.0 / p.planner_frequency, self.on_timer)
+
+    # ------------------------------------------------------------ inputs
+
+    def _receive(self, kind: int, check, msg) -> None:
+        problem = check(msg) if check is not None else ""
+        if problem:
+            key = self.in_keys[kind]
+            self.reject(key, MessageError(problem, type_name=type(msg).__name__, key=key))
+            return
+        if kind == COSTMAP:
+            self.newest_costmap = msg
+        # sorted as replay feeds them, whatever order they arrived in
+        bisect.insort(self.pending, (msg.header.stamp_ns, kind, msg.header.seq, msg), key=lambda item: item[:3])
+
+    def _check_costmap(self, msg: Costmap) -> str:
+        if msg.data.shape != (msg.info.height, msg.info.width) or msg.data.size == 0:
+            return f"data of shape {msg.data.shape} for a grid of {msg.info.height} x {msg.info.width} cells"
+        if msg.header.frame_id not in (self.frames.map_frame, self.frames.odom_frame):
+            return f"frame {msg.header.frame_id!r} is neither {self.frames.map_frame!r} nor {self.frames.odom_frame!r}"
+        return ""
+
+    def _check_pose(self, msg: PoseWithCovariance) -> str:
+        if msg.header.frame_id != self.frames.map_frame:
+            return f"frame {msg.header.frame_id!r}, expected the map frame {self.frames.map_frame!r}"
+        return ""
+
+    def _check_goal(self, msg: Goal) -> str:
+        if msg.header.frame_id not in ("", self.frames.map_frame):
+            return f"frame {msg.header.frame_id!r}, expected the map frame {self.frames.map_frame!r}"
+        return ""
+
+    def _apply_due(self, now_ns: int) -> None:
+        """Put into effect the sporadic inputs stamped before now − request_delay_s, in stamp order."""
+        while self.pending and self.pending[0][0] + self.delay_ns < now_ns:
+            _, kind, _, msg = self.pending.pop(0)
+            if kind == COSTMAP:
+                self.costmap = msg
+            elif kind == MAP_ODOM:
+                self.frames.set_map_odom(msg)
+            elif kind == POSE:
+                self.pose = msg
+            elif kind == GOAL:
+                self.goal, self.waiting = msg, True
+                self.counters["goals"] += 1
+            elif self.goal is not None and msg.goal_id in ("", self.goal.goal_id):
+                self.goal, self.waiting = None, False
+                self.counters["goals_canceled"] += 1
+
+    def on_odom(self, msg: Odometry) -> None:
+        self.frames.set_odom(msg)
+        self._apply_due(msg.header.stamp_ns)
+        if self.waiting:
+            self.replan()
+
+    def on_timer(self) -> None:
+        self._apply_due(self.now_ns)
+        self.replan()
+
+    # ------------------------------------------------------------ planning
+
+    def robot_pose(self, frame: str) -> np.ndarray | None:
+        """The robot in `frame`: the localizer's pose when newer than the odometry, else the odometry."""
+        odom_stamp = self.frames.odom_stamp_ns
+        if self.pose is not None and frame == self.frames.map_frame and (
+                odom_stamp is None or self.pose.header.stamp_ns > odom_stamp):
+            return np.array([self.pose.pose.x, self.pose.pose.y, self.pose.pose.theta])
+        return self.frames.robot(frame)
+
+    def _plan(self, costmap: Costmap, start, goal) -> PlanResult:
+        began = time.perf_counter()   # instrumentation only
+        result = self.planner.plan(costmap.data, costmap.info, start, goal)
+        self.plan_ms.append((time.perf_counter() - began) * 1e3)
+        return result
+
+    def replan(self) -> None:
+        """Plan the active goal from the robot's pose and publish it."""
+        if self.goal is None:
+            return
+        start = None if self.costmap is None else self.robot_pose(self.costmap.header.frame_id)
+        self.waiting = start is None
+        if self.waiting:
+            return
+        g = self.goal.pose
+        result = self._plan(self.costmap, start, (g.x, g.y, g.theta))
+        self.counters[f"plans/{result.status}"] += 1
+        self.plan = Path(header=self.header(self.costmap.header.frame_id), poses=result.poses)
+        self.plan_pub.publish(self.plan)
+
+    def answer_plan(self, parameters: dict[str, str]) -> Path | None:
+        if not parameters:
+            return self.plan
+        unknown = sorted(set(parameters) - set(QUERY_PARAMETERS))
+        if unknown:
+            raise QueryError(f"{self.plan_key}: unknown parameter(s) {unknown}; use start=x,y[,yaw];goal=x,y[,yaw]")
+        if "goal" not in parameters:
+            raise QueryError(f"{self.plan_key}: goal=x,y[,yaw] is required (start defaults to the robot's pose)")
+        goal = parse_pose("goal", parameters["goal"])
+        start = parse_pose("start", parameters["start"]) if "start" in parameters else None
+        costmap = self.newest_costmap
+        if costmap is None:
+            raise QueryError(f"{self.plan_key}: no global costmap yet (on {self.in_keys[COSTMAP]})")
+        if start is None:
+            start = self.robot_pose(costmap.header.frame_id)
+            if start is None:
+                raise QueryError(f"{self.plan_key}: no start= given and the robot's pose is not known yet")
+        result = self._plan(costmap, start, goal)
+        self.counters[f"queries/{result.status}"] += 1
+        if not result.ok:
+            raise QueryError(f"{result.status}: {result.message}")
+        return Path(header=Header(stamp_ns=costmap.header.stamp_ns, frame_id=costmap.header.frame_id),
+                    poses=result.poses)
+
+    def diagnostic(self) -> Diagnostic:
+        diag = super().diagnostic()
+        if self.plan_ms:
+            diag.values["plan_ms"] = statistics.median(self.plan_ms)
+        return diag
