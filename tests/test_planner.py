@@ -16,6 +16,7 @@ from omninav.services.global_planner.params import GlobalPlannerParams
 from omninav.services.global_planner.smoother import segment_max_cost, smooth
 from omninav.services.map_server.mapio import cell_to_world, grid_coords, load_map
 from omninav.services.runtime.params import ParamError
+from omninav.sim.world import WorldError, load_world, shipped_worlds, world_path
 
 from conftest import SHARED_DATA
 
@@ -320,3 +321,31 @@ def test_ros_global_planner_files_load(tmp_path):
         GlobalPlannerParams.from_mapping({"use_dijkstr": True})
     with pytest.raises(ParamError, match="orientation_mode"):
         GlobalPlannerParams.from_mapping({"orientation_mode": 9})
+
+
+PAPER_FOOTPRINT = ((0.416, 0.318), (0.416, -0.318), (-0.416, -0.318), (-0.416, 0.318))
+
+
+@pytest.mark.parametrize("name", shipped_worlds())
+def test_plans_in_every_sim_world_are_safe_and_optimal(name):
+    """From the robot's start to its goals and to far free cells: A* finds a path that never crosses
+    an inscribed or lethal cell of the paper's footprint, at the same cost as Dijkstra."""
+    try:
+        world = load_world(world_path(name))
+    except WorldError as exc:          # willow needs ../shared/data beside the checkout
+        pytest.skip(str(exc))
+    costmap = Costmap(CostmapParams(footprint=PAPER_FOOTPRINT, layers=(StaticLayerParams(), InflationLayerParams())),
+                      world.rasterize(0.05))
+    costmap.update()
+    costs, info = costmap.costs, costmap.info
+    start = tuple(float(v) for v in world.robot.start)
+    free = np.argwhere(costs == 0)
+    rng = np.random.default_rng(11)
+    targets = [tuple(float(v) for v in goal) for goal in world.goals]
+    targets += [centre(info, tuple(int(v) for v in free[i])) for i in rng.integers(len(free), size=3)]
+    for goal in targets:
+        astar = GlobalPlanner(ASTAR).plan(costs, info, start, goal)
+        assert astar.ok, f"{name}: {astar.message}"
+        assert crossed_cells_max(costs, info, astar.poses) < 253
+        dijkstra = GlobalPlanner(GlobalPlannerParams(use_dijkstra=True)).plan(costs, info, start, goal)
+        assert dijkstra.ok and math.isclose(astar.cost, dijkstra.cost, rel_tol=1e-9)
