@@ -1,0 +1,1 @@
+"""Converters from other robots' log formats into omninav messages (CARMEN logs, ...)."""

@@ -1,0 +1,1 @@
+"""SLAM: a Rao-Blackwellized particle filter of the gmapping class over log-odds occupancy grids."""

@@ -1,0 +1,303 @@
+"""Scan-to-map matching on a particle's own grid: a correlative search, then Gauss-Newton.
+
+The matching field. Each cell's occupancy evidence o = clamp(log-odds / l_occ, 0, 1) (one hit is
+full evidence; free and unknown cells are 0). At each cell centre the field is
+S = max over the (2·kernelSize + 1)² cells around it of o · exp(−d² / 2σ²), d their distance —
+a likelihood field of the nearest obstacle, computed on the fly from the log-odds, so no particle
+has to keep a distance transform up to date. Between cell centres S is interpolated bilinearly,
+which makes it continuous with a gradient everywhere (Hector SLAM's trick), so a pose can be
+refined below the cell size.
+
+match_one(): start from the guess; refine by Gauss-Newton on Σ (1 − S(p_i))² over the scan's end
+points p_i (Levenberg damping, a step is taken only if it lowers the cost). The score is the mean
+S over the points (1: every end point on an obstacle cell). When that score is below
+`search_below` (a poor start: an odometry glitch, a loop coming back to old parts of the map), an
+exhaustive correlative search picks a new start — coarse first (steps lstep, astep over ±window,
+±angle, on a field twice as wide, 60 of the end points), then half steps around its best (the
+normal field, every end point), the field read at the nearest cell centre — and the refinement
+runs again from there; the better result wins.
+
+The particle weight uses a separate, sharper likelihood: each end point's squared distance to
+the nearest obstacle cell centre within kernelSize + 1 cells (capped there), over 2·lsigma².
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit
+
+from .grid import TILE_BITS, TILE_MASK
+
+
+@njit(cache=True, inline="always")
+def _evidence(pool, table, row, col, inv_l_occ):
+    if row < 0 or col < 0:
+        return 0.0
+    tr, tc = row >> TILE_BITS, col >> TILE_BITS
+    if tr >= table.shape[0] or tc >= table.shape[1]:
+        return 0.0
+    tile = table[tr, tc]
+    if tile < 0:
+        return 0.0
+    value = pool[tile, row & TILE_MASK, col & TILE_MASK] * inv_l_occ
+    return min(max(value, 0.0), 1.0)
+
+
+@njit(cache=True, inline="always")
+def _node(pool, table, row, col, kernel, inv_l_occ):
+    """The field at the centre of cell (row, col)."""
+    k = (kernel.shape[0] - 1) // 2
+    best = 0.0
+    for dr in range(-k, k + 1):
+        for dc in range(-k, k + 1):
+            o = _evidence(pool, table, row + dr, col + dc, inv_l_occ)
+            if o > 0.0:
+                best = max(best, o * kernel[dr + k, dc + k])
+    return best
+
+
+@njit(cache=True, inline="always")
+def _load_block(pool, table, row0, col0, inv_l_occ, block):
+    """Evidence of the block.shape cells from (row0, col0) on; False if all are zero.
+    Most blocks lie inside one tile: then the tile is looked up once."""
+    m = block.shape[0]
+    last_r, last_c = row0 + m - 1, col0 + m - 1
+    any_evidence = False
+    if (row0 >= 0 and col0 >= 0 and row0 >> TILE_BITS == last_r >> TILE_BITS
+            and col0 >> TILE_BITS == last_c >> TILE_BITS
+            and last_r >> TILE_BITS < table.shape[0] and last_c >> TILE_BITS < table.shape[1]):
+        tile = table[row0 >> TILE_BITS, col0 >> TILE_BITS]
+        if tile < 0:
+            return False
+        r_in, c_in = row0 & TILE_MASK, col0 & TILE_MASK
+        for i in range(m):
+            for j in range(m):
+                o = min(max(pool[tile, r_in + i, c_in + j] * inv_l_occ, 0.0), 1.0)
+                block[i, j] = o
+                any_evidence |= o > 0.0
+        return any_evidence
+    for i in range(m):
+        for j in range(m):
+            o = _evidence(pool, table, row0 + i, col0 + j, inv_l_occ)
+            block[i, j] = o
+            any_evidence |= o > 0.0
+    return any_evidence
+
+
+@njit(cache=True, inline="always")
+def _block_node(block, i0, j0, kernel):
+    best = 0.0
+    n = kernel.shape[0]
+    for i in range(n):
+        for j in range(n):
+            best = max(best, block[i0 + i, j0 + j] * kernel[i, j])
+    return best
+
+
+@njit(cache=True, inline="always")
+def _field(pool, table, u, v, kernel, inv_l_occ, block):
+    """Bilinearly interpolated field at grid coordinates (u, v), and its gradient (per cell).
+    `block` is scratch space of (2·kernelSize + 2)² cells."""
+    k = (kernel.shape[0] - 1) // 2
+    a, b = u - 0.5, v - 0.5
+    c0, r0 = int(math.floor(a)), int(math.floor(b))
+    if not _load_block(pool, table, r0 - k, c0 - k, inv_l_occ, block):
+        return 0.0, 0.0, 0.0
+    fu, fv = a - c0, b - r0
+    s00 = _block_node(block, 0, 0, kernel)
+    s01 = _block_node(block, 0, 1, kernel)
+    s10 = _block_node(block, 1, 0, kernel)
+    s11 = _block_node(block, 1, 1, kernel)
+    s = (1 - fv) * ((1 - fu) * s00 + fu * s01) + fv * ((1 - fu) * s10 + fu * s11)
+    ds_du = (1 - fv) * (s01 - s00) + fv * (s11 - s10)
+    ds_dv = (1 - fu) * (s10 - s00) + fu * (s11 - s01)
+    return s, ds_du, ds_dv
+
+
+@njit(cache=True)
+def _linearize(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, block, h, g):
+    """Cost Σ (1 − S)² and score (mean S) at a pose; fills in the Gauss-Newton system h, g."""
+    xmin, ymin, inv_delta = geo[0], geo[1], geo[2]
+    c, s = math.cos(th), math.sin(th)
+    h[:] = 0.0
+    g[:] = 0.0
+    cost, total = 0.0, 0.0
+    for i in range(px.shape[0]):
+        wx, wy = c * px[i] - s * py[i], s * px[i] + c * py[i]
+        f, du, dv = _field(pool, table, (x + wx - xmin) * inv_delta, (y + wy - ymin) * inv_delta,
+                           kernel, inv_l_occ, block)
+        r = 1.0 - f
+        cost += r * r
+        total += f
+        if du == 0.0 and dv == 0.0:
+            continue
+        # the residual's Jacobian: −∇S · ∂p/∂(x, y, θ)
+        j0, j1 = -du * inv_delta, -dv * inv_delta
+        j2 = j0 * -wy + j1 * wx
+        g[0] += j0 * r
+        g[1] += j1 * r
+        g[2] += j2 * r
+        h[0, 0] += j0 * j0
+        h[0, 1] += j0 * j1
+        h[0, 2] += j0 * j2
+        h[1, 1] += j1 * j1
+        h[1, 2] += j1 * j2
+        h[2, 2] += j2 * j2
+    h[1, 0], h[2, 0], h[2, 1] = h[0, 1], h[0, 2], h[1, 2]
+    return cost, total / max(px.shape[0], 1)
+
+
+@njit(cache=True)
+def refine(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, iterations):
+    """Gauss-Newton with Levenberg damping from (x, y, th); returns (x, y, th, score)."""
+    m = kernel.shape[0] + 1
+    block = np.empty((m, m))
+    h, g = np.zeros((3, 3)), np.zeros(3)
+    h_new, g_new = np.zeros((3, 3)), np.zeros(3)
+    cost, score = _linearize(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, block, h, g)
+    damping = 1e-3
+    for _ in range(iterations):
+        if h[0, 0] + h[1, 1] + h[2, 2] == 0.0:
+            break
+        improved = False
+        step = np.zeros(3)
+        for _try in range(5):
+            a = h.copy()
+            for d in range(3):
+                a[d, d] += damping * h[d, d] + 1e-9
+            step = np.linalg.solve(a, -g)
+            nx, ny, nth = x + step[0], y + step[1], th + step[2]
+            new_cost, new_score = _linearize(pool, table, geo, px, py, nx, ny, nth, kernel, inv_l_occ,
+                                             block, h_new, g_new)
+            if new_cost < cost:
+                x, y, th, cost, score = nx, ny, nth, new_cost, new_score
+                h[:, :] = h_new
+                g[:] = g_new
+                damping = max(damping * 0.3, 1e-6)
+                improved = True
+                break
+            damping *= 10.0
+        if not improved or (abs(step[0]) + abs(step[1]) < 1e-5 and abs(step[2]) < 1e-6):
+            break
+    return x, y, th, score
+
+
+@njit(cache=True)
+def search(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, window, lstep, angle, astep):
+    """Exhaustive search over a box of poses around (x, y, th): translations in whole cells (lstep
+    rounded to cells), angles in astep; the field is read at the nearest cell centre. Returns the
+    best (x, y, th, score). Field values are computed once per cell, on first use, in a patch
+    covering every candidate's end points, so a candidate costs one array read per point."""
+    xmin, ymin, inv_delta = geo[0], geo[1], geo[2]
+    step = max(1, int(round(lstep * inv_delta)))
+    n_lin = int(window * inv_delta + 1e-9) // step
+    n_ang = int(angle / astep + 1e-9)
+    n = px.shape[0]
+    n_angles = 2 * n_ang + 1
+    rows, cols = np.empty((n_angles, n), np.int64), np.empty((n_angles, n), np.int64)
+    for ia in range(n_angles):
+        c, s = math.cos(th + (ia - n_ang) * astep), math.sin(th + (ia - n_ang) * astep)
+        for i in range(n):
+            rows[ia, i] = int(math.floor((y + s * px[i] + c * py[i] - ymin) * inv_delta))
+            cols[ia, i] = int(math.floor((x + c * px[i] - s * py[i] - xmin) * inv_delta))
+    reach = n_lin * step
+    row_base, col_base = rows.min() - reach, cols.min() - reach
+    patch = np.full((rows.max() + reach - row_base + 1, cols.max() + reach - col_base + 1), np.float32(-1.0))
+    rows -= row_base
+    cols -= col_base
+    best_total, best_x, best_y, best_th = -1.0, x, y, th
+    for ia in range(n_angles):
+        t = th + (ia - n_ang) * astep
+        for iy in range(-n_lin, n_lin + 1):
+            for ix in range(-n_lin, n_lin + 1):
+                dr, dc = iy * step, ix * step
+                total = 0.0
+                for i in range(n):
+                    r, c = rows[ia, i] + dr, cols[ia, i] + dc
+                    value = patch[r, c]
+                    if value < 0.0:
+                        value = _node(pool, table, r + row_base, c + col_base, kernel, inv_l_occ)
+                        patch[r, c] = value
+                    total += value
+                # on a tie (an empty map, a featureless corridor) the guess itself wins
+                if total > best_total + 1e-9 or (total > best_total - 1e-9 and ix == 0 and iy == 0
+                                                   and ia == n_ang):
+                    best_total = total
+                    best_x, best_y, best_th = x + dc / inv_delta, y + dr / inv_delta, t
+    return best_x, best_y, best_th, best_total / max(n, 1)
+
+
+SEARCH_POINTS = 60  # end points the coarse search scores (evenly spread over the scan)
+
+
+@njit(cache=True)
+def match_one(pool, table, geo, px, py, x, y, th, kernel, coarse_kernel, inv_l_occ, iterations,
+              search_below, window, lstep, angle, astep):
+    """Refine from the guess; if that scores below search_below, search coarse to fine (steps
+    lstep, astep over ±window, ±angle on a wider field, then half steps around the best) and
+    refine from there too. Returns the better (x, y, th, score)."""
+    rx, ry, rth, score = refine(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, iterations)
+    if score >= search_below or (window <= 0.0 and angle <= 0.0):
+        return rx, ry, rth, score
+    stride = max(1, px.shape[0] // SEARCH_POINTS)
+    cx, cy, cth, _ = search(pool, table, geo, px[::stride], py[::stride], x, y, th, coarse_kernel, inv_l_occ,
+                            window, lstep, angle, astep)
+    cx, cy, cth, _ = search(pool, table, geo, px, py, cx, cy, cth, kernel, inv_l_occ,
+                            lstep / 2, lstep / 2, astep / 2, astep / 4)
+    sx, sy, sth, s_score = refine(pool, table, geo, px, py, cx, cy, cth, kernel, inv_l_occ, iterations)
+    if s_score > score:
+        return sx, sy, sth, s_score
+    return rx, ry, rth, score
+
+
+@njit(cache=True)
+def log_likelihood(pool, table, geo, px, py, x, y, th, radius, lsigma, inv_l_occ):
+    """Σ over end points of −d²/(2·lsigma²), d the distance to the nearest obstacle cell centre
+    within `radius` cells (capped at radius + ½ cell)."""
+    xmin, ymin, inv_delta = geo[0], geo[1], geo[2]
+    delta = 1.0 / inv_delta
+    cap = ((radius + 0.5) * delta) ** 2
+    c, s = math.cos(th), math.sin(th)
+    total = 0.0
+    for i in range(px.shape[0]):
+        u = (x + c * px[i] - s * py[i] - xmin) * inv_delta
+        v = (y + s * px[i] + c * py[i] - ymin) * inv_delta
+        col, row = int(math.floor(u)), int(math.floor(v))
+        best = cap
+        for dr in range(-radius, radius + 1):
+            for dc in range(-radius, radius + 1):
+                if _evidence(pool, table, row + dr, col + dc, inv_l_occ) >= 1.0:
+                    du = (col + dc + 0.5 - u) * delta
+                    dv = (row + dr + 0.5 - v) * delta
+                    best = min(best, du * du + dv * dv)
+        total -= best / (2.0 * lsigma * lsigma)
+    return total
+
+
+@njit(cache=True)
+def match_all(pool, tables, geo, px, py, poses, kernel, coarse_kernel, inv_l_occ, iterations, minimum_score,
+              search_below, window, lstep, angle, astep, radius, lsigma):
+    """match_one for every particle, each against its own map (a match scoring below
+    minimum_score keeps the guess), then the scan's log-likelihood at the pose kept."""
+    n = poses.shape[0]
+    out = poses.copy()
+    scores = np.empty(n)
+    loglik = np.empty(n)
+    for i in range(n):
+        x, y, th, score = match_one(pool, tables[i], geo, px, py, poses[i, 0], poses[i, 1], poses[i, 2],
+                                    kernel, coarse_kernel, inv_l_occ, iterations, search_below, window,
+                                    lstep, angle, astep)
+        scores[i] = score
+        if score >= minimum_score:
+            out[i, 0], out[i, 1], out[i, 2] = x, y, th
+        loglik[i] = log_likelihood(pool, tables[i], geo, px, py, out[i, 0], out[i, 1], out[i, 2],
+                                   radius, lsigma, inv_l_occ)
+    return out, scores, loglik
+
+
+def gaussian_kernel(radius: int, delta: float, sigma: float) -> np.ndarray:
+    """exp(−d²/2σ²) over a (2·radius + 1)² block of cells, d between cell centres."""
+    offsets = np.arange(-radius, radius + 1) * delta
+    d2 = offsets[:, None] ** 2 + offsets[None, :] ** 2
+    return np.exp(-d2 / (2.0 * sigma * sigma))

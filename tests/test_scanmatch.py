@@ -1,0 +1,94 @@
+"""The scan matcher recovers known offsets on a map built from exact scans of the room world."""
+import numpy as np
+import pytest
+
+from omninav.services.slam import scanmatch as sm
+from omninav.services.slam.grid import GridGeometry, TiledGrids, cut_beams
+from omninav.sim.raycast import cast
+from omninav.sim.world import load_world, world_path
+
+DELTA = 0.05
+ANGLES = np.linspace(-np.pi, np.pi, 360, endpoint=False)
+L_OCC = 0.85
+
+
+@pytest.fixture(scope="module")
+def room():
+    world = load_world(world_path("room"))
+    grids = TiledGrids(GridGeometry.from_extent(-1.0, -1.0, 11.0, 9.0, DELTA))
+    for pose in [(2.0, 2.0, 0.0), (5.0, 3.0, 1.0), (8.0, 4.0, 2.0), (4.0, 5.5, -1.0), (1.5, 4.0, 0.5)]:
+        x, y, hit = beams(world, pose)
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        grids.integrate(0, pose[:2], pose[0] + c * x - s * y, pose[1] + s * x + c * y, hit, L_OCC, -0.4, 5.0)
+    return world, grids
+
+
+def beams(world, pose):
+    ranges = cast(world, pose[0], pose[1], pose[2] + ANGLES, max_range=12.0)
+    return cut_beams(ranges, ANGLES, 0.0, 12.0, 11.0)
+
+
+def setup(room, true_pose):
+    world, grids = room
+    x, y, hit = beams(world, true_pose)
+    geo = np.array([grids.geometry.xmin, grids.geometry.ymin, 1.0 / DELTA])
+    kernel = sm.gaussian_kernel(1, DELTA, 0.05)
+    return grids, geo, np.ascontiguousarray(x[hit]), np.ascontiguousarray(y[hit]), kernel
+
+
+TRUE = np.array([4.3, 3.6, 0.4])
+
+
+@pytest.mark.parametrize("offset", [(0.06, -0.04, 0.03), (-0.05, 0.07, -0.04), (0.0, 0.0, 0.06)])
+def test_refinement_recovers_a_small_offset(room, offset):
+    grids, geo, px, py, kernel = setup(room, TRUE)
+    guess = TRUE + offset
+    x, y, th, score = sm.refine(grids.pool, grids.tables[0], geo, px, py, *guess, kernel, 1 / L_OCC, 20)
+    # the map quantises walls to 5 cm cells: a pose within a fifth of a cell is a recovered one
+    assert np.hypot(x - TRUE[0], y - TRUE[1]) < 0.01
+    assert abs(th - TRUE[2]) < 0.003
+    assert score > 0.8
+
+
+def test_the_correlative_search_recovers_a_large_offset(room):
+    grids, geo, px, py, kernel = setup(room, TRUE)
+    guess = TRUE + (0.5, -0.4, 0.3)
+    plain = sm.refine(grids.pool, grids.tables[0], geo, px, py, *guess, kernel, 1 / L_OCC, 20)
+    assert np.hypot(plain[0] - TRUE[0], plain[1] - TRUE[1]) > 0.05, "too far for refinement alone"
+    coarse = sm.gaussian_kernel(2, DELTA, 0.1)
+    x, y, th, score = sm.match_one(grids.pool, grids.tables[0], geo, px, py, *guess, kernel, coarse, 1 / L_OCC, 20,
+                                   0.9, 0.6, 0.1, 0.4, 0.02)
+    assert np.hypot(x - TRUE[0], y - TRUE[1]) < 0.01 and abs(th - TRUE[2]) < 0.003
+    assert score > plain[3]
+
+
+def test_the_likelihood_is_highest_at_the_true_pose(room):
+    grids, geo, px, py, _ = setup(room, TRUE)
+    at = lambda pose: sm.log_likelihood(grids.pool, grids.tables[0], geo, px, py, *pose, 2, 0.075, 1 / L_OCC)
+    best = at(TRUE)
+    for offset in [(0.05, 0, 0), (0, -0.05, 0), (0, 0, 0.02), (0.1, 0.1, 0)]:
+        assert at(TRUE + offset) < best
+
+
+def test_match_all_matches_each_particle_against_its_own_map(room):
+    grids, geo, px, py, kernel = setup(room, TRUE)
+    two = TiledGrids(grids.geometry, 2)
+    two.pool, two.refs, two.free, two.free_top = grids.pool, grids.refs.copy(), grids.free, grids.free_top
+    two.tables = np.stack([grids.tables[0], np.full_like(grids.tables[0], -1)])  # map 1 is empty
+    guesses = np.array([TRUE + (0.05, 0.03, 0.02), TRUE + (0.05, 0.03, 0.02)])
+    poses, scores, loglik = sm.match_all(two.pool, two.tables, geo, px, py, guesses, kernel, kernel, 1 / L_OCC,
+                                         20, 0.0, 0.5, 0.3, 0.1, 0.2, 0.02, 2, 0.075)
+    assert np.hypot(*(poses[0, :2] - TRUE[:2])) < 0.01
+    assert np.allclose(poses[1], guesses[1]), "an empty map keeps the guess"
+    assert scores[1] == 0.0 and scores[0] > 0.8
+    assert loglik[0] > loglik[1]
+
+
+def test_a_match_below_the_minimum_score_keeps_the_guess(room):
+    grids, geo, px, py, kernel = setup(room, TRUE)
+    guess = np.array([TRUE + (0.05, 0.03, 0.02)])
+    args = (grids.pool, grids.tables[:1], geo, px, py, guess, kernel, kernel, 1 / L_OCC, 20)
+    kept, scores, loglik = sm.match_all(*args, 0.99, 0.0, 0.0, 0.1, 0.0, 0.02, 2, 0.075)
+    assert scores[0] < 0.99 and np.array_equal(kept, guess)
+    matched, _, better = sm.match_all(*args, 0.0, 0.0, 0.0, 0.1, 0.0, 0.02, 2, 0.075)
+    assert not np.array_equal(matched, guess) and better[0] > loglik[0], "the likelihood is taken where the pose is"
