@@ -13,8 +13,10 @@ SERVICES: dict[str, str] = {
     "sim": "omninav.sim.node:SimNode",
     "chassis": "omninav.services.chassis.node:ChassisNode",
     "lidar": "omninav.services.lidar.node:LidarNode",
+    "localizer": "omninav.services.localizer.node:LocalizerNode",
     "map_server": "omninav.services.map_server.node:MapServerNode",
     "costmap": "omninav.services.costmap.node:CostmapNode",
+    "slam": "omninav.services.slam.node:SlamNode",
     "global_planner": "omninav.services.global_planner.node:PlannerNode",
 }
 

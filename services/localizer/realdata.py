@@ -1,0 +1,382 @@
+"""The localizer on a real robot's recording, without ground truth: `omninav localize-eval --bag …`.
+
+Made for the MIT racecar bag in the Stata basement (shared/data/bags, issue 5), and usable on any
+ROS bag or omninav MCAP recording with LaserScan and Odometry, plus a map_server map.
+
+The figure: at every scan, the share of its beams (finite returns inside the scan's range limits)
+whose end point lies within 0.1 m of an occupied map cell, under
+  - the localizer's pose: its map→odom transform (published at every scan) ⊕ the odometry at the
+    scan's stamp — what a consumer of the transform sees;
+  - raw odometry from the same start: the start pose ⊕ the odometry's motion since the first scan.
+
+The localizer runs exactly its live code: the recording's messages are fed to LocalizerNode in
+stamp order, as `replay --into` feeds a service.
+
+The start pose is not in the recording. Unless --initial-pose gives it, it is searched for over
+the whole map with the first scans (search_start): every free pose on a 0.25 m × 4° grid is scored
+with the AMCL likelihood field on the first scan, the best candidates are refined on a 0.05 m × 1°
+grid with the first SEARCH_SCANS scans (carried by the odometry), and the best one is the start.
+The runner-up more than a metre away is reported too, so an ambiguous start shows.
+
+The laser's mounting on the car (there is no /tf in the bag) is --laser-x/-y/-yaw; the default
+0.285 m ahead of base_link (the rear axle) is the MIT racecar's base_link→laser transform
+(mit-racecar/racecar, racecar-v2 static_transforms.launch.xml); docs/localize_eval.md compares
+other values on this bag.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from mcap.exceptions import McapError
+from scipy import ndimage
+
+from ...schemas import MessageError, decode
+from ...schemas.codec import encode
+from ...schemas.keys import KeyLayout
+from ...schemas.messages import LaserScan, OccupancyGrid, Odometry, Transform
+from ...schemas.registry import type_info
+from ..chassis.odometry import compose, relative
+from ..map_server.mapio import MapError, cell_to_world, load_map
+from ..recorder.mcap_io import Record, read_records
+from ..replay.into import replay_into
+from ..runtime.node import NS_PER_S
+from ..runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
+from .node import LocalizerNode, LocalizerParams, OdomHistory
+from .params import AmclParams
+from .sensor import FREE, OCCUPIED, GridFrame, LaserModel, prepare_scan
+
+NEAR_M = 0.1                 # an end point this close to an occupied cell agrees with the map
+RACECAR_LASER_X = 0.285      # m, base_link → laser on the MIT racecar (see the module docstring)
+SEARCH_STEP_M, SEARCH_STEP_A = 0.25, math.radians(4.0)
+REFINE_STEP_M, REFINE_STEP_A, REFINE_CELLS = 0.05, math.radians(1.0), 5   # ±5 steps around a candidate
+SEARCH_CLEARANCE_M = 0.15    # the car's centre is at least this far from obstacles
+SEARCH_CANDIDATES = 40
+SEARCH_SCANS = 3              # few: the racecar's odometry heading drifts fast
+SEARCH_BEAMS = 120
+START_COV = (0.1 ** 2, 0.1 ** 2, 0.05 ** 2)   # m², m², rad²: a good start, not an exact one
+
+# amcl for the racecar (Ackermann steering, VESC odometry, 1081-beam 270° lidar, about 2 m/s); the rest
+# keeps ROS amcl's defaults. The VESC's heading comes from the commanded steering and is poor: scan
+# matching between scans 0.1 s apart turned 0.02 rad where it turned 0.30, or −0.26 where it turned
+# −0.18. So the rotation noise is large (alpha1, alpha2 = 1: σ_rot = |rot| + trans), the
+# translation noise modest, and the filter updates every 5 cm.
+RACECAR_AMCL = {
+    "odom_model_type": "diff-corrected", "odom_alpha1": 1.0, "odom_alpha2": 1.0, "odom_alpha3": 0.1,
+    "odom_alpha4": 0.1, "laser_max_beams": 100, "laser_sigma_hit": 0.1, "min_particles": 500,
+    "max_particles": 5000, "kld_err": 0.05, "update_min_d": 0.05, "update_min_a": 0.05, "resample_interval": 1,
+}
+
+
+class RealDataError(ValueError):
+    """A recording or map that cannot be used; the text says which and why."""
+
+
+@dataclass
+class Run:
+    scans: list[LaserScan]
+    odometry: list[Odometry]
+
+
+def load_run(path: str | Path, scan_topic: str, odom_topic: str, robot: str = "r1") -> Run:
+    """Scans and odometry of a ROS bag (through the rosbag importer) or of an omninav MCAP recording."""
+    path = Path(path)
+    if path.suffix == ".mcap":
+        keys = KeyLayout(robot)
+        try:
+            records = list(read_records(path, [keys.robot("scan"), keys.robot("odom")]))
+        except (McapError, EOFError, ValueError, OSError, MessageError) as exc:
+            raise RealDataError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc})") from None
+            scans = [decode(r.payload, LaserScan, r.key) for r in records if r.key == keys.robot("scan")]
+            odometry = [decode(r.payload, Odometry, r.key) for r in records if r.key == keys.robot("odom")]
+    else:
+        from ..importers.rosbag import RosbagError, read_bag
+        try:
+            contents = read_bag(path, scan_topic, odom_topic)
+        except RosbagError as exc:
+            raise RealDataError(str(exc)) from None
+        scans, odometry = contents.scans, contents.odometry
+    if len(scans) < SEARCH_SCANS or len(odometry) < 2:
+        raise RealDataError(f"{path}: {len(scans)} scans and {len(odometry)} odometry messages: too few to localize")
+    return Run(sorted(scans, key=lambda m: m.header.stamp_ns), sorted(odometry, key=lambda m: m.header.stamp_ns))
+
+
+def odometry_history(odometry: list[Odometry]) -> OdomHistory:
+    history = OdomHistory(keep_ns=2 ** 62)
+    for msg in odometry:
+        history.add(msg.header.stamp_ns, np.array([msg.pose.x, msg.pose.y, msg.pose.theta]))
+    return history
+
+
+def usable_scans(run: Run, history: OdomHistory) -> list[LaserScan]:
+    """The scans inside the odometry's time span (the pose at the others is unknown)."""
+    return [s for s in run.scans if history.at(s.header.stamp_ns) is not None]
+
+
+# ---------------------------------------------------------------- the figure
+
+class Agreement:
+    """Share of a scan's end points within NEAR_M of an occupied cell, for a robot pose."""
+
+    def __init__(self, grid: OccupancyGrid, laser_pose):
+        occupied = np.asarray(grid.data) == OCCUPIED
+        self.near = ndimage.distance_transform_edt(~occupied) * grid.info.resolution <= NEAR_M
+        self.affine = GridFrame.of(grid).affine
+        self.laser_pose = laser_pose
+
+    def end_points(self, scan: LaserScan) -> np.ndarray:
+        """Base-frame end points (B, 2) of the valid returns."""
+        r = np.asarray(scan.ranges, np.float64)
+        angles = scan.angle_min + np.arange(r.size) * scan.angle_increment
+        with np.errstate(invalid="ignore"):
+            valid = np.isfinite(r) & (r > scan.range_min) & (r < scan.range_max)
+        lx, ly, lyaw = self.laser_pose
+        a = lyaw + angles[valid]
+        return np.column_stack([lx + r[valid] * np.cos(a), ly + r[valid] * np.sin(a)])
+
+    def share(self, pose, points: np.ndarray) -> float:
+        if len(points) == 0:
+            return float("nan")
+        world = compose(pose, np.column_stack([points, np.zeros(len(points))]))[:, :2]
+        u = self.affine[0, 0] * world[:, 0] + self.affine[0, 1] * world[:, 1] + self.affine[0, 2]
+        v = self.affine[1, 0] * world[:, 0] + self.affine[1, 1] * world[:, 1] + self.affine[1, 2]
+        col, row = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+        height, width = self.near.shape
+        inside = (row >= 0) & (row < height) & (col >= 0) & (col < width)
+        hits = self.near[np.clip(row, 0, height - 1), np.clip(col, 0, width - 1)] & inside
+        return float(hits.mean())
+
+
+# ---------------------------------------------------------------- the start pose
+
+def _weigh(laser: LaserModel, poses: np.ndarray, beams) -> np.ndarray:
+    weights = np.ones(len(poses))
+    for start in range(0, len(poses), 200_000):
+        chunk = np.ascontiguousarray(poses[start:start + 200_000])
+        laser.weigh(chunk, len(chunk), beams, weights[start:start + 200_000])
+    return weights
+
+
+def search_start(grid: OccupancyGrid, scans: list[LaserScan], history: OdomHistory, laser_pose) -> dict:
+    """The pose at scans[0] that best explains the first scans (see the module docstring)."""
+    params = AmclParams(laser_max_beams=SEARCH_BEAMS, laser_sigma_hit=0.1)
+    laser = LaserModel(grid, params)
+    used = scans[:SEARCH_SCANS]
+    beams = [prepare_scan(s.ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max, params, laser_pose)
+             for s in used]
+    first = history.at(used[0].header.stamp_ns)
+    moves = [relative(first, history.at(s.header.stamp_ns)) for s in used]
+    # free poses: on free cells, SEARCH_CLEARANCE_M from obstacles and unknown space
+    data = np.asarray(grid.data)
+    clear = ndimage.distance_transform_edt(data == FREE) * grid.info.resolution >= SEARCH_CLEARANCE_M
+    stride = max(1, round(SEARCH_STEP_M / grid.info.resolution))
+    rows, cols = np.nonzero(clear[::stride, ::stride])
+    xs, ys = cell_to_world(grid.info, rows * stride, cols * stride)
+    yaws = np.arange(-math.pi, math.pi, SEARCH_STEP_A)
+    coarse = np.column_stack([np.repeat(xs, len(yaws)), np.repeat(ys, len(yaws)), np.tile(yaws, len(xs))])
+    scores = _weigh(laser, coarse, beams[0])
+    best = coarse[np.argsort(scores)[::-1][:SEARCH_CANDIDATES]]
+    steps = np.arange(-REFINE_CELLS, REFINE_CELLS + 1)
+    grid_offsets = np.stack(np.meshgrid(steps * REFINE_STEP_M, steps * REFINE_STEP_M, steps * REFINE_STEP_A,
+                                        indexing="ij"), axis=-1).reshape(-1, 3)
+    fine = (best[:, None, :] + grid_offsets[None, :, :]).reshape(-1, 3)
+    total = np.zeros(len(fine))
+    for move, b in zip(moves, beams):   # the same candidate seen from where the odometry says it went
+        total += np.log(_weigh(laser, compose(fine, move), b))
+    order = np.argsort(total)[::-1]
+    start = fine[order[0]]
+    far = next((i for i in order if math.hypot(*(fine[i, :2] - start[:2])) > 1.0), None)
+    return {"pose": start, "score": float(total[order[0]]),
+            "runner_up": None if far is None else {"pose": fine[far], "score": float(total[far])}}
+
+
+# ---------------------------------------------------------------- the run
+
+def racecar_params(params_file: str | None, overrides: dict, map_file: str, laser_pose, seed: int,
+                   start) -> LocalizerParams:
+    values = read_params_mapping(params_file, "amcl") if params_file else dict(RACECAR_AMCL)
+    x, y, a = (float(v) for v in start)
+    fixed = {"map_file": map_file, "laser_x": laser_pose[0], "laser_y": laser_pose[1], "laser_yaw": laser_pose[2],
+             "seed": seed, "initial_pose_x": x, "initial_pose_y": y, "initial_pose_a": a,
+             "initial_cov_xx": START_COV[0], "initial_cov_yy": START_COV[1], "initial_cov_aa": START_COV[2]}
+    return load_params(LocalizerParams, {**values, **overrides, **fixed}, params_file or "racecar amcl settings")
+
+
+def localize(run: Run, params: LocalizerParams) -> list[Transform]:
+    """The localizer's map→odom transforms, one per scan it used, from its live code."""
+    node = LocalizerNode(params)
+    records = []
+    for key, messages in (("odom", run.odometry), ("scan", run.scans)):
+        full = node.keys.robot(key)
+        for seq, msg in enumerate(messages):
+            records.append(Record(full, type_info(type(msg))[0], encode(msg), seq, msg.header.stamp_ns,
+                                  msg.header.stamp_ns))
+    out = replay_into(node, records, None).outputs
+    tf_key = node.keys.robot("tf/map_odom")
+    return [decode(r.payload, Transform) for r in out if r.key == tf_key]
+
+
+def score_run(run: Run, grid: OccupancyGrid, map_file: str, laser_pose, params_file: str | None,
+              overrides: dict, seed: int, initial_pose=None) -> dict:
+    history = odometry_history(run.odometry)
+    scans = usable_scans(run, history)
+    if len(scans) < SEARCH_SCANS:
+        raise RealDataError(f"only {len(scans)} scans lie within the odometry's time span")
+    search = None
+    if initial_pose is None:
+        search = search_start(grid, scans, history, laser_pose)
+        initial_pose = search["pose"]
+    params = racecar_params(params_file, overrides, map_file, laser_pose, seed, initial_pose)
+    transforms = localize(Run(scans, run.odometry), params)
+    tolerance = round(params.transform_tolerance * NS_PER_S)
+    by_stamp = {tf.header.stamp_ns - tolerance: tf.transform for tf in transforms}
+    agreement = Agreement(grid, laser_pose)
+    t0 = scans[0].header.stamp_ns
+    odom0 = history.at(t0)
+    rows = []
+    for scan in scans:
+        stamp = scan.header.stamp_ns
+        tf = by_stamp.get(stamp)
+        if tf is None:
+            continue
+        odom = history.at(stamp)
+        points = agreement.end_points(scan)
+        estimate = compose((tf.x, tf.y, tf.theta), odom)
+        raw = compose(initial_pose, relative(odom0, odom))
+        rows.append(((stamp - t0) / NS_PER_S, agreement.share(estimate, points), agreement.share(raw, points),
+                     estimate, raw))
+    t = np.array([r[0] for r in rows])
+    amcl, raw = np.array([r[1] for r in rows]), np.array([r[2] for r in rows])
+    return {"scans": len(run.scans), "odometry": len(run.odometry), "scans_scored": len(rows),
+            "duration_s": round(float(t[-1]), 3) if len(t) else 0.0,
+            "laser_pose": [float(v) for v in laser_pose],
+            "start": {"pose": [round(float(v), 4) for v in initial_pose],
+                      "how": "given" if search is None else "searched",
+                      **({} if search is None else _search_summary(search))},
+            "near_m": NEAR_M,
+            "localizer": _summary(t, amcl), "raw_odometry": _summary(t, raw),
+            "series": {"t": [round(float(v), 4) for v in t], "localizer": [round(float(v), 4) for v in amcl],
+                       "raw_odometry": [round(float(v), 4) for v in raw]},
+            "paths": {"localizer": [list(map(float, r[3])) for r in rows],
+                      "raw_odometry": [list(map(float, r[4])) for r in rows]}}
+
+
+def _search_summary(search: dict) -> dict:
+    out = {"score": round(search["score"], 2)}
+    if search["runner_up"] is not None:
+        other = search["runner_up"]
+        out["runner_up"] = {"pose": [round(float(v), 4) for v in other["pose"]], "score": round(other["score"], 2),
+                            "distance_m": round(float(np.hypot(*(other["pose"][:2] - search["pose"][:2]))), 2)}
+    return out
+
+
+def _summary(t: np.ndarray, share: np.ndarray) -> dict:
+    """Mean share overall, per whole second, and at the end."""
+    if len(t) == 0:
+        return {"mean": None}
+    seconds = np.floor(t).astype(int)
+    return {"mean": round(float(np.nanmean(share)), 4), "min": round(float(np.nanmin(share)), 4),
+            "last_second": round(float(np.nanmean(share[t >= t[-1] - 1.0])), 4),
+            "per_second": [round(float(np.nanmean(share[seconds == s])), 4) for s in range(seconds[-1] + 1)
+                           if np.any(seconds == s)]}
+
+
+# ---------------------------------------------------------------- the command (inside localize-eval)
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    group = parser.add_argument_group("real data (instead of the simulator)")
+    group.add_argument("--bag", help="a ROS 1/2 bag or an omninav .mcap recording with scans and odometry")
+    group.add_argument("--map", help="the map_server YAML of the map the robot drove in (needed with --bag)")
+    group.add_argument("--scan-topic", default="/scan", help="the bag's LaserScan topic (default /scan)")
+    group.add_argument("--odom-topic", default="/vesc/odom", help="the bag's Odometry topic (default /vesc/odom)")
+    group.add_argument("--laser-x", type=float, default=RACECAR_LASER_X,
+                       help=f"m, the laser ahead of base_link (default {RACECAR_LASER_X}, the MIT racecar's)")
+    group.add_argument("--laser-y", type=float, default=0.0, help="m, the laser left of base_link (default 0)")
+    group.add_argument("--laser-yaw", type=float, default=0.0, help="rad, the laser's turn (default 0)")
+    group.add_argument("--initial-pose", metavar="X,Y,YAW", help="the start pose in the map (default: searched)")
+    group.add_argument("--plot", metavar="PNG", help="draw the paths on the map and the shares over time")
+
+
+def main(args: argparse.Namespace) -> int:
+    if not args.map:
+        print("omninav localize-eval: --bag needs --map (the map_server YAML of the building)", file=sys.stderr)
+        return 2
+    try:
+        initial = _parse_pose(args.initial_pose) if args.initial_pose else None
+        grid = load_map(args.map)
+        run = load_run(args.bag, args.scan_topic, args.odom_topic)
+        result = score_run(run, grid, args.map, (args.laser_x, args.laser_y, args.laser_yaw), args.params,
+                           parse_overrides(args.set), args.seed, initial)
+    except (RealDataError, MapError, ParamError, ValueError) as exc:
+        print(f"omninav localize-eval: {exc}", file=sys.stderr)
+        return 2
+    if args.plot:
+        plot(result, grid, args.plot)
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(format_result(result, args.bag))
+    return 0
+
+
+def _parse_pose(text: str) -> tuple[float, float, float]:
+    try:
+        values = tuple(float(v) for v in text.split(","))
+    except ValueError:
+        values = ()
+    if len(values) != 3 or not all(map(math.isfinite, values)):
+        raise ValueError(f"--initial-pose {text!r}: expected X,Y,YAW (m, m, rad)")
+    return values
+
+
+def format_result(r: dict, source: str) -> str:
+    s = r["start"]
+    lines = [f"{source}: {r['scans']} scans, {r['odometry']} odometry messages, {r['scans_scored']} scans scored "
+             f"over {r['duration_s']:.2f} s; laser at {r['laser_pose']} in base_link",
+             f"start pose ({s['how']}): x {s['pose'][0]:.3f} m, y {s['pose'][1]:.3f} m, yaw {s['pose'][2]:.3f} rad"]
+    if "runner_up" in s:
+        u = s["runner_up"]
+        lines.append(f"  search score {s['score']:.1f}; best pose more than 1 m away: {u['score']:.1f} "
+                     f"({u['distance_m']:.1f} m off)")
+    lines.append(f"share of beam end points within {r['near_m']} m of an occupied cell:")
+    lines.append(f"  {'':14}{'mean':>7}{'min':>7}{'last 1 s':>10}   per second")
+    for name, label in (("localizer", "localizer"), ("raw_odometry", "raw odometry")):
+        f = r[name]
+        lines.append(f"  {label:14}{f['mean']:7.3f}{f['min']:7.3f}{f['last_second']:10.3f}   "
+                     + " ".join(f"{v:.3f}" for v in f["per_second"]))
+    return "\n".join(lines)
+
+
+def plot(result: dict, grid: OccupancyGrid, path: str) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (top, bottom) = plt.subplots(2, 1, figsize=(8, 10), gridspec_kw={"height_ratios": [3, 1]})
+    rows, cols = np.nonzero(np.asarray(grid.data) == OCCUPIED)
+    xs, ys = cell_to_world(grid.info, rows, cols)
+    paths = {k: np.array(v) for k, v in result["paths"].items()}
+    every = np.vstack(list(paths.values()))
+    lo, hi = every[:, :2].min(axis=0) - 6.0, every[:, :2].max(axis=0) + 6.0
+    keep = (xs > lo[0]) & (xs < hi[0]) & (ys > lo[1]) & (ys < hi[1])
+    top.scatter(xs[keep], ys[keep], s=0.3, c="k")
+    for name, colour in (("localizer", "tab:blue"), ("raw_odometry", "tab:red")):
+        top.plot(paths[name][:, 0], paths[name][:, 1], colour, label=name.replace("_", " "))
+        bottom.plot(result["series"]["t"], result["series"][name], colour, label=name.replace("_", " "))
+    top.set_aspect("equal")
+    top.set_xlim(lo[0], hi[0])
+    top.set_ylim(lo[1], hi[1])
+    top.legend()
+    top.set_title("paths in the map frame")
+    bottom.set_xlabel("s")
+    bottom.set_ylabel(f"beams within {result['near_m']} m of a wall")
+    bottom.set_ylim(0, 1)
+    bottom.legend()
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
+    plt.close(fig)

@@ -1,0 +1,118 @@
+"""`omninav localize-eval`: the routes, the harness's driving, the scoring, short runs in the simulator
+(tracking, a kidnapping), and the real racecar bag against raw odometry."""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from omninav.cli.main import main as omninav
+from omninav.services.localizer.evaluate import ROUTES, Series, route_command, route_problems
+from omninav.sim.world import load_world, world_path
+
+from conftest import SHARED_DATA
+
+BAG = SHARED_DATA / "bags" / "localization_bag1_2022-03-29-19-23-29.bag"
+BASEMENT = SHARED_DATA / "maps" / "basement_fixed.yaml"
+try:
+    import rosbags  # noqa: F401
+    HAVE_ROSBAGS = True
+except ImportError:
+    HAVE_ROSBAGS = False
+
+
+@pytest.mark.parametrize("name", sorted(ROUTES))
+def test_every_route_is_clear_and_starts_at_the_start(name):
+    world = load_world(world_path(name))
+    assert route_problems(world, ROUTES[name]) == []
+    assert math.dist(ROUTES[name][0], world.robot.start[:2]) < 0.3
+
+
+def test_a_route_through_furniture_is_reported():
+    world = load_world(world_path("room"))
+    there, back = route_problems(world, ((1.3, 0.8), (4.5, 3.0)))     # through the round table at (3, 2.2)
+    assert there.startswith("segment 0 (1.3, 0.8) → (4.5, 3)") and back.startswith("segment 1 (4.5, 3) → (1.3, 0.8)")
+    (problem,) = route_problems(world, ((1.3, 0.8), (8.3, 0.8), (8.3, 3.5), (6.2, 3.5)))   # closing leg
+    assert problem.startswith("segment 3")
+
+
+def test_route_commands():
+    # holonomic: straight at the target (here behind and to the left), turning towards the way it goes
+    vx, vy, wz = route_command((0.0, 0.0, 0.0), (-3.0, 4.0), True, 0.5, 1.0)
+    assert (vx, vy) == pytest.approx((-0.3, 0.4)) and wz == 1.0
+    # a differential drive turns on the spot first, then drives with a small correction
+    assert route_command((0.0, 0.0, 0.0), (0.0, 2.0), False, 0.5, 1.0) == (0.0, 0.0, 1.0)
+    vx, vy, wz = route_command((0.0, 0.0, 0.2), (2.0, 0.0), False, 0.5, 1.0)
+    assert vx == pytest.approx(0.5 * math.cos(0.2)) and vy == 0.0 and wz == pytest.approx(-0.4)
+    # slowing down when close
+    assert route_command((0.0, 0.0, 0.0), (0.1, 0.0), True, 0.5, 1.0)[0] == pytest.approx(0.15)
+
+
+def test_convergence_needs_the_error_to_hold_and_the_statistics_cover_everything_after():
+    series = Series()
+    errors = [2.0, 0.05, 0.5, 0.05, 0.05, 0.05, 0.04, 0.03, 0.12, 0.02, 0.02, 0.02]
+    for k, e in enumerate(errors):
+        series.t.append(0.5 * k)
+        series.position.append(e)
+        series.heading.append(math.radians(1.0))
+        series.injected.append(0)
+    assert series.converged_at() == 1.5                    # 0.05 at 0.5 s did not hold for 1 s
+    assert series.converged_at(4.1) == 4.5                  # after the 0.12 at 4.0 s
+    assert series.converged_at(5.1) is None                 # too little left to hold for 1 s
+    stats = series.stats(1.5)
+    assert stats["samples"] == 9 and stats["position_cm"]["max"] == 12.0   # the later 12 cm counts
+    assert stats["heading_deg"]["p95"] == pytest.approx(1.0)
+
+
+def _run(capsys, *args):
+    code = omninav(["localize-eval", *args, "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    return json.loads(captured.out)
+
+
+def test_tracking_in_the_room_from_a_rough_initial_pose(capsys):
+    r = _run(capsys, "--world", "room", "--mode", "track", "--duration", "25")
+    assert (r["world"], r["drive"], r["mode"]) == ("room", "mecanum", "track")
+    assert r["collisions"] == 0 and r["scans"] > 240 and r["converged"]
+    after = r["after_convergence"]
+    assert after["samples"] > 200
+    assert after["position_cm"]["p95"] < 6.0 and after["heading_deg"]["p95"] < 2.0   # aims: 5 cm, 2°
+
+
+def test_a_kidnapping_in_the_room_is_detected(capsys):
+    r = _run(capsys, "--world", "room", "--drive", "diff", "--mode", "kidnap", "--duration", "20",
+             "--kidnap-at", "8")
+    k = r["kidnap"]
+    assert k["done"] and k["at_s"] >= 8.0 and k["jump_m"] > 3.0 and k["error_after_m"] > 1.0
+    assert k["detected"] and 0 < k["detected_after_s"] < 20.0 - k["at_s"]
+    assert r["after_convergence"]["position_cm"]["max"] < 10.0       # tracking until then
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--world", "nowhere"], "nowhere"),
+    (["--world", "corridor"], "no route for world 'corridor'"),
+    (["--route", "1,1;2"], "expected at least two waypoints"),
+    (["--route", "1.3,0.8;4.5,3"], "the route is not clear"),
+    (["--set", "laser_max_beem=30"], "laser_max_beem"),
+    (["--params", "/nonexistent/amcl.yaml"], "no such file"),
+    (["--bag", "x.bag"], "--bag needs --map"),
+])
+def test_user_errors_are_one_line(capsys, args, message):
+    assert omninav(["localize-eval", *args]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
+
+
+@pytest.mark.skipif(not HAVE_ROSBAGS, reason="the optional rosbags package is not installed (pip install '.[rosbag]')")
+@pytest.mark.skipif(not (BAG.is_file() and BASEMENT.is_file()), reason="no shared data (bag and basement map)")
+def test_on_the_racecar_bag_the_localizer_agrees_with_the_map_better_than_odometry(capsys, tmp_path):
+    picture = tmp_path / "real.png"
+    r = _run(capsys, "--bag", str(BAG), "--map", str(BASEMENT), "--plot", str(picture))
+    assert r["scans"] == 281 and r["odometry"] == 350 and r["scans_scored"] > 270
+    assert r["start"]["how"] == "searched" and r["laser_pose"] == [0.285, 0.0, 0.0]
+    ours, odometry = r["localizer"], r["raw_odometry"]
+    assert ours["mean"] > 0.5 and ours["mean"] > odometry["mean"] + 0.3
+    assert min(ours["per_second"]) > 0.3                    # never lost for a whole second
+    assert np.mean(r["series"]["raw_odometry"][-40:]) < 0.2  # while odometry ends up in a wall
+    assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

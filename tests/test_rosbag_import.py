@@ -1,0 +1,192 @@
+"""ROS bags as omninav messages: the 2-D projection, a ROS 2 bag written here, the real ROS 1 racecar bag,
+and `omninav import rosbag`."""
+import math
+from types import SimpleNamespace as NS
+
+import numpy as np
+import pytest
+
+from omninav.cli.main import main as omninav
+from omninav.schemas.codec import decode
+from omninav.schemas.keys import KeyLayout
+from omninav.services.chassis.odometry import wrap_angle
+from omninav.services.importers.rosbag import RosbagError, odometry, read_bag, yaw_of
+from omninav.services.recorder.mcap_io import read_records
+
+from conftest import SHARED_DATA
+
+BAG = SHARED_DATA / "bags" / "localization_bag1_2022-03-29-19-23-29.bag"
+KEYS = KeyLayout()
+try:
+    import rosbags  # noqa: F401
+    HAVE_ROSBAGS = True
+except ImportError:
+    HAVE_ROSBAGS = False
+needs_rosbags = pytest.mark.skipif(not HAVE_ROSBAGS, reason="the optional rosbags package is not installed "
+                                                            "(pip install '.[rosbag]')")
+needs_bag = pytest.mark.skipif(not BAG.is_file(), reason=f"no shared data: {BAG}")
+
+
+@pytest.mark.parametrize("yaw", [0.0, 0.3, -1.2, 2.9, math.pi - 1e-9, -3.0])
+@pytest.mark.parametrize("norm", [1.0, 0.5, 3.0])
+def test_yaw_of_a_planar_quaternion_at_any_norm(yaw, norm):
+    x, y, z, w = 0.0, 0.0, norm * math.sin(yaw / 2), norm * math.cos(yaw / 2)
+    assert wrap_angle(yaw_of(x, y, z, w) - yaw) == pytest.approx(0.0, abs=1e-9)
+    assert wrap_angle(yaw_of(-x, -y, -z, -w) - yaw) == pytest.approx(0.0, abs=1e-9)   # q and −q: one rotation
+
+
+def test_yaw_of_a_tilted_quaternion_is_its_heading():
+    # yaw 0.7 after pitch 0.2 and roll −0.1 (ZYX, as ROS's tf): the heading stays 0.7
+    cr, sr = math.cos(-0.05), math.sin(-0.05)
+    cp, sp = math.cos(0.1), math.sin(0.1)
+    cy, sy = math.cos(0.35), math.sin(0.35)
+    w, x = cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy
+    y, z = cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy
+    assert yaw_of(x, y, z, w) == pytest.approx(0.7, abs=1e-9)
+
+
+def test_odometry_is_projected_to_2d():
+    cov = np.arange(36, dtype=float)
+    msg = NS(header=NS(frame_id="odom"), child_frame_id="base_link",
+             pose=NS(pose=NS(position=NS(x=1.5, y=-2.0, z=0.3), orientation=NS(x=0.0, y=0.0, z=math.sin(0.4),
+                                                                               w=math.cos(0.4))),
+                     covariance=cov),
+             twist=NS(twist=NS(linear=NS(x=0.5, y=0.1, z=9.0), angular=NS(x=9.0, y=9.0, z=-0.2)), covariance=cov * 2))
+    odom = odometry(msg, 123)
+    assert odom.header.stamp_ns == odom.twist.header.stamp_ns == 123 and odom.header.frame_id == "odom"
+    assert (odom.pose.x, odom.pose.y) == (1.5, -2.0) and odom.pose.theta == pytest.approx(0.8)
+    assert (odom.twist.linear_x, odom.twist.linear_y, odom.twist.angular_z) == (0.5, 0.1, -0.2)
+    # x, y, yaw of (x, y, z, roll, pitch, yaw), row-major 6×6
+    assert odom.pose_covariance.tolist() == [[0, 1, 5], [6, 7, 11], [30, 31, 35]]
+    assert odom.twist_covariance.tolist() == [[0, 2, 10], [12, 14, 22], [60, 62, 70]]
+
+
+def test_a_missing_bag_is_named(tmp_path):
+    with pytest.raises(RosbagError, match="no such file"):
+        read_bag(tmp_path / "nope.bag")
+
+
+@needs_rosbags
+def test_a_file_that_is_no_bag_is_a_clear_error(tmp_path):
+    junk = tmp_path / "junk.bag"
+    junk.write_bytes(b"not a bag at all\n" * 10)
+    with pytest.raises(RosbagError, match="not a readable ROS 1 or ROS 2 bag"):
+        read_bag(junk)
+
+
+# ---------------------------------------------------------------- a ROS 2 bag
+
+def _write_ros2_bag(path):
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    t = store.types
+    Time, Header = t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"]
+    Vec, Quat, Point = t["geometry_msgs/msg/Vector3"], t["geometry_msgs/msg/Quaternion"], t["geometry_msgs/msg/Point"]
+    scan_type, odom_type = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry"
+    with Writer(path, version=8) as writer:
+        scans = writer.add_connection("/scan", scan_type, typestore=store)
+        odoms = writer.add_connection("/odom", odom_type, typestore=store)
+        other = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
+        for k in range(3):
+            stamp = Time(sec=100 + k, nanosec=5)
+            scan = t[scan_type](header=Header(stamp=stamp, frame_id="laser"), angle_min=-1.0, angle_max=1.0,
+                                angle_increment=1.0, time_increment=0.0, scan_time=0.1, range_min=0.1, range_max=8.0,
+                                ranges=np.array([1.0, np.inf, 2.5 + k], np.float32),
+                                intensities=np.array([], np.float32))
+            writer.write(scans, 10 ** 9 * (100 + k), bytes(store.serialize_cdr(scan, scan_type)))
+            pose = t["geometry_msgs/msg/PoseWithCovariance"](
+                pose=t["geometry_msgs/msg/Pose"](position=Point(x=0.1 * k, y=0.0, z=0.0),
+                                                 orientation=Quat(x=0.0, y=0.0, z=math.sin(0.1 * k), w=math.cos(0.1 * k))),
+                covariance=np.zeros(36))
+            twist = t["geometry_msgs/msg/TwistWithCovariance"](
+                twist=t["geometry_msgs/msg/Twist"](linear=Vec(x=1.0, y=0.0, z=0.0), angular=Vec(x=0.0, y=0.0, z=0.2)),
+                covariance=np.zeros(36))
+            # the last odometry has no header stamp: it takes the time the bag recorded it at
+            odom_stamp = stamp if k < 2 else Time(sec=0, nanosec=0)
+            odom = t[odom_type](header=Header(stamp=odom_stamp, frame_id="odom"), child_frame_id="base_link",
+                                pose=pose, twist=twist)
+            writer.write(odoms, 10 ** 9 * (100 + k) + 7, bytes(store.serialize_cdr(odom, odom_type)))
+        writer.write(other, 10 ** 9 * 100, bytes(store.serialize_cdr(t["std_msgs/msg/String"](data="hi"),
+                                                                      "std_msgs/msg/String")))
+
+
+@needs_rosbags
+def test_a_ros2_bag_converts(tmp_path):
+    path = tmp_path / "ros2bag"
+    _write_ros2_bag(path)
+    contents = read_bag(path, "/scan", "/odom")
+    assert [s.header.stamp_ns for s in contents.scans] == [100 * 10 ** 9 + 5, 101 * 10 ** 9 + 5, 102 * 10 ** 9 + 5]
+    assert contents.scans[2].ranges.tolist() == [1.0, np.inf, 4.5] and contents.scans[0].range_max == 8.0
+    assert [o.header.stamp_ns for o in contents.odometry] == [100 * 10 ** 9 + 5, 101 * 10 ** 9 + 5, 102 * 10 ** 9 + 7]
+    assert contents.unstamped == {"/odom": 1}
+    assert contents.odometry[2].pose.x == pytest.approx(0.2) and contents.odometry[2].pose.theta == pytest.approx(0.4)
+    assert contents.topics["/chatter"] == ("std_msgs/msg/String", 1)
+
+
+@needs_rosbags
+def test_a_missing_or_mistyped_topic_is_named(tmp_path):
+    path = tmp_path / "ros2bag"
+    _write_ros2_bag(path)
+    with pytest.raises(RosbagError, match=r"no topic /vesc/odom \(the bag has: /chatter .*/odom .*/scan"):
+        read_bag(path, "/scan", "/vesc/odom")
+    with pytest.raises(RosbagError, match="/chatter carries std_msgs/msg/String, not nav_msgs/msg/Odometry"):
+        read_bag(path, "/scan", "/chatter")
+
+
+# ---------------------------------------------------------------- the racecar's ROS 1 bag
+
+@needs_rosbags
+@needs_bag
+def test_the_racecar_bag_converts():
+    from rosbags.highlevel import AnyReader
+
+    contents = read_bag(BAG)                      # defaults: /scan and /vesc/odom
+    assert len(contents.scans) == 281 and len(contents.odometry) == 350
+    for msgs in (contents.scans, contents.odometry):
+        stamps = [m.header.stamp_ns for m in msgs]
+        assert stamps == sorted(stamps) and stamps[-1] - stamps[0] > 6 * 10 ** 9   # a 7 s run
+    scan = contents.scans[0]
+    assert scan.header.frame_id == "laser" and scan.ranges.shape == (1081,) and scan.ranges.dtype == np.float32
+    assert scan.angle_min == pytest.approx(-2.356194, abs=1e-6) and scan.range_max == 30.0
+    assert scan.angle_min + 1080 * scan.angle_increment == pytest.approx(scan.angle_max, abs=1e-5)
+    odom = contents.odometry
+    assert {o.header.frame_id for o in odom} == {"odom"} and {o.child_frame_id for o in odom} == {"base_link"}
+    # against the bag's own first odometry message, read here independently
+    with AnyReader([BAG]) as reader:
+        conn = next(c for c in reader.connections if c.topic == "/vesc/odom")
+        _, _, raw = next(iter(reader.messages(connections=[conn])))
+        first = reader.deserialize(raw, conn.msgtype)
+    q = first.pose.pose.orientation
+    assert odom[0].header.stamp_ns == first.header.stamp.sec * 10 ** 9 + first.header.stamp.nanosec
+    assert odom[0].pose.x == first.pose.pose.position.x and odom[0].pose.y == first.pose.pose.position.y
+    assert wrap_angle(odom[0].pose.theta - 2 * math.atan2(q.z, q.w)) == pytest.approx(0.0, abs=1e-9)  # q.x = q.y = 0
+    assert odom[0].twist.linear_x == first.twist.twist.linear.x
+
+
+@needs_rosbags
+@needs_bag
+def test_import_rosbag_writes_a_recording(tmp_path, capsys):
+    out = tmp_path / "bag.mcap"
+    assert omninav(["import", "rosbag", str(BAG), "-o", str(out)]) == 0
+    assert "281 scans" in capsys.readouterr().out
+    records = list(read_records(out))
+    scans = [r for r in records if r.key == KEYS.robot("scan")]
+    odoms = [r for r in records if r.key == KEYS.robot("odom")]
+    assert len(scans) == 281 and len(odoms) == 350 and len(records) == 631
+    assert [r.seq for r in scans] == list(range(281))
+    assert [r.stamp_ns for r in records] == sorted(r.stamp_ns for r in records)
+    assert decode(scans[0].payload).header.stamp_ns == scans[0].stamp_ns
+    # an existing output is kept unless --force
+    before = out.read_bytes()
+    assert omninav(["import", "rosbag", str(BAG), "-o", str(out)]) == 2
+    assert "exists" in capsys.readouterr().err and out.read_bytes() == before
+
+
+@needs_rosbags
+@needs_bag
+def test_import_rosbag_with_a_wrong_topic_writes_nothing(tmp_path, capsys):
+    out = tmp_path / "bag.mcap"
+    assert omninav(["import", "rosbag", str(BAG), "-o", str(out), "--odom-topic", "/odom"]) == 2
+    assert "no topic /odom" in capsys.readouterr().err and not out.exists()
