@@ -3,6 +3,9 @@
   omninav map save [-o maps/NAME]      the map being served on the bus (map_server, slam) to
                                        NAME.yaml + NAME.pgm, as ROS map_saver -f does
   omninav map show MAP.yaml -o map.png a picture of a map file, in map-frame metres
+  omninav map build --world W -o maps/NAME
+                                       map a simulated world with slam (in one process), save
+                                       the map and compare it with the world's true occupancy
 
 Each action is one entry of ACTIONS: (help, add_arguments(parser), main(args) -> int).
 """
@@ -22,7 +25,12 @@ from ..schemas.keys import DEFAULT_ROBOT, KeyLayout
 from ..schemas.messages import OccupancyGrid
 from ..services.map_server.mapio import (MODES, UNKNOWN_GREY, MapError, load_map, map_files, read_map_yaml,
                                           save_map)
-from ..sim.world import GRID_OBSTACLE
+from ..services.chassis.kinematics import DRIVES
+from ..services.localizer.evaluate import ROUTES as MAPPING_ROUTES
+from ..services.runtime.params import ParamError, parse_overrides
+from ..services.slam.mapping import build_map, compare_with_truth, parse_waypoints, slam_params_for
+from ..sim.node import open_world
+from ..sim.world import GRID_OBSTACLE, WorldError
 from .introspect import ROUTER_HELP, CommandError, connect, key_expression, reports_errors
 from .report import new_figure
 
@@ -173,11 +181,59 @@ def main_show(args: argparse.Namespace) -> int:
     return 0
 
 
+# ---------------------------------------------------------------- omninav map build
+
+def add_build_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--world", required=True, help="shipped world name or world file, e.g. sim/worlds/room.yaml")
+    parser.add_argument("-o", "--output", required=True, metavar="PATH", help="write PATH.yaml and PATH.pgm")
+    parser.add_argument("--waypoints", metavar="'x,y;x,y;…'",
+                        help=f"the route to drive (default: the world's route; there is one for "
+                             f"{', '.join(MAPPING_ROUTES)})")
+    parser.add_argument("--drive", choices=DRIVES, default="", help="drive (default: the world's)")
+    parser.add_argument("--laps", type=int, default=1, help="times to drive the route (default 1)")
+    parser.add_argument("--max-time", type=float, default=900.0, metavar="S",
+                        help="stop after this much sim time even if the route is unfinished (default 900 s)")
+    parser.add_argument("--seed", type=int, default=0, help="seed of the sim, lidar and slam (default 0)")
+    parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
+                        help="override a slam parameter (e.g. particles=10)")
+    parser.add_argument("--force", action="store_true", help="overwrite existing files")
+
+
+@reports_errors
+def main_build(args: argparse.Namespace) -> int:
+    if args.laps < 1 or not args.max_time > 0:
+        raise CommandError("--laps must be at least 1 and --max-time positive", 2)
+    existing = [str(f) for f in map_files(args.output) if f.exists()]
+    if existing and not args.force:
+        raise CommandError(f"{' and '.join(existing)} already exist{'s' if len(existing) == 1 else ''}; "
+                           "choose another -o or add --force to overwrite", 2)
+    try:
+        world = open_world(args.world)
+        route = parse_waypoints(args.waypoints) if args.waypoints else None
+        params = slam_params_for(world, parse_overrides(args.set), args.seed)
+        result = build_map(args.world, route, args.drive, args.seed, params, args.laps, args.max_time)
+    except (WorldError, ParamError, ValueError) as exc:
+        raise CommandError(str(exc), 2) from None
+    if result.grid is None:
+        raise CommandError("slam made no map (no scan reached it); nothing written")
+    try:
+        yaml_path = save_map(result.grid, args.output)
+    except OSError as exc:
+        raise CommandError(f"-o {args.output}: cannot write ({exc})") from None
+    unfinished = "" if result.laps >= args.laps else f" (route unfinished: {result.laps} of {args.laps} laps)"
+    print(f"drove {result.sim_s:.1f} s of sim time{unfinished}, {result.updates} slam updates, "
+          f"{result.collisions} collisions", flush=True)
+    print(f"wrote {yaml_path}: {describe(result.grid)}", flush=True)
+    print(f"against the true occupancy of {world.name}: {compare_with_truth(result.grid, world).text()}", flush=True)
+    return 0
+
+
 # ---------------------------------------------------------------- the command
 
 ACTIONS = {
     "save": ("save the map served on the bus (map_server format)", add_save_arguments, main_save),
     "show": ("draw a map file as a picture", add_show_arguments, main_show),
+    "build": ("map a simulated world with slam and save the map", add_build_arguments, main_build),
 }
 
 

@@ -95,8 +95,9 @@ class ScanUpdate:
 class Rbpf:
     """The filter. Feed it every scan with the odometry pose at the scan's stamp."""
 
-    def __init__(self, params: SlamParams, angles, range_max: float, range_min: float = 0.0):
+    def __init__(self, params: SlamParams, angles, range_max: float, range_min: float = 0.0, start=(0.0, 0.0, 0.0)):
         self.params = p = params
+        self.start = np.asarray(start, np.float64)   # the map-frame pose given to the first scan
         self.n = p.particles if p.mode == "rbpf" else 1
         self.angles = np.asarray(angles, np.float64)
         self.range_min = float(range_min)
@@ -216,8 +217,8 @@ class Rbpf:
         self.scan_count += 1
         self._odom = odom
         beams, px, py = self._beams(ranges)
-        if self._last_odom is None:  # the map frame is the robot's pose at the first scan
-            self.poses[:] = 0.0
+        if self._last_odom is None:  # the map frame: the first scan is at `start` (default: its own pose)
+            self.poses[:] = self.start
             self._integrate(beams, np.array([0]))
             self.grids.resample(np.zeros(self.n, np.int64))  # every particle starts from this map
             self._finish(index, odom, stamp_ns)

@@ -1,0 +1,148 @@
+"""Mapping in the simulator (`omninav map build`) and the comparison of a map with the truth.
+
+build_map runs, in one process and in lockstep (InProcessRunner), the sim, chassis, lidar and slam
+services and a route driver: localize-eval's harness, which drives cmd_vel along waypoints on the
+TRUE pose (the rig, not navigation), here without its map and start request. The route is driven
+once; the map is the slam node's map at the end, in the world frame (slam starts at the world's
+start pose, see node.py).
+
+compare_with_truth scores a map against World.rasterize at the map's resolution: the share of
+cells that agree among the cells both call known, and how far each occupied map cell lies from the
+nearest truly occupied cell (in cells: 0 on a true wall, 1 next to it).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from ...schemas.messages import OccupancyGrid
+from ...sim.node import SimNode, SimNodeParams
+from ...sim.world import GRID_OBSTACLE, World
+from ..chassis.node import ChassisNode, ChassisNodeParams
+from ..lidar.node import LidarNode, LidarNodeParams
+from ..localizer.evaluate import ROUTES, Harness, HarnessParams, route_problems
+from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
+from ..runtime.inprocess import InProcessRunner
+from ..runtime.params import load_params
+from .node import SlamNode, SlamNodeParams
+
+# gmapping's defaults process a scan per metre driven; indoors, with a 12 m lidar, updating every
+# 25 cm / 0.25 rad gives the matcher overlapping scans and the map denser evidence
+MAPPING_DEFAULTS = dict(linearUpdate=0.25, angularUpdate=0.25, particles=30, map_update_interval=5.0)
+MARGIN_M = 2.0      # the map's extent beyond the world's bounds
+
+
+class RouteDriver(Harness):
+    """localize-eval's harness without its start: no map, no initial pose, only the driving."""
+    service = "map_build"
+
+    def __init__(self, params: HarnessParams, **kwargs):
+        super().__init__(params, grid=None, **kwargs)
+        self.laps = 0
+
+    def _start(self, t: int, pose) -> None:
+        pass
+
+    def jump_to(self, waypoint: int) -> None:
+        if waypoint >= len(self.params.route):
+            self.laps += 1
+        super().jump_to(waypoint)
+
+
+@dataclass
+class BuildResult:
+    grid: OccupancyGrid | None
+    sim_s: float
+    laps: int
+    updates: int
+    collisions: int
+    malformed: int
+
+
+def slam_params_for(world: World, overrides: dict | None = None, seed: int = 0) -> SlamNodeParams:
+    """Mapping defaults for a world: the map frame at its start pose, the extent around its bounds;
+    overrides (slam parameter names) win. Raises ParamError naming a bad parameter."""
+    xmin, ymin, xmax, ymax = world.extent
+    start = world.robot.start
+    values = {**MAPPING_DEFAULTS, "xmin": xmin - MARGIN_M, "ymin": ymin - MARGIN_M, "xmax": xmax + MARGIN_M,
+              "ymax": ymax + MARGIN_M, "initial_pose_x": float(start[0]), "initial_pose_y": float(start[1]),
+              "initial_pose_a": float(start[2]), "seed": seed, **(overrides or {})}
+    return load_params(SlamNodeParams, values, "slam parameters")
+
+
+def parse_waypoints(text: str) -> tuple[tuple[float, float], ...]:
+    """'x,y;x,y;…' into waypoints (ValueError if it is not at least two finite pairs)."""
+    try:
+        points = tuple(tuple(float(v) for v in part.split(",")) for part in text.split(";") if part.strip())
+    except ValueError:
+        points = ()
+    if len(points) < 2 or any(len(p) != 2 or not all(map(math.isfinite, p)) for p in points):
+        raise ValueError(f"waypoints {text!r}: expected at least two 'x,y' pairs separated by ';'")
+    return points
+
+
+def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, params: SlamNodeParams | None = None,
+              laps: int = 1, max_sim_s: float = 900.0, speed: float = 0.4) -> BuildResult:
+    """Drive the route `laps` times (at most max_sim_s of sim time) while slam maps."""
+    sim = SimNode(SimNodeParams(world=world_name, drive=drive, seed=seed))
+    world, drive = sim.world, sim.sim.drive
+    route = tuple(tuple(map(float, p)) for p in (route or ROUTES.get(world.name, ())))
+    if len(route) < 2:
+        raise ValueError(f"no route for world {world.name!r} (default routes exist for {', '.join(ROUTES)}): "
+                         "give --waypoints")
+    problems = route_problems(world, route)
+    if problems:
+        raise ValueError("the route is not clear: " + "; ".join(problems))
+    slam = SlamNode(params or slam_params_for(world, seed=seed))
+    driver = RouteDriver(HarnessParams(route=route, holonomic=drive != "diff", speed=speed))
+    runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams(drive=drive)),
+                              LidarNode(LidarNodeParams(world=world_name, seed=seed + 1)), slam, driver])
+    runner.run_until(lambda: driver.laps >= laps, math.ceil(max_sim_s / sim.params.dt))
+    runner.close()
+    return BuildResult(grid=slam.current_map(), sim_s=sim.now_ns * 1e-9, laps=driver.laps,
+                       updates=slam.counters["filter_updates"], collisions=sim.sim.collisions,
+                       malformed=sum(v for k, v in slam.counters.items() if k.startswith("malformed/")))
+
+
+@dataclass(frozen=True)
+class Comparison:
+    known_both: int              # cells known in both
+    agreement: float             # share of those on which map and truth agree (occupied or free)
+    occupied: int                # occupied map cells inside the truth's grid
+    wall_mean_cells: float       # distance of occupied map cells to the nearest true obstacle cell
+    wall_p99_cells: float
+    wall_max_cells: float
+    within_one_cell: float       # share of occupied map cells at most one cell from a true obstacle
+
+    def text(self) -> str:
+        return (f"agreement {100 * self.agreement:.2f} % of {self.known_both} cells known in both; "
+                f"walls: {self.occupied} occupied cells, distance to the true wall mean {self.wall_mean_cells:.2f}"
+                f" / p99 {self.wall_p99_cells:.2f} / max {self.wall_max_cells:.2f} cells, "
+                f"{100 * self.within_one_cell:.2f} % within one cell")
+
+
+def compare_with_truth(grid: OccupancyGrid, world: World) -> Comparison:
+    """The map against the world's true occupancy, rasterized at the map's resolution; each map
+    cell is looked up at its centre, so any alignment (and an origin with yaw) is honoured."""
+    truth = world.rasterize(grid.info.resolution)
+    rows, cols = np.indices(grid.data.shape)
+    tr, tc = world_to_cell(truth.info, *cell_to_world(grid.info, rows, cols))
+    inside = in_grid(truth.info, tr, tc)
+    true_val = np.full(grid.data.shape, -1, np.int16)
+    true_val[inside] = truth.data[tr[inside], tc[inside]]
+    mine = grid.data
+    known = (mine >= 0) & (true_val >= 0)
+    agree = (mine > GRID_OBSTACLE) == (true_val > GRID_OBSTACLE)
+    true_occupied = truth.data > GRID_OBSTACLE
+    distance = ndimage.distance_transform_edt(~true_occupied)
+    occ = (mine > GRID_OBSTACLE) & inside
+    d = distance[tr[occ], tc[occ]]
+    n_known = int(known.sum())
+    return Comparison(known_both=n_known, agreement=float(agree[known].mean()) if n_known else 0.0,
+                      occupied=int(occ.sum()), wall_mean_cells=float(d.mean()) if d.size else 0.0,
+                      wall_p99_cells=float(np.percentile(d, 99)) if d.size else 0.0,
+                      wall_max_cells=float(d.max()) if d.size else 0.0,
+                      within_one_cell=float((d <= 1.0).mean()) if d.size else 0.0)

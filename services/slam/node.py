@@ -1,0 +1,175 @@
+"""The slam service: gmapping's node around the RBPF core (rbpf.py).
+
+Inputs, in merge order: odom and scan (synced). A scan stamped t is used once odometry stamped ≥ t
+has come; the odometry pose at t is interpolated between the two odometry messages around it
+(OdomHistory, shared with the localizer), so the filter sees where the robot was when the scan was
+taken. In the sim both come at every step, so the odometry at the scan's own stamp is used as is.
+
+The filter is built at the first usable scan (its beam angles and range_max fix the laser model);
+a later scan with another beam count is rejected as malformed, as are scans no laser model can use
+and odometry that goes back in time.
+
+Outputs: on every scan, `pose` (the best particle's PoseWithCovariance in the map frame; the
+covariance is the particles' weighted spread) and `tf/map_odom`; every map_update_interval of sim
+time, `map` (the best particle's OccupancyGrid, cropped to what was seen), as gmapping does.
+`get` on map answers the current map, `get` on pose the last pose.
+
+The map frame: the core's convention is the robot's pose at the first scan. initial_pose_x/y/a
+place that first pose elsewhere; in the sim, set them to the world's start pose (`omninav map
+build` does) and the map frame is the world frame, so the map lines up with the true occupancy.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...schemas import MessageError
+from ...schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, Pose2D, PoseWithCovariance, Transform
+from ..localizer.node import OdomHistory
+from ..runtime.node import NS_PER_S, Node
+from .params import SlamParams
+from .rbpf import Rbpf
+
+MAX_PENDING_SCANS = 100     # scans waiting for odometry; beyond this the oldest are dropped
+
+
+@dataclass(frozen=True)
+class SlamNodeParams(SlamParams):
+    """SlamParams plus what the node needs around the core (gmapping's frame names)."""
+    initial_pose_x: float = 0.0     # m, m, rad: the map-frame pose of the robot at the first scan
+    initial_pose_y: float = 0.0
+    initial_pose_a: float = 0.0
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+    odom_history_s: float = 2.0     # sim s of odometry kept for interpolation
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("initial_pose_x", "initial_pose_y", "initial_pose_a"):
+            if not math.isfinite(getattr(self, name)):
+                raise ValueError(f"{name} must be finite, got {getattr(self, name)}")
+        if not self.map_update_interval > 0:
+            raise ValueError(f"map_update_interval must be positive, got {self.map_update_interval}")
+        if not self.odom_history_s >= 0:
+            raise ValueError(f"odom_history_s must be zero or positive, got {self.odom_history_s}")
+        if not (self.map_frame and self.odom_frame):
+            raise ValueError("map_frame and odom_frame must not be empty")
+
+
+class SlamNode(Node):
+    service = "slam"
+    Params = SlamNodeParams
+
+    def setup(self) -> None:
+        p = self.params
+        self.slam: Rbpf | None = None
+        self.n_beams = 0
+        self.odom = OdomHistory(round(p.odom_history_s * NS_PER_S))
+        self.scans: list[tuple[int, np.ndarray]] = []           # waiting for odometry past their stamp
+        self.last_pose: PoseWithCovariance | None = None
+        self._map: tuple[int, OccupancyGrid] | None = None      # (filter updates, map) of the last map made
+        self.map_pub = self.publisher("map")
+        self.pose_pub = self.publisher("pose")
+        self.tf_pub = self.publisher("tf/map_odom")
+        self.keys_in = {name: self.keys.resolve(name) for name in ("odom", "scan")}
+        self.subscribe("odom", self.on_odom)
+        self.subscribe("scan", self.on_scan)
+        self.queryable("map", lambda _params: self.current_map())
+        self.queryable("pose", lambda _params: self.last_pose)
+        self.every(p.map_update_interval, self.publish_map)
+
+    # ------------------------------------------------------------ inputs
+
+    def on_odom(self, msg: Odometry) -> None:
+        stamp, latest = msg.header.stamp_ns, self.odom.latest
+        if latest is not None and stamp < latest:
+            self._reject("odom", f"stamp {stamp} ns is before the previous odometry's {latest} ns", "Odometry")
+            return
+        self.odom.add(stamp, np.array([msg.pose.x, msg.pose.y, msg.pose.theta]))
+        self._process_waiting_scans()
+
+    def on_scan(self, msg: LaserScan) -> None:
+        problem = self._scan_problem(msg)
+        if problem:
+            self._reject("scan", problem, "LaserScan")
+            return
+        if self.slam is None:
+            p = self.params
+            angles = msg.angle_min + np.arange(msg.ranges.size) * msg.angle_increment
+            self.slam = Rbpf(p, angles, msg.range_max, msg.range_min,
+                             start=(p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
+            self.n_beams = msg.ranges.size
+        self.scans.append((msg.header.stamp_ns, np.asarray(msg.ranges, np.float64)))
+        if len(self.scans) > MAX_PENDING_SCANS:
+            self.scans.pop(0)
+            self.counters["scans_dropped_waiting_for_odometry"] += 1
+        self._process_waiting_scans()   # odometry at the scan's stamp may have come first
+
+    def _scan_problem(self, msg: LaserScan) -> str:
+        if msg.ranges.size < 2 or not msg.angle_increment or not math.isfinite(msg.angle_increment):
+            return f"{msg.ranges.size} ranges with angle_increment {msg.angle_increment}: not a usable scan"
+        if not (math.isfinite(msg.range_max) and msg.range_max > 0):
+            return f"range_max {msg.range_max} is not a positive distance"
+        if self.slam is not None and msg.ranges.size != self.n_beams:
+            return f"{msg.ranges.size} beams, but the laser had {self.n_beams} (restart slam for another laser)"
+        return ""
+
+    def _reject(self, name: str, problem: str, type_name: str) -> None:
+        key = self.keys_in[name]
+        self.reject(key, MessageError(problem, type_name=type_name, key=key))
+
+    def _process_waiting_scans(self) -> None:
+        latest = self.odom.latest
+        while self.scans and latest is not None and self.scans[0][0] <= latest:
+            stamp, ranges = self.scans.pop(0)
+            odom = self.odom.at(stamp)
+            if odom is None:
+                self.counters["scans_before_odometry"] += 1
+            else:
+                self._update(stamp, odom, ranges)
+
+    # ------------------------------------------------------------ the filter and its outputs
+
+    def _update(self, stamp_ns: int, odom: np.ndarray, ranges: np.ndarray) -> None:
+        p, slam = self.params, self.slam
+        result = slam.process(stamp_ns, odom, ranges)
+        self.counters["scans"] += 1
+        if result is not None:
+            self.counters["filter_updates"] += 1
+            self.counters["resamples"] += int(result.resampled)
+        x, y, theta = (float(v) for v in slam.pose())
+        self.last_pose = PoseWithCovariance(header=Header(stamp_ns=stamp_ns, frame_id=p.map_frame),
+                                            pose=Pose2D(x, y, theta), covariance=self._covariance())
+        self.pose_pub.publish(self.last_pose)
+        tx, ty, ttheta = (float(v) for v in slam.map_to_odom())
+        self.tf_pub.publish(Transform(header=Header(stamp_ns=stamp_ns, frame_id=p.map_frame),
+                                      child_frame_id=p.odom_frame, transform=Pose2D(tx, ty, ttheta)))
+
+    def _covariance(self) -> np.ndarray:
+        """The particles' weighted spread at their last update (headings about the best one's)."""
+        slam = self.slam
+        poses, w = slam.poses.copy(), slam.weights
+        best = poses[slam.best]
+        poses[:, 2] = best[2] + np.arctan2(np.sin(poses[:, 2] - best[2]), np.cos(poses[:, 2] - best[2]))
+        d = poses - w @ poses
+        return (w[:, None] * d).T @ d
+
+    def current_map(self) -> OccupancyGrid | None:
+        """The best particle's map (made again only after the filter has changed it)."""
+        slam = self.slam
+        if slam is None:
+            return None
+        if self._map is None or self._map[0] != slam.updates:
+            grid = slam.grids.occupancy_grid(slam.best, self.params.occ_thresh)
+            grid.header.frame_id = self.params.map_frame
+            self._map = (slam.updates, grid)
+        grid = self._map[1]
+        grid.header.stamp_ns = self.now_ns
+        return grid
+
+    def publish_map(self) -> None:
+        grid = self.current_map()
+        if grid is not None:
+            self.map_pub.publish(grid)

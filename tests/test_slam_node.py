@@ -1,0 +1,152 @@
+"""The slam node in a whole in-process pipeline (sim, chassis, lidar, slam, a route driver) against
+the room's ground truth; malformed input; determinism; and `omninav map build`."""
+import math
+
+import numpy as np
+import pytest
+import yaml
+
+from omninav.cli.main import main as omninav
+from omninav.schemas import decode
+from omninav.schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, Pose2D, PoseWithCovariance, Transform
+from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
+from omninav.services.chassis.odometry import compose
+from omninav.services.lidar.node import LidarNode, LidarNodeParams
+from omninav.services.localizer.evaluate import HarnessParams
+from omninav.services.map_server.mapio import load_map
+from omninav.services.runtime.inprocess import InProcessRunner
+from omninav.services.slam.mapping import RouteDriver, compare_with_truth, slam_params_for
+from omninav.services.slam.node import SlamNode
+from omninav.sim.node import SimNode, SimNodeParams
+
+ROUTE = ((1.3, 0.8), (4.5, 0.8))     # along the bottom wall and back
+SHORT_ROUTE = "1.3,0.8;4.5,0.8"
+
+
+def run_room(seed: int = 0):
+    """Drive the short route once; returns the slam node, the world and per-scan (estimate, truth)."""
+    sim = SimNode(SimNodeParams(world="room", seed=seed))
+    slam = SlamNode(slam_params_for(sim.world, {"particles": 10}, seed))
+    driver = RouteDriver(HarnessParams(route=ROUTE))
+    runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams(drive=sim.sim.drive)),
+                              LidarNode(LidarNodeParams(world="room", seed=seed + 1)), slam, driver])
+    truth, pairs, tfs, maps = {}, [], [], []
+    truth_key, pose_key = slam.keys.resolve("sim/truth"), slam.keys.resolve("pose")
+
+    def tap(key, payload, stamp_ns):
+        if key == truth_key:
+            p = decode(payload, Odometry).pose
+            truth[stamp_ns] = (p.x, p.y, p.theta)
+        elif key == pose_key:
+            p = decode(payload, PoseWithCovariance).pose
+            pairs.append(((p.x, p.y, p.theta), truth[stamp_ns]))
+        elif key == slam.keys.resolve("tf/map_odom"):
+            tfs.append(decode(payload, Transform))
+        elif key == slam.keys.resolve("map"):
+            maps.append(decode(payload, OccupancyGrid))
+
+    runner.tap(tap)
+    runner.run_until(lambda: driver.laps >= 1, 4000)
+    runner.close()
+    return slam, sim.world, pairs, tfs, maps
+
+
+@pytest.fixture(scope="module")
+def room_run():
+    return run_room()
+
+
+def test_map_matches_the_room(room_run):
+    slam, world, _, _, maps = room_run
+    assert slam.counters["filter_updates"] > 5
+    assert maps, "no map published on the timer"
+    grid = slam.answer(slam.keys.resolve("map"), {})
+    assert grid.header.frame_id == "map"
+    c = compare_with_truth(grid, world)
+    assert c.known_both > 5000 and c.occupied > 200
+    assert c.agreement > 0.95
+    assert c.within_one_cell > 0.95
+    assert c.wall_mean_cells < 1.0
+
+
+def test_pose_follows_the_truth(room_run):
+    slam, _, pairs, tfs, _ = room_run
+    assert len(pairs) > 50
+    errors = [math.hypot(e[0] - t[0], e[1] - t[1]) for e, t in pairs]
+    headings = [abs(math.remainder(e[2] - t[2], math.tau)) for e, t in pairs]
+    assert max(errors) < 0.10 and max(headings) < 0.05
+    # the map frame is the world frame: the first scan is at the world's start (the robot has moved
+    # by at most one sim step's creep when the lidar's first scan comes)
+    assert errors[0] < 0.01
+    assert len(tfs) == len(pairs) and all(t.child_frame_id == "odom" and t.header.frame_id == "map" for t in tfs)
+    assert slam.answer(slam.keys.resolve("pose"), {}) is slam.last_pose
+
+
+def test_deterministic(room_run):
+    slam, _, pairs, _, _ = room_run
+    again, _, pairs2, _, _ = run_room()
+    assert pairs2 == pairs
+    np.testing.assert_array_equal(again.current_map().data, slam.current_map().data)
+
+
+def scan(stamp_ns, n=90, angle_increment=2 * math.pi / 90):
+    return LaserScan(header=Header(stamp_ns=stamp_ns), angle_min=-math.pi, angle_increment=angle_increment,
+                     range_min=0.1, range_max=10.0, ranges=np.full(n, 3.0, np.float32))
+
+
+def odom(stamp_ns, x=0.0):
+    return Odometry(header=Header(stamp_ns=stamp_ns), pose=Pose2D(x, 0.0, 0.0))
+
+
+def feed(node, topic, msg):
+    index = next(i for i, inp in enumerate(node.inputs) if inp.key == node.keys.resolve(topic))
+    node.process(index, msg)
+
+
+def test_malformed_input_is_counted():
+    node = SlamNode(slam_params_for(SimNode(SimNodeParams(world="room")).world, {"particles": 2}))
+    feed(node, "odom", odom(0))
+    feed(node, "scan", scan(0))
+    feed(node, "scan", scan(1, angle_increment=0.0))           # no usable geometry
+    feed(node, "scan", scan(2, n=45))                          # another beam count than the laser's
+    feed(node, "odom", odom(-5))                               # odometry back in time
+    assert node.counters[f"malformed/{node.keys.resolve('scan')}"] == 2
+    assert node.counters[f"malformed/{node.keys.resolve('odom')}"] == 1
+    assert node.counters["scans"] == 1
+
+
+def test_scan_waits_for_odometry_and_is_interpolated():
+    node = SlamNode(slam_params_for(SimNode(SimNodeParams(world="room")).world, {"particles": 1}))
+    feed(node, "odom", odom(0, x=0.0))
+    feed(node, "scan", scan(0))
+    feed(node, "scan", scan(10))           # between two odometry messages: waits for the next
+    assert node.counters["scans"] == 1
+    feed(node, "odom", odom(20, x=0.2))
+    assert node.counters["scans"] == 2
+    # 0.1 m driven by the scan's stamp (below linearUpdate: moved by odometry only)
+    start = np.array([node.params.initial_pose_x, node.params.initial_pose_y, node.params.initial_pose_a])
+    pose = node.last_pose.pose
+    np.testing.assert_allclose((pose.x, pose.y, pose.theta), compose(start, (0.1, 0.0, 0.0)), atol=1e-9)
+
+
+def test_map_build_writes_and_scores_the_map(tmp_path, capsys):
+    out = tmp_path / "room"
+    assert omninav(["map", "build", "--world", "sim/worlds/room.yaml", "-o", str(out),
+                    "--waypoints", SHORT_ROUTE, "--set", "particles=10"]) == 0
+    text = capsys.readouterr().out
+    assert (tmp_path / "room.yaml").is_file() and (tmp_path / "room.pgm").is_file()
+    assert yaml.safe_load((tmp_path / "room.yaml").read_text())["resolution"] == pytest.approx(0.05)
+    agreement = float(text.split("agreement ")[1].split(" %")[0])
+    assert agreement > 90.0
+    assert load_map(tmp_path / "room.yaml").data.shape[0] > 50
+    # existing files are kept unless --force
+    assert omninav(["map", "build", "--world", "room", "-o", str(out), "--waypoints", SHORT_ROUTE]) == 2
+    assert "already exist" in capsys.readouterr().err
+
+
+def test_map_build_user_errors(tmp_path, capsys):
+    for args, words in ((["--world", "nowhere"], "no such file"), (["--world", "room", "--waypoints", "1,2"], "waypoints"),
+                        (["--world", "room", "--set", "particles=0"], "particles")):
+        assert omninav(["map", "build", "-o", str(tmp_path / "m"), *args]) == 2
+        assert words in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
