@@ -27,6 +27,7 @@ from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Polygon
 from mcap.exceptions import McapError
 
+from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..schemas import MessageError, decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ..schemas.messages import Diagnostic, LaserScan, Obstacles, Odometry
@@ -40,7 +41,7 @@ SCAN_MOMENTS = 4
 WORLD_KEY = "world"          # the sim's Diagnostic value naming its world file
 
 
-class ReportError(Exception):
+class ReportError(UserError):
     """A user error: printed as one line, exit status 2."""
 
 
@@ -321,14 +322,6 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--robot", default=DEFAULT_ROBOT, help="robot namespace (default r1)")
 
 
-def main(args: argparse.Namespace) -> int:
-    try:
-        return _main(args)
-    except ReportError as exc:
-        print(f"omninav report: error: {exc}", file=sys.stderr)
-        return 2
-
-
 def _world(args: argparse.Namespace, run: RunData) -> World | None:
     if args.world:
         try:
@@ -348,7 +341,8 @@ def _world(args: argparse.Namespace, run: RunData) -> World | None:
         return None
 
 
-def _main(args: argparse.Namespace) -> int:
+@exits_2_on_user_error("report")
+def main(args: argparse.Namespace) -> int:
     try:
         KeyLayout(args.robot)
     except ValueError as exc:

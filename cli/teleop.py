@@ -23,6 +23,7 @@ import time
 from dataclasses import dataclass, replace
 from typing import Callable
 
+from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..schemas.keys import DEFAULT_ROBOT
 from ..schemas.messages import Clock, Twist
 from ..services.runtime.live import LiveRunner
@@ -39,7 +40,7 @@ CLOCK_NOTICE_S = 3.0             # say that no clock has come after this long
 HELP_LINE = "w/s forward/back, a/d strafe, q/e turn, space stop, x quit"
 
 
-class TeleopError(Exception):
+class TeleopError(UserError):
     """A user error: printed as one line, exit status 2."""
 
 
@@ -210,15 +211,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="drive 'vx,vy,wz,seconds;…' (sim seconds) instead of the keyboard, then stop and exit")
 
 
+@exits_2_on_user_error("teleop")
 def main(args: argparse.Namespace) -> int:
-    try:
-        return _main(args)
-    except TeleopError as exc:
-        print(f"omninav teleop: error: {exc}", file=sys.stderr)
-        return 2
-
-
-def _main(args: argparse.Namespace) -> int:
     for name, value in (("--max-speed", args.max_speed), ("--max-turn", args.max_turn),
                         ("--key-timeout", args.key_timeout)):
         if not (math.isfinite(value) and value > 0):

@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import sys
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -20,6 +19,7 @@ from typing import Any, Iterable
 import numpy as np
 from mcap.exceptions import McapError
 
+from ..runtime.errors import UserError, exits_2_on_user_error
 from ...schemas import MessageError, decode
 from ...schemas.messages import Diagnostic
 from ..recorder.mcap_io import Record, RecordingWriter, read_records
@@ -35,7 +35,7 @@ FIRST_SEQ = "first_seq/"
 NOT_REPLAYABLE = ("late/", "sync_timeout")
 
 
-class ReplayError(Exception):
+class ReplayError(UserError):
     """A recording or request that cannot be replayed; the text says why."""
 
 
@@ -276,15 +276,8 @@ def _alignment_notes(node: Node, alignment: Alignment, run: ReplayRun, diag_key:
     return notes
 
 
+@exits_2_on_user_error("replay")
 def main_into(args: argparse.Namespace) -> int:
-    try:
-        return _main(args)
-    except ReplayError as exc:
-        print(f"omninav replay: error: {exc}", file=sys.stderr)
-        return 2
-
-
-def _main(args: argparse.Namespace) -> int:
     try:
         node = build_node(args.into, args.params, parse_overrides(args.set), args.robot, args.name)
     except (UnknownService, ParamError, ValueError) as exc:   # ValueError: a bad robot or instance name
