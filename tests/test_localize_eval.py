@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from omninav.cli.main import main as omninav
-from omninav.services.localizer.evaluate import ROUTES, Series, route_command, route_problems
+from omninav.services.localizer.evaluate import PARAMS_FILE, ROUTES, Series, route_command, route_problems
+from omninav.services.localizer.params import AmclParams
+from omninav.services.runtime.params import load_params_file
 from omninav.sim.world import load_world, world_path
 
 from conftest import SHARED_DATA
@@ -19,6 +21,12 @@ try:
     HAVE_ROSBAGS = True
 except ImportError:
     HAVE_ROSBAGS = False
+
+
+def test_the_paper_params_are_a_plain_ros1_amcl_file():
+    params = load_params_file(AmclParams, PARAMS_FILE, "amcl")      # only amcl's own parameters
+    assert params.odom_model_type == "omni-corrected" and params.laser_model_type == "likelihood_field_prob"
+    assert params.recovery_alpha_slow > 0 and params.recovery_alpha_fast > params.recovery_alpha_slow
 
 
 @pytest.mark.parametrize("name", sorted(ROUTES))
