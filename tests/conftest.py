@@ -80,7 +80,7 @@ class Processes:
         return next(self.output(log) for p, log in self.started if p is proc)
 
     @staticmethod
-    def stop(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 15.0) -> int:
+    def stop(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 30.0) -> int:
         if proc.poll() is None:
             try:
                 os.killpg(proc.pid, sig)

@@ -170,7 +170,9 @@ class RecorderNode(Node):
                 for sub in subscribers:
                     sub.undeclare()
             self._drain(handlers)   # what was queued before the undeclare
-        self.close()
+            # finish the files before closing the session: a Zenoh session close can hang, and
+            # the recording must be complete whatever happens after this point
+            self.close()
 
     def _take(self, handler, limit: int) -> int:
         """Write up to `limit` queued samples of one subscription; returns how many."""
