@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from omninav.cli.main import main as omninav
-from omninav.services.localizer.evaluate import PARAMS_FILE, ROUTES, Series, route_command, route_problems
+from omninav.services.localizer.evaluate import PARAMS_FILE, ROUTES, Route, Series, route_command, route_problems
 from omninav.services.localizer.params import AmclParams
 from omninav.services.runtime.params import load_params_file
 from omninav.sim.world import load_world, world_path
@@ -33,14 +33,20 @@ def test_the_paper_params_are_a_plain_ros1_amcl_file():
 def test_every_route_is_clear_and_starts_at_the_start(name):
     world = load_world(world_path(name))
     assert route_problems(world, ROUTES[name]) == []
-    assert math.dist(ROUTES[name][0], world.robot.start[:2]) < 0.3
+    assert math.dist(ROUTES[name].points[0], world.robot.start[:2]) < 0.3
+
+
+def test_a_route_loops_from_its_loop_point():
+    route = Route(((0, 0), (1, 0), (2, 0), (3, 0)), loop_from=1)
+    assert route.legs() == [(0, 1), (1, 2), (2, 3), (3, 1)]
+    assert [route.after(k) for k in range(4)] == [1, 2, 3, 1]
 
 
 def test_a_route_through_furniture_is_reported():
     world = load_world(world_path("room"))
-    there, back = route_problems(world, ((1.3, 0.8), (4.5, 3.0)))     # through the round table at (3, 2.2)
+    there, back = route_problems(world, Route(((1.3, 0.8), (4.5, 3.0))))   # through the round table at (3, 2.2)
     assert there.startswith("segment 0 (1.3, 0.8) → (4.5, 3)") and back.startswith("segment 1 (4.5, 3) → (1.3, 0.8)")
-    (problem,) = route_problems(world, ((1.3, 0.8), (8.3, 0.8), (8.3, 3.5), (6.2, 3.5)))   # closing leg
+    (problem,) = route_problems(world, Route(((1.3, 0.8), (8.3, 0.8), (8.3, 3.5), (6.2, 3.5))))   # closing leg
     assert problem.startswith("segment 3")
 
 

@@ -12,7 +12,7 @@ from omninav.schemas.messages import Header, LaserScan, OccupancyGrid, Odometry,
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.chassis.odometry import compose
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
-from omninav.services.localizer.evaluate import HarnessParams
+from omninav.services.localizer.evaluate import HarnessParams, Route
 from omninav.services.map_server.mapio import load_map
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.slam.mapping import RouteDriver, compare_with_truth, slam_params_for
@@ -27,7 +27,7 @@ def run_room(seed: int = 0):
     """Drive the short route once; returns the slam node, the world and per-scan (estimate, truth)."""
     sim = SimNode(SimNodeParams(world="room", seed=seed))
     slam = SlamNode(slam_params_for(sim.world, {"particles": 10}, seed))
-    driver = RouteDriver(HarnessParams(route=ROUTE))
+    driver = RouteDriver(HarnessParams(route=Route(ROUTE)))
     runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams(drive=sim.sim.drive)),
                               LidarNode(LidarNodeParams(world="room", seed=seed + 1)), slam, driver])
     truth, pairs, tfs, maps = {}, [], [], []

@@ -52,17 +52,33 @@ CONVERGED_HOLD_S = 1.0
 START_OFFSET = (0.5 * math.cos(2.0), 0.5 * math.sin(2.0), math.radians(15.0))   # 0.5 m and 15° off
 ROUTE_CLEARANCE = 0.05   # m between obstacles and the robot's circumscribed circle along a route
 
-# Loops of waypoints (x, y) in free space, from each world's start pose: the robot may turn anywhere
-# along them (tests/test_localize_eval.py checks the clearance).
-ROUTES: dict[str, tuple[tuple[float, float], ...]] = {
-    "room": ((1.3, 0.8), (8.3, 0.8), (8.3, 3.5), (6.2, 3.5), (6.2, 6.9), (3.8, 6.9), (3.8, 4.6), (1.3, 4.6)),
+
+
+@dataclass(frozen=True)
+class Route:
+    """Waypoints (x, y) from the start pose; after the last one the robot goes on at points[loop_from],
+    so the points before it only lead in."""
+    points: tuple[tuple[float, float], ...]
+    loop_from: int = 0
+
+    def legs(self) -> list[tuple[int, int]]:
+        return [(k, k + 1) for k in range(len(self.points) - 1)] + [(len(self.points) - 1, self.loop_from)]
+
+    def after(self, k: int) -> int:
+        return k + 1 if k + 1 < len(self.points) else self.loop_from
+
+
+# Routes in free space from each world's start pose: the robot may turn anywhere along them
+# (route_problems checks the clearance), and no mover crosses them.
+ROUTES: dict[str, Route] = {
+    "room": Route(((1.3, 0.8), (8.3, 0.8), (8.3, 3.5), (6.2, 3.5), (6.2, 6.9), (3.8, 6.9), (3.8, 4.6), (1.3, 4.6))),
     # down into the lower rooms, through both, up into the upper right room, and back the same way
-    "office": ((1.0, 6.0), (4.0, 6.0), (4.0, 4.0), (6.4, 4.0), (6.4, 2.5), (12.0, 2.5), (12.0, 6.0),
-               (13.5, 6.0), (13.5, 9.3), (13.5, 6.0), (12.0, 6.0), (12.0, 2.5), (6.4, 2.5), (6.4, 4.0),
-               (4.0, 4.0), (4.0, 6.0)),
-    # the two aisles west of the cross aisle, where no mover goes
-    "warehouse": ((1.0, 1.0), (1.2, 4.25), (8.8, 4.25), (1.2, 4.25), (1.2, 9.25), (8.8, 9.25), (1.2, 9.25),
-                  (1.2, 4.25)),
+    "office": Route(((1.0, 6.0), (4.0, 6.0), (4.0, 4.0), (6.4, 4.0), (6.4, 2.5), (12.0, 2.5), (12.0, 6.0),
+                     (13.5, 6.0), (13.5, 9.3), (13.5, 6.0), (12.0, 6.0), (12.0, 2.5), (6.4, 2.5), (6.4, 4.0),
+                     (4.0, 4.0), (4.0, 6.0))),
+    # into the first aisle (across the forklift's lane at x = 3 long before it comes by at 48 s), then up
+    # and down its west half: every other way between aisles crosses the lane of a mover
+    "warehouse": Route(((1.0, 1.0), (1.2, 4.25), (4.6, 4.25), (8.7, 4.25)), loop_from=2),
 }
 
 
@@ -70,12 +86,13 @@ def circumscribed_radius(world: World) -> float:
     return float(np.max(np.hypot(*world.robot.footprint.T)))
 
 
-def route_problems(world: World, route) -> list[str]:
+def route_problems(world: World, route: Route) -> list[str]:
     """Where the robot, turned any way, would come closer than ROUTE_CLEARANCE to an obstacle."""
     reach = circumscribed_radius(world) + ROUTE_CLEARANCE
-    points = np.asarray(route, float)
+    points = np.asarray(route.points, float)
     problems = []
-    for k, (a, b) in enumerate(zip(points, np.roll(points, -1, axis=0))):
+    for k, (i, j) in enumerate(route.legs()):
+        a, b = points[i], points[j]
         samples = a + (b - a) * np.linspace(0.0, 1.0, max(2, math.ceil(np.hypot(*(b - a)) / 0.02)))[:, None]
         clearance = world.distance(samples) - reach
         if clearance.min() < 0:
@@ -106,7 +123,7 @@ def route_command(pose, target, holonomic: bool, speed: float, turn: float) -> t
 
 @dataclass(frozen=True)
 class HarnessParams:
-    route: tuple[tuple[float, float], ...] = ()
+    route: Route = Route(((0.0, 0.0),))
     holonomic: bool = True
     speed: float = 0.4          # m/s
     turn: float = 0.8           # rad/s
@@ -134,7 +151,7 @@ class Harness(Node):
         self.next_control_ns: int | None = None
 
     def jump_to(self, waypoint: int) -> None:
-        self.target = waypoint % len(self.params.route)
+        self.target = waypoint
 
     def on_truth(self, msg: Odometry) -> None:
         t, p = msg.header.stamp_ns, self.params
@@ -145,10 +162,10 @@ class Harness(Node):
         if t < self.next_control_ns:
             return
         self.next_control_ns += round(p.control_period_s * NS_PER_S)
-        target = p.route[self.target]
+        target = p.route.points[self.target]
         if math.hypot(target[0] - pose[0], target[1] - pose[1]) < p.reached:
-            self.jump_to(self.target + 1)
-            target = p.route[self.target]
+            self.jump_to(p.route.after(self.target))
+            target = p.route.points[self.target]
         vx, vy, wz = route_command(pose, target, p.holonomic, p.speed, p.turn)
         self.cmd_pub.publish(Twist(header=self.header("base_link"), linear_x=vx, linear_y=vy, angular_z=wz))
 
@@ -205,14 +222,14 @@ def localizer_params(params_file: str | None, overrides: dict, seed: int) -> Loc
 
 def evaluate(world_name: str = "room", drive: str = "", mode: str = "track", seed: int = 0,
              params: LocalizerParams | None = None, duration_s: float = 120.0, kidnap_at_s: float = 40.0,
-             route=None) -> dict:
+             route: Route | None = None) -> dict:
     """Run the pipeline in lockstep and score the localizer against the ground truth."""
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
     sim = SimNode(SimNodeParams(world=world_name, drive=drive, seed=seed))
     world, drive = sim.world, sim.sim.drive
-    route = tuple(tuple(map(float, p)) for p in (route or ROUTES.get(world.name, ())))
-    if not route:
+    route = route or ROUTES.get(world.name)
+    if route is None:
         raise ValueError(f"no route for world {world.name!r} (routes exist for {', '.join(ROUTES)}): give --route")
     problems = route_problems(world, route)
     if problems:
@@ -268,15 +285,16 @@ def evaluate(world_name: str = "room", drive: str = "", mode: str = "track", see
     return result
 
 
-def _kidnap(sim: SimNode, harness: Harness, route, now_s: float) -> dict:
-    """Teleport the robot to the waypoint farthest from it, facing the next one."""
+def _kidnap(sim: SimNode, harness: Harness, route: Route, now_s: float) -> dict:
+    """Teleport the robot to the waypoint of the loop farthest from it, facing the next one."""
     here = sim.sim.pose
-    points = np.asarray(route)
-    far = int(np.argmax(np.hypot(points[:, 0] - here[0], points[:, 1] - here[1])))
-    after = points[(far + 1) % len(points)]
+    points = np.asarray(route.points)
+    loop = np.arange(route.loop_from, len(points))
+    far = int(loop[np.argmax(np.hypot(points[loop, 0] - here[0], points[loop, 1] - here[1]))])
+    after = points[route.after(far)]
     pose = (points[far, 0], points[far, 1], math.atan2(after[1] - points[far, 1], after[0] - points[far, 0]))
     sim.sim.teleport(pose)
-    harness.jump_to(far + 1)
+    harness.jump_to(route.after(far))
     return {"at_s": now_s, "from": [round(float(v), 3) for v in here], "to": [round(float(v), 3) for v in pose]}
 
 
@@ -318,14 +336,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     realdata.add_arguments(parser)
 
 
-def _parse_route(text: str) -> tuple[tuple[float, float], ...]:
+def _parse_route(text: str) -> Route:
     try:
         points = tuple(tuple(float(v) for v in part.split(",")) for part in text.split(";") if part.strip())
     except ValueError:
         points = ()
     if len(points) < 2 or any(len(p) != 2 or not all(map(math.isfinite, p)) for p in points):
         raise ValueError(f"--route {text!r}: expected at least two waypoints 'x,y;x,y;…'")
-    return points
+    return Route(points)
 
 
 def main(args: argparse.Namespace) -> int:
