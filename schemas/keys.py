@@ -16,7 +16,8 @@ ALL = f"{ROOT}/**"
 # topic -> message type, for keys under omninav/<robot>/
 ROBOT_TOPICS: dict[str, type] = {
     "cmd_vel": m.Twist,                 # from the local planner / teleop, to the chassis
-    "cmd_vel_nav": m.Twist,             # raw local-planner output, before smoother & collision monitor
+    "cmd_vel_nav": m.Twist,             # the navigator's command, before the velocity smoother
+    "cmd_vel_smoothed": m.Twist,        # velocity smoother -> collision monitor (which sends cmd_vel)
     "wheel_cmd": m.WheelCommand,        # chassis -> sim
     "wheel_state": m.WheelState,        # sim -> chassis
     "odom": m.Odometry,
@@ -32,6 +33,9 @@ ROBOT_TOPICS: dict[str, type] = {
     "costmap/global": m.Costmap,
     "costmap/local": m.Costmap,
     "plan": m.Path,
+    "plan_request": m.Goal,             # navigator -> global planner (goal_id "<goal>#<request>")
+    "follow_path": m.Path,              # navigator -> local planner: the plan to follow (empty: stop)
+    "local_cmd": m.LocalCommand,        # local planner -> navigator
     "local_plan": m.Path,
     "goal": m.Goal,
     "cancel": m.CancelGoal,

@@ -127,11 +127,26 @@ class ParticleCloud:
     weights: np.ndarray = array("<f8", (None,))
 
 
-@message("Path", 1)
+@message("Path", 2)
 @dataclass(slots=True)
 class Path:
     header: Header = field(default_factory=Header)
     poses: np.ndarray = array("<f8", (None, 3))         # x, y, theta per waypoint
+    goal_id: str = ""          # the goal or plan request this path answers ("" when none)
+    error: str = ""            # why there is no path ("status: reason"); empty when poses is the plan
+
+
+@message("LocalCommand", 1)
+@dataclass(slots=True)
+class LocalCommand:
+    """The local planner's answer for one control cycle (move_base's computeVelocityCommands)."""
+    header: Header = field(default_factory=Header)     # stamp: the odometry it was computed on
+    goal_id: str = ""          # goal_id of the followed path
+    linear_x: float = 0.0      # body twist, m/s and rad/s
+    linear_y: float = 0.0
+    angular_z: float = 0.0
+    ok: bool = True            # False: no valid command (the twist then brakes)
+    reason: str = ""           # why not, or what it did (e.g. "escape")
 
 
 @message("Transform", 1)
