@@ -32,6 +32,7 @@ ROBOT_TOPICS: dict[str, type] = {
     "tf/odom_base": m.Transform,
     "costmap/global": m.Costmap,
     "costmap/local": m.Costmap,
+    "costmap/clear": m.ClearCostmaps,   # navigator recovery -> costmap
     "plan": m.Path,
     "plan_request": m.Goal,             # navigator -> global planner (goal_id "<goal>#<request>")
     "follow_path": m.Path,              # navigator -> local planner: the plan to follow (empty: stop)

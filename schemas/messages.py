@@ -190,6 +190,14 @@ class CancelGoal:
     goal_id: str = ""                                   # empty: cancel whatever is active
 
 
+@message("ClearCostmaps", 1)
+@dataclass(slots=True)
+class ClearCostmaps:
+    """A recovery's request: forget obstacles farther than reset_distance from the robot."""
+    header: Header = field(default_factory=Header)
+    reset_distance: float = 3.0    # m: the side of the square around the robot that is kept
+
+
 @message("NavStatus", 1)
 @dataclass(slots=True)
 class NavStatus:
