@@ -281,7 +281,7 @@ def evaluate(world_name: str = "room", drive: str = "", mode: str = "track", see
     result["converged_at_s"] = converged
     result["after_convergence"] = series.stats(converged, end) if converged is not None else {"samples": 0}
     if mode == "kidnap":
-        result["kidnap"] = _kidnap_result(series, kidnap)
+        result["kidnap"] = kidnap_result(series, kidnap, converged)
     return result
 
 
@@ -298,19 +298,26 @@ def _kidnap(sim: SimNode, harness: Harness, route: Route, now_s: float) -> dict:
     return {"at_s": now_s, "from": [round(float(v), 3) for v in here], "to": [round(float(v), 3) for v in pose]}
 
 
-def _kidnap_result(series: Series, kidnap: dict | None) -> dict:
+def kidnap_result(series: Series, kidnap: dict | None, converged_s: float) -> dict:
     if kidnap is None:
         return {"done": False, "why": "the filter had not converged by the end of the run"}
     at = kidnap["at_s"]
-    t = np.asarray(series.t)
+    t, injected = np.asarray(series.t), np.asarray(series.injected)
     after = np.flatnonzero(t > at)
     injected_before = series.injected[after[0] - 1] if len(after) and after[0] > 0 else 0
     detected = next((series.t[i] for i in after if series.injected[i] > injected_before), None)
+    # recovery also injects now and then while tracking well: the rate before tells chance from detection
+    tracking = (t >= converged_s) & (t <= at)
+    tracked_s = float(t[tracking][-1] - t[tracking][0]) if tracking.sum() > 1 else 0.0
+    first_second = injected[(t > at) & (t <= at + 1.0)]
     recovered = series.converged_at(at)
     out = {"done": True, **kidnap, "jump_m": round(float(np.hypot(kidnap["to"][0] - kidnap["from"][0],
                                                                kidnap["to"][1] - kidnap["from"][1])), 2),
            "error_after_m": round(series.position[after[0]], 2) if len(after) else None,
            "detected": detected is not None, "detected_after_s": None if detected is None else round(detected - at, 2),
+           "random_poses_per_s_before": round(float(injected[tracking][-1] - injected[tracking][0]) / tracked_s, 1)
+           if tracked_s > 0 else None,
+           "random_poses_first_s_after": int(first_second[-1] - injected_before) if len(first_second) else 0,
            "recovered": recovered is not None,
            "recovered_after_s": None if recovered is None else round(recovered - at, 2)}
     if recovered is not None:
@@ -394,7 +401,9 @@ def format_result(r: dict) -> str:
         else:
             lines.append(f"  kidnapped at {k['at_s']:.1f} s, {k['jump_m']:.1f} m away (error then "
                          f"{k['error_after_m']} m); detected: "
-                         + (f"after {k['detected_after_s']:.1f} s" if k["detected"] else "no") + "; recovered: "
+                         + (f"after {k['detected_after_s']:.1f} s" if k["detected"] else "no")
+                         + f" ({k['random_poses_first_s_after']} random poses in the first second, "
+                         f"{k['random_poses_per_s_before']}/s while tracking before); recovered: "
                          + (f"after {k['recovered_after_s']:.1f} s; then " + _stats_line(k["after_recovery"])
                             if k["recovered"] else "no"))
     return "\n".join(lines)

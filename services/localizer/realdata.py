@@ -90,10 +90,10 @@ def load_run(path: str | Path, scan_topic: str, odom_topic: str, robot: str = "r
         keys = KeyLayout(robot)
         try:
             records = list(read_records(path, [keys.robot("scan"), keys.robot("odom")]))
+            scans = [decode(r.payload, LaserScan, key=r.key) for r in records if r.key == keys.robot("scan")]
+            odometry = [decode(r.payload, Odometry, key=r.key) for r in records if r.key == keys.robot("odom")]
         except (McapError, EOFError, ValueError, OSError, MessageError) as exc:
             raise RealDataError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc})") from None
-            scans = [decode(r.payload, LaserScan, r.key) for r in records if r.key == keys.robot("scan")]
-            odometry = [decode(r.payload, Odometry, r.key) for r in records if r.key == keys.robot("odom")]
     else:
         from ..importers.rosbag import RosbagError, read_bag
         try:
@@ -276,11 +276,12 @@ def _search_summary(search: dict) -> dict:
 
 
 def _summary(t: np.ndarray, share: np.ndarray) -> dict:
-    """Mean share overall, per whole second, and at the end."""
+    """The share over all scans (mean, median, 10th percentile, min), per whole second, and at the end."""
     if len(t) == 0:
         return {"mean": None}
     seconds = np.floor(t).astype(int)
-    return {"mean": round(float(np.nanmean(share)), 4), "min": round(float(np.nanmin(share)), 4),
+    return {"mean": round(float(np.nanmean(share)), 4), "median": round(float(np.nanmedian(share)), 4),
+            "p10": round(float(np.nanpercentile(share, 10)), 4), "min": round(float(np.nanmin(share)), 4),
             "last_second": round(float(np.nanmean(share[t >= t[-1] - 1.0])), 4),
             "per_second": [round(float(np.nanmean(share[seconds == s])), 4) for s in range(seconds[-1] + 1)
                            if np.any(seconds == s)]}
@@ -344,10 +345,11 @@ def format_result(r: dict, source: str) -> str:
         lines.append(f"  search score {s['score']:.1f}; best pose more than 1 m away: {u['score']:.1f} "
                      f"({u['distance_m']:.1f} m off)")
     lines.append(f"share of beam end points within {r['near_m']} m of an occupied cell:")
-    lines.append(f"  {'':14}{'mean':>7}{'min':>7}{'last 1 s':>10}   per second")
+    lines.append(f"  {'':14}{'mean':>7}{'median':>7}{'p10':>7}{'min':>7}{'last 1 s':>10}   per second")
     for name, label in (("localizer", "localizer"), ("raw_odometry", "raw odometry")):
         f = r[name]
-        lines.append(f"  {label:14}{f['mean']:7.3f}{f['min']:7.3f}{f['last_second']:10.3f}   "
+        lines.append(f"  {label:14}{f['mean']:7.3f}{f['median']:7.3f}{f['p10']:7.3f}{f['min']:7.3f}"
+                     f"{f['last_second']:10.3f}   "
                      + " ".join(f"{v:.3f}" for v in f["per_second"]))
     return "\n".join(lines)
 
