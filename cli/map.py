@@ -1,13 +1,14 @@
-"""`omninav map ACTION`: maps in the ROS map_server format.
+"""`omninav map`: mapping a simulated world, and maps in the ROS map_server format.
 
+  omninav map --world W -o maps/NAME   map a simulated world with slam (in one process), driving
+                                       by frontier exploration (or --waypoints, or --route), save
+                                       the map and compare it with the world's true occupancy
   omninav map save [-o maps/NAME]      the map being served on the bus (map_server, slam) to
                                        NAME.yaml + NAME.pgm, as ROS map_saver -f does
   omninav map show MAP.yaml -o map.png a picture of a map file, in map-frame metres
-  omninav map build --world W -o maps/NAME
-                                       map a simulated world with slam (in one process), save
-                                       the map and compare it with the world's true occupancy
 
-Each action is one entry of ACTIONS: (help, add_arguments(parser), main(args) -> int).
+Each action is one entry of ACTIONS: (help, add_arguments(parser), main(args) -> int); without an
+action the mapping's own arguments apply (an action's parser sets its own values over them).
 """
 from __future__ import annotations
 
@@ -27,7 +28,8 @@ from ..services.map_server.mapio import (MODES, UNKNOWN_GREY, MapError, load_map
                                           save_map)
 from ..services.chassis.kinematics import DRIVES
 from ..services.runtime.params import ParamError, parse_overrides
-from ..services.slam.mapping import MAPPING_ROUTES, build_map, compare_with_truth, parse_waypoints, slam_params_for
+from ..services.slam.mapping import (MAPPING_ROUTES, build_map, compare_with_truth, explored_share, parse_waypoints,
+                                     slam_params_for)
 from ..sim.node import open_world
 from ..sim.world import GRID_OBSTACLE, WorldError
 from .introspect import ROUTER_HELP, CommandError, connect, key_expression, reports_errors
@@ -180,18 +182,21 @@ def main_show(args: argparse.Namespace) -> int:
     return 0
 
 
-# ---------------------------------------------------------------- omninav map build
+# ---------------------------------------------------------------- omninav map --world
 
-def add_build_arguments(parser: argparse.ArgumentParser) -> None:
-    parser.add_argument("--world", required=True, help="shipped world name or world file, e.g. sim/worlds/room.yaml")
-    parser.add_argument("-o", "--output", required=True, metavar="PATH", help="write PATH.yaml and PATH.pgm")
-    parser.add_argument("--waypoints", metavar="'x,y;x,y;…'",
-                        help=f"the route to drive (default: the world's route; there is one for "
-                             f"{', '.join(MAPPING_ROUTES)})")
+def add_mapping_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--world", help="map this world: shipped world name or world file, e.g. sim/worlds/room.yaml")
+    parser.add_argument("-o", "--output", metavar="PATH", help="with --world: write PATH.yaml and PATH.pgm")
+    how = parser.add_mutually_exclusive_group()
+    how.add_argument("--waypoints", metavar="'x,y;x,y;…'",
+                     help="drive this route on the true pose instead of exploring")
+    how.add_argument("--route", action="store_true",
+                     help=f"drive the world's mapping route instead of exploring (there is one for "
+                          f"{', '.join(MAPPING_ROUTES)})")
     parser.add_argument("--drive", choices=DRIVES, default="", help="drive (default: the world's)")
-    parser.add_argument("--laps", type=int, default=1, help="times to drive the route (default 1)")
-    parser.add_argument("--max-time", type=float, default=900.0, metavar="S",
-                        help="stop after this much sim time even if the route is unfinished (default 900 s)")
+    parser.add_argument("--laps", type=int, default=1, help="with a route: times to drive it (default 1)")
+    parser.add_argument("--max-time", type=float, default=1800.0, metavar="S",
+                        help="stop after this much sim time even if unfinished (default 1800 s)")
     parser.add_argument("--seed", type=int, default=0, help="seed of the sim, lidar and slam (default 0)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a slam parameter (e.g. particles=10)")
@@ -199,7 +204,9 @@ def add_build_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 @reports_errors
-def main_build(args: argparse.Namespace) -> int:
+def main_mapping(args: argparse.Namespace) -> int:
+    if not args.world or not args.output:
+        raise CommandError("give --world W -o PATH to map a world, or an action: " + ", ".join(ACTIONS), 2)
     if args.laps < 1 or not args.max_time > 0:
         raise CommandError("--laps must be at least 1 and --max-time positive", 2)
     existing = [str(f) for f in map_files(args.output) if f.exists()]
@@ -208,7 +215,10 @@ def main_build(args: argparse.Namespace) -> int:
                            "choose another -o or add --force to overwrite", 2)
     try:
         world = open_world(args.world)
-        route = parse_waypoints(args.waypoints) if args.waypoints else None
+        if args.route and world.name not in MAPPING_ROUTES:
+            raise ValueError(f"--route: no mapping route for world {world.name!r} (there is one for "
+                             f"{', '.join(MAPPING_ROUTES)}); give --waypoints or explore")
+        route = parse_waypoints(args.waypoints) if args.waypoints else MAPPING_ROUTES[world.name] if args.route else None
         params = slam_params_for(world, parse_overrides(args.set), args.seed)
         result = build_map(args.world, route, args.drive, args.seed, params, args.laps, args.max_time)
     except (WorldError, ParamError, ValueError) as exc:
@@ -219,11 +229,16 @@ def main_build(args: argparse.Namespace) -> int:
         yaml_path = save_map(result.grid, args.output)
     except OSError as exc:
         raise CommandError(f"-o {args.output}: cannot write ({exc})") from None
-    unfinished = "" if result.laps >= args.laps else f" (route unfinished: {result.laps} of {args.laps} laps)"
-    print(f"drove {result.sim_s:.1f} s of sim time{unfinished}, {result.updates} slam updates, "
+    if route is None:
+        how = f"explored {result.goals} frontiers" + ("" if result.finished else " (unfinished: frontiers left)")
+    else:
+        how = "drove the route" + ("" if result.finished else f" (unfinished: {result.laps} of {args.laps} laps)")
+    print(f"{how} in {result.sim_s:.1f} s of sim time, {result.updates} slam updates, "
           f"{result.collisions} collisions", flush=True)
     print(f"wrote {yaml_path}: {describe(result.grid)}", flush=True)
-    print(f"against the true occupancy of {world.name}: {compare_with_truth(result.grid, world).text()}", flush=True)
+    print(f"against the true occupancy of {world.name}: {compare_with_truth(result.grid, world).text()}; "
+          f"{100 * explored_share(result.grid, world):.2f} % of the free space reachable from the start mapped",
+          flush=True)
     return 0
 
 
@@ -232,12 +247,13 @@ def main_build(args: argparse.Namespace) -> int:
 ACTIONS = {
     "save": ("save the map served on the bus (map_server format)", add_save_arguments, main_save),
     "show": ("draw a map file as a picture", add_show_arguments, main_show),
-    "build": ("map a simulated world with slam and save the map", add_build_arguments, main_build),
 }
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
-    actions = parser.add_subparsers(dest="action", required=True, metavar="ACTION")
+    add_mapping_arguments(parser)
+    parser.set_defaults(run=main_mapping, command_name="map")
+    actions = parser.add_subparsers(dest="action", metavar="ACTION")
     for name, (help_text, add, run) in ACTIONS.items():
         sub = actions.add_parser(name, help=help_text, description=help_text)
         add(sub)

@@ -1,6 +1,8 @@
 """The slam node in a whole in-process pipeline (sim, chassis, lidar, slam, a route driver) against
-the room's ground truth; malformed input; determinism; and `omninav map build`."""
+the room's ground truth; malformed input; determinism; `omninav map --world`; and a live
+multi-process run replayed into slam byte for byte."""
 import math
+import signal
 
 import numpy as np
 import pytest
@@ -13,11 +15,13 @@ from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.chassis.odometry import compose
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.localizer.evaluate import HarnessParams, Route
-from omninav.services.map_server.mapio import load_map
+from omninav.services.map_server.mapio import load_map, world_to_cell
+from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.slam.mapping import RouteDriver, compare_with_truth, slam_params_for
 from omninav.services.slam.node import SlamNode
-from omninav.sim.node import SimNode, SimNodeParams
+from omninav.sim.node import SimNode, SimNodeParams, open_world
+from conftest import wait_until
 
 ROUTE = ((1.3, 0.8), (4.5, 0.8))     # along the bottom wall and back
 SHORT_ROUTE = "1.3,0.8;4.5,0.8"
@@ -129,24 +133,81 @@ def test_scan_waits_for_odometry_and_is_interpolated():
     np.testing.assert_allclose((pose.x, pose.y, pose.theta), compose(start, (0.1, 0.0, 0.0)), atol=1e-9)
 
 
-def test_map_build_writes_and_scores_the_map(tmp_path, capsys):
+def test_map_world_writes_and_scores_the_map(tmp_path, capsys):
     out = tmp_path / "room"
-    assert omninav(["map", "build", "--world", "sim/worlds/room.yaml", "-o", str(out),
+    assert omninav(["map", "--world", "sim/worlds/room.yaml", "-o", str(out),
                     "--waypoints", SHORT_ROUTE, "--set", "particles=10"]) == 0
     text = capsys.readouterr().out
+    assert text.startswith("drove the route in ")
     assert (tmp_path / "room.yaml").is_file() and (tmp_path / "room.pgm").is_file()
     assert yaml.safe_load((tmp_path / "room.yaml").read_text())["resolution"] == pytest.approx(0.05)
     agreement = float(text.split("agreement ")[1].split(" %")[0])
     assert agreement > 90.0
     assert load_map(tmp_path / "room.yaml").data.shape[0] > 50
     # existing files are kept unless --force
-    assert omninav(["map", "build", "--world", "room", "-o", str(out), "--waypoints", SHORT_ROUTE]) == 2
+    assert omninav(["map", "--world", "room", "-o", str(out), "--waypoints", SHORT_ROUTE]) == 2
     assert "already exist" in capsys.readouterr().err
+    # the actions keep their own arguments: -o after `save` is save's, the map file is show's
+    assert omninav(["map", "show", str(tmp_path / "room.yaml"), "-o", str(tmp_path / "room.png")]) == 0
+    assert (tmp_path / "room.png").is_file()
 
 
-def test_map_build_user_errors(tmp_path, capsys):
+def test_map_world_user_errors(tmp_path, capsys):
     for args, words in ((["--world", "nowhere"], "no such file"), (["--world", "room", "--waypoints", "1,2"], "waypoints"),
-                        (["--world", "room", "--set", "particles=0"], "particles")):
-        assert omninav(["map", "build", "-o", str(tmp_path / "m"), *args]) == 2
+                        (["--world", "room", "--set", "particles=0"], "particles"),
+                        (["--world", "corridor", "--route"], "no mapping route")):
+        assert omninav(["map", "-o", str(tmp_path / "m"), *args]) == 2
         assert words in capsys.readouterr().err
+    assert omninav(["map", "--world", "room"]) == 2
+    assert "-o PATH" in capsys.readouterr().err
     assert not list(tmp_path.iterdir())
+    with pytest.raises(SystemExit):     # the old spelling is gone: `build` is no action
+        omninav(["map", "build", "--world", "room", "-o", str(tmp_path / "m")])
+    assert "invalid choice: 'build'" in capsys.readouterr().err
+
+
+# ---------------------------------------------------------------- live, then replayed byte for byte
+
+LIVE_SLAM = ["--set", "particles=10", "--set", "linearUpdate=0.2", "--set", "angularUpdate=0.2",
+             "--set", "map_update_interval=1.0", "--set", "xmin=-15", "--set", "ymin=-15", "--set", "xmax=15",
+             "--set", "ymax=15"]
+
+
+def test_a_live_run_replays_into_slam_byte_for_byte(processes, tmp_path):
+    recording = tmp_path / "run.mcap"
+    recorder = processes.omninav("record", "-o", str(recording))
+    wait_until(lambda: "recording" in processes.log_of(recorder), 60, what="the recorder to start")
+    # the sensors first: slam starts into flowing streams, so it never waits for a silent one
+    services = [processes.omninav("run", "sim", "--set", "rate=2"), processes.omninav("run", "chassis"),
+                processes.omninav("run", "lidar")]
+    for proc in services:
+        wait_until(lambda: "started" in processes.log_of(proc), 60, what="the sim, chassis and lidar to start")
+    slam = processes.omninav("run", "slam", *LIVE_SLAM)
+    wait_until(lambda: "started" in processes.log_of(slam), 60, what="slam to start")
+    teleop = processes.omninav("teleop", "--script", "0.3,0,0,3;0,0,0.5,2;0,-0.15,0,2")
+    assert teleop.wait(180) == 0, processes.log_of(teleop)
+    for proc in [slam, *reversed(services)]:    # slam's last diagnostic gets recorded
+        assert processes.stop(proc, signal.SIGINT) == 0, processes.log_of(proc)
+    assert processes.stop(recorder, signal.SIGINT) == 0, processes.log_of(recorder)
+
+    maps = list(read_records(recording, ["omninav/r1/map"]))
+    assert len(maps) >= 3 and len(list(read_records(recording, ["omninav/r1/pose"]))) >= 20
+    replay = processes.omninav("replay", str(recording), "--into", "slam", "--compare", *LIVE_SLAM)
+    assert replay.wait(180) == 0, processes.log_of(replay)
+    log = processes.log_of(replay)
+    assert "omninav/r1/map" in log and "omninav/r1/tf/map_odom" in log
+
+
+def test_the_comparison_counts_the_movers_lanes_apart():
+    world = open_world("warehouse")
+    truth = world.rasterize(0.05)
+    data = truth.data.copy()
+    exact = compare_with_truth(OccupancyGrid(header=Header(frame_id="map"), info=truth.info, data=data.copy()), world)
+    assert exact.agreement == 1.0 and exact.within_one_cell == 1.0 and exact.occupied_in_lanes == 0
+    for x, y in ((8.0, 1.5), (1.0, 4.0)):      # on the forklift's lane; in free space off every lane
+        r, c = (int(v) for v in world_to_cell(truth.info, x, y))
+        data[r - 2:r + 3, c - 2:c + 3] = 100
+    result = compare_with_truth(OccupancyGrid(header=Header(frame_id="map"), info=truth.info, data=data), world)
+    assert result.occupied_in_lanes == 25
+    assert result.occupied == exact.occupied + 25 and result.wall_max_cells > 10
+    assert result.known_both == exact.known_both and result.agreement == pytest.approx(1.0 - 25 / exact.known_both)

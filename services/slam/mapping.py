@@ -1,10 +1,11 @@
-"""Mapping in the simulator (`omninav map build`) and the comparison of a map with the truth.
+"""Mapping in the simulator (`omninav map --world W`) and the comparison of a map with the truth.
 
 build_map runs, in one process and in lockstep (InProcessRunner), the sim, chassis, lidar and slam
-services and a route driver: localize-eval's harness, which drives cmd_vel along waypoints on the
-TRUE pose (the rig, not navigation), here without its map and start request. The route is driven
-once; the map is the slam node's map at the end, in the world frame (slam starts at the world's
-start pose, see node.py).
+services and a driver: by default the explore service (frontier exploration on slam's map and
+pose, explore_node.py) until no reachable frontier is left; with a route, localize-eval's harness,
+which drives cmd_vel along the waypoints on the TRUE pose (a test rig, not navigation), here
+without its map and start request. The map is the slam node's map at the end, in the world frame
+(slam starts at the world's start pose, see node.py).
 
 compare_with_truth scores a map against World.rasterize at the map's resolution: the share of
 cells that agree among the cells both call known, and how far each occupied map cell lies from the
@@ -23,15 +24,17 @@ from ...sim.node import SimNode, SimNodeParams
 from ...sim.world import GRID_OBSTACLE, World
 from ..chassis.node import ChassisNode, ChassisNodeParams
 from ..lidar.node import LidarNode, LidarNodeParams
-from ..localizer.evaluate import ROUTES, Harness, HarnessParams, Route, route_problems
+from ..localizer.evaluate import ROUTES, Harness, HarnessParams, Route, circumscribed_radius, route_problems
 from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
 from ..runtime.inprocess import InProcessRunner
 from ..runtime.params import load_params
+from .explore_node import ExploreNode, ExploreNodeParams
 from .node import SlamNode, SlamNodeParams
 
 # gmapping's defaults process a scan per metre driven; indoors, with a 12 m lidar, updating every
-# 25 cm / 0.25 rad gives the matcher overlapping scans and the map denser evidence
-MAPPING_DEFAULTS = dict(linearUpdate=0.25, angularUpdate=0.25, particles=30, map_update_interval=5.0)
+# 25 cm / 0.25 rad gives the matcher overlapping scans and the map denser evidence. The explorer
+# decides on the map, so it comes every second.
+MAPPING_DEFAULTS = dict(linearUpdate=0.25, angularUpdate=0.25, particles=30, map_update_interval=1.0)
 MARGIN_M = 2.0      # the map's extent beyond the world's bounds
 # localize-eval's routes, except where mapping must see more than localizing needs: every aisle of
 # the warehouse (a mover may cross; slam keeps it out of the map as it moves on)
@@ -63,7 +66,9 @@ class RouteDriver(Harness):
 class BuildResult:
     grid: OccupancyGrid | None
     sim_s: float
-    laps: int
+    finished: bool      # the route driven `laps` times, or no reachable frontier left
+    laps: int           # with a route
+    goals: int          # frontiers driven to, when exploring
     updates: int
     collisions: int
     malformed: int
@@ -92,64 +97,107 @@ def parse_waypoints(text: str) -> tuple[tuple[float, float], ...]:
 
 
 def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, params: SlamNodeParams | None = None,
-              laps: int = 1, max_sim_s: float = 900.0, speed: float = 0.4) -> BuildResult:
-    """Drive the route `laps` times (at most max_sim_s of sim time) while slam maps."""
+              laps: int = 1, max_sim_s: float = 1800.0, speed: float = 0.4) -> BuildResult:
+    """Explore (no route) or drive the route (a Route or waypoints) `laps` times, at most max_sim_s of sim
+    time, while slam maps."""
     sim = SimNode(SimNodeParams(world=world_name, drive=drive, seed=seed))
     world, drive = sim.world, sim.sim.drive
-    route = Route(tuple(tuple(map(float, p)) for p in route)) if route else MAPPING_ROUTES.get(world.name)
-    if route is None:
-        raise ValueError(f"no route for world {world.name!r} (default routes exist for "
-                         f"{', '.join(MAPPING_ROUTES)}): give --waypoints")
-    problems = route_problems(world, route)
-    if problems:
-        raise ValueError("the route is not clear: " + "; ".join(problems))
+    if route is not None:
+        route = route if isinstance(route, Route) else Route(tuple(tuple(map(float, p)) for p in route))
+        problems = route_problems(world, route)
+        if problems:
+            raise ValueError("the route is not clear: " + "; ".join(problems))
+        driver = RouteDriver(HarnessParams(route=route, holonomic=drive != "diff", speed=speed))
+        done = lambda: driver.laps >= laps   # noqa: E731
+    else:
+        driver = ExploreNode(ExploreNodeParams(robot_radius=circumscribed_radius(world), holonomic=drive != "diff",
+                                               speed=speed))
+        done = lambda: driver.finished   # noqa: E731
     slam = SlamNode(params or slam_params_for(world, seed=seed))
-    driver = RouteDriver(HarnessParams(route=route, holonomic=drive != "diff", speed=speed))
     runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams(drive=drive)),
                               LidarNode(LidarNodeParams(world=world_name, seed=seed + 1)), slam, driver])
-    runner.run_until(lambda: driver.laps >= laps, math.ceil(max_sim_s / sim.params.dt))
+    runner.run_until(done, math.ceil(max_sim_s / sim.params.dt))
     runner.close()
-    return BuildResult(grid=slam.current_map(), sim_s=sim.now_ns * 1e-9, laps=driver.laps,
+    exploring = isinstance(driver, ExploreNode)
+    return BuildResult(grid=slam.current_map(), sim_s=sim.now_ns * 1e-9, finished=done(),
+                       laps=0 if exploring else driver.laps, goals=driver.counters["goals"] if exploring else 0,
                        updates=slam.counters["filter_updates"], collisions=sim.sim.collisions,
                        malformed=sum(v for k, v in slam.counters.items() if k.startswith("malformed/")))
 
 
 @dataclass(frozen=True)
 class Comparison:
-    known_both: int              # cells known in both
+    known_both: int              # cells known in both (outside the movers' lanes)
     agreement: float             # share of those on which map and truth agree (occupied or free)
-    occupied: int                # occupied map cells inside the truth's grid
-    wall_mean_cells: float       # distance of occupied map cells to the nearest true obstacle cell
+    occupied: int                # occupied map cells inside the truth's grid, outside the movers' lanes
+    wall_mean_cells: float       # distance of those cells to the nearest true obstacle cell
     wall_p99_cells: float
     wall_max_cells: float
-    within_one_cell: float       # share of occupied map cells at most one cell from a true obstacle
+    within_one_cell: float       # share of those cells at most one cell from a true obstacle
+    occupied_in_lanes: int = 0   # occupied map cells where a mover can be (its path swept by its radius)
 
     def text(self) -> str:
+        lanes = (f"; {self.occupied_in_lanes} occupied cells in the movers' lanes (not counted above)"
+                 if self.occupied_in_lanes else "")
         return (f"agreement {100 * self.agreement:.2f} % of {self.known_both} cells known in both; "
                 f"walls: {self.occupied} occupied cells, distance to the true wall mean {self.wall_mean_cells:.2f}"
                 f" / p99 {self.wall_p99_cells:.2f} / max {self.wall_max_cells:.2f} cells, "
-                f"{100 * self.within_one_cell:.2f} % within one cell")
+                f"{100 * self.within_one_cell:.2f} % within one cell{lanes}")
+
+
+def mover_lanes(grid: OccupancyGrid, world: World) -> np.ndarray:
+    """The map cells a mover can overlap: within its radius of its path (the whole cell)."""
+    x, y = cell_to_world(grid.info, *np.indices(grid.data.shape))
+    points = np.stack([x.ravel(), y.ravel()], axis=1)
+    lanes = np.zeros(len(points), bool)
+    half_diagonal = grid.info.resolution / math.sqrt(2.0)
+    for loop, radius in zip(world.movers.loops, world.movers.radius):
+        for a, b in zip(loop[:-1], loop[1:]):
+            ab = b - a
+            t = np.clip((points - a) @ ab / max(float(ab @ ab), 1e-12), 0.0, 1.0)
+            lanes |= np.hypot(*(points - a - t[:, None] * ab).T) < radius + half_diagonal
+    return lanes.reshape(grid.data.shape)
 
 
 def compare_with_truth(grid: OccupancyGrid, world: World) -> Comparison:
     """The map against the world's true occupancy, rasterized at the map's resolution; each map
-    cell is looked up at its centre, so any alignment (and an origin with yaw) is honoured."""
+    cell is looked up at its centre, so any alignment (and an origin with yaw) is honoured. The
+    truth holds the static geometry only: cells a mover can overlap are counted apart."""
     truth = world.rasterize(grid.info.resolution)
     rows, cols = np.indices(grid.data.shape)
     tr, tc = world_to_cell(truth.info, *cell_to_world(grid.info, rows, cols))
     inside = in_grid(truth.info, tr, tc)
+    lanes = mover_lanes(grid, world)
     true_val = np.full(grid.data.shape, -1, np.int16)
     true_val[inside] = truth.data[tr[inside], tc[inside]]
     mine = grid.data
-    known = (mine >= 0) & (true_val >= 0)
+    known = (mine >= 0) & (true_val >= 0) & ~lanes
     agree = (mine > GRID_OBSTACLE) == (true_val > GRID_OBSTACLE)
     true_occupied = truth.data > GRID_OBSTACLE
     distance = ndimage.distance_transform_edt(~true_occupied)
-    occ = (mine > GRID_OBSTACLE) & inside
+    occupied = (mine > GRID_OBSTACLE) & inside
+    occ = occupied & ~lanes
     d = distance[tr[occ], tc[occ]]
     n_known = int(known.sum())
     return Comparison(known_both=n_known, agreement=float(agree[known].mean()) if n_known else 0.0,
                       occupied=int(occ.sum()), wall_mean_cells=float(d.mean()) if d.size else 0.0,
                       wall_p99_cells=float(np.percentile(d, 99)) if d.size else 0.0,
                       wall_max_cells=float(d.max()) if d.size else 0.0,
-                      within_one_cell=float((d <= 1.0).mean()) if d.size else 0.0)
+                      within_one_cell=float((d <= 1.0).mean()) if d.size else 0.0,
+                      occupied_in_lanes=int((occupied & lanes).sum()))
+
+
+def explored_share(grid: OccupancyGrid, world: World) -> float:
+    """The share of the truly free cells connected to the robot's start (4-connected, at the map's
+    resolution) that the map knows (free or occupied): how much of the reachable space was mapped."""
+    truth = world.rasterize(grid.info.resolution)
+    free = truth.data == 0
+    labels, _ = ndimage.label(free)
+    start = world_to_cell(truth.info, world.robot.start[0], world.robot.start[1])
+    reachable = labels == labels[int(start[0]), int(start[1])]
+    rows, cols = np.nonzero(reachable)
+    mr, mc = world_to_cell(grid.info, *cell_to_world(truth.info, rows, cols))
+    inside = in_grid(grid.info, mr, mc)
+    known = np.zeros(len(rows), bool)
+    known[inside] = grid.data[mr[inside], mc[inside]] >= 0
+    return float(known.mean())

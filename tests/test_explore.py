@@ -1,0 +1,145 @@
+"""Frontier exploration: frontiers on hand-made maps, the choice of goal and path, and a whole
+exploration of the room world in the simulator."""
+import dataclasses
+
+import numpy as np
+import pytest
+
+from omninav.schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
+from omninav.services.slam.explore import (INSCRIBED, Explorer, ExploreParams, find_frontiers, frontier_cells,
+                                           still_frontier)
+from omninav.services.slam.mapping import build_map, compare_with_truth, explored_share, slam_params_for
+from omninav.sim.node import open_world
+
+RES = 0.1
+FREE, OCC, UNKNOWN = 0, 100, -1
+
+
+def grid_of(data) -> OccupancyGrid:
+    data = np.asarray(data, np.int8)
+    info = MapMetaData(resolution=RES, width=data.shape[1], height=data.shape[0], origin=Pose2D(0.0, 0.0, 0.0))
+    return OccupancyGrid(header=Header(frame_id="map"), info=info, data=data)
+
+
+def rooms() -> np.ndarray:
+    """6 m × 3 m: a free room x < 3 m walled all round but for a 1.6 m gap at x = 3 m, unknown beyond;
+    a free pocket at x 4..5 m, y 0.5..1.2 m in the unknown, cut off by walls."""
+    data = np.full((30, 60), UNKNOWN, np.int8)
+    data[1:29, 1:30] = FREE
+    data[0, :31] = data[29, :31] = data[:, 0] = OCC
+    data[:, 30] = OCC
+    data[7:23, 30] = FREE            # the gap, 1.6 m
+    data[5:12, 40:50] = FREE         # the pocket, walled in
+    data[4, 39:51] = data[12, 39:51] = OCC
+    data[4:13, 39] = data[4:13, 50] = OCC
+    return data
+
+
+def test_frontier_cells_are_free_cells_next_to_unknown():
+    data = np.full((5, 6), FREE, np.int8)
+    data[:, 4:] = UNKNOWN
+    data[0, 3] = OCC
+    cells = frontier_cells(grid_of(data))
+    expected = np.zeros((5, 6), bool)
+    expected[1:, 3] = True           # column 3 borders the unknown columns, but row 0 is occupied
+    expected[0, :3] = expected[-1, :3] = True   # the map's edge counts as unknown
+    expected[1:-1, 0] = True
+    np.testing.assert_array_equal(cells, expected)
+
+
+def test_frontiers_are_clustered_sized_filtered_and_given_up():
+    grid = grid_of(rooms())
+    frontiers = find_frontiers(grid)
+    sizes = sorted(round(f.size_m, 2) for f in frontiers)
+    assert sizes == [1.6]            # the gap; the pocket is walled in, the room too
+    data = rooms()
+    data[5:7, 44:47] = UNKNOWN       # a hole in the pocket, against its north wall: 7 free cells around it
+    frontiers = find_frontiers(grid_of(data))
+    assert sorted(round(f.size_m, 2) for f in frontiers) == [0.7, 1.6]
+    assert [round(f.size_m, 2) for f in find_frontiers(grid_of(data), min_size_m=1.0)] == [1.6]
+    gap = next(f for f in frontiers if round(f.size_m, 2) == 1.6)
+    assert set(map(tuple, gap.cells)) == {(r, 30) for r in range(7, 23)}
+    np.testing.assert_allclose(gap.xy[:, 0], 3.05)
+    # giving up half the gap's cells leaves the other half
+    half = gap.xy[:8]
+    left = find_frontiers(grid_of(data), min_size_m=0.5, given_up_xy=half)
+    assert sorted(round(f.size_m, 2) for f in left) == [0.7, 0.8]
+    assert still_frontier(grid_of(data), np.array([[3.05, 1.5], [1.5, 1.5], [-1.0, 1.5]])).tolist() == [True, False, False]
+
+
+def test_costs_keep_the_robot_off_walls():
+    params = ExploreParams(robot_radius=0.3, clearance=0.1, inflation_radius=1.0)
+    costs = Explorer(params, RES).costs(grid_of(rooms()))
+    assert costs[0, 10] == 254 and costs[25, 45] == 255 and costs[13, 45] == INSCRIBED   # wall; unknown; near one
+    assert costs[15, 4] >= INSCRIBED and costs[15, 5] < INSCRIBED     # 0.4 m and 0.5 m from the west wall
+    assert 0 < costs[15, 8] < costs[15, 6] and costs[15, 12] == 0     # inflation falls off to 1 m
+
+
+def test_the_reachable_frontier_is_chosen_and_its_path_is_clear():
+    params = ExploreParams(robot_radius=0.3, clearance=0.1, approach_distance=1.0, min_frontier_size=0.5)
+    explorer = Explorer(params, RES)
+    grid = grid_of(rooms())
+    costs = explorer.costs(grid)
+    goal = explorer.choose(grid, costs, (1.0, 1.5, 0.0))
+    assert goal is not None and round(goal.frontier.size_m, 2) == 1.6
+    assert np.hypot(*(goal.frontier.xy - goal.xy).T).min() <= 1.0 + 1e-9   # within approach_distance of the gap
+    assert np.hypot(goal.xy[0] - 1.0, goal.xy[1] - 1.5) <= goal.path_m < 3.0
+    np.testing.assert_allclose(goal.path[0], (1.0, 1.5))
+    assert not explorer.path_blocked(grid, costs, goal.path)
+    # the pocket's frontier (a hole in it) is out of reach: only the gap is ever chosen
+    data = rooms()
+    data[5:7, 44:47] = UNKNOWN
+    grid = grid_of(data)
+    assert round(explorer.choose(grid, explorer.costs(grid), (1.0, 1.5, 0.0)).frontier.size_m, 2) == 1.6
+    # gap closed: nothing reachable is left
+    data[7:23, 30] = OCC
+    grid = grid_of(data)
+    assert explorer.choose(grid, explorer.costs(grid), (1.0, 1.5, 0.0)) is None
+
+
+def test_the_nearer_frontier_wins_unless_the_farther_is_much_larger():
+    data = np.full((30, 80), FREE, np.int8)
+    data[0, :] = data[-1, :] = OCC
+    data[1:-1, 0] = UNKNOWN          # 2.8 m of frontier at x = 0.15 m
+    data[1:-1, -1] = UNKNOWN         # and at x = 7.85 m
+    data[1:10, -1] = OCC             # … of which only 1.9 m
+    grid = grid_of(data)
+    params = ExploreParams(robot_radius=0.3, clearance=0.1, approach_distance=0.5)
+    near_the_short_one = (6.5, 1.5, 0.0)
+    for gain, side in ((0.3, "east"), (20.0, "west")):
+        explorer = Explorer(dataclasses.replace(params, gain_scale=gain), RES)
+        goal = explorer.choose(grid, explorer.costs(grid), near_the_short_one)
+        assert ("east" if goal.xy[0] > 4.0 else "west") == side
+
+
+def test_a_robot_too_close_to_a_wall_can_still_leave_and_blocked_paths_are_seen():
+    params = ExploreParams(robot_radius=0.3, clearance=0.1)
+    explorer = Explorer(params, RES)
+    grid = grid_of(rooms())
+    costs = explorer.costs(grid)
+    assert costs[15, 2] >= INSCRIBED
+    goal = explorer.choose(grid, costs, (0.25, 1.55, 0.0))     # 0.15 m from the west wall
+    assert goal is not None and not explorer.path_blocked(grid, costs, goal.path)
+    through_wall = np.array([[1.0, 1.5], [1.0, 3.5]])           # across the north wall
+    assert explorer.path_blocked(grid, costs, through_wall)
+    off_map = np.array([[1.0, 1.5], [-2.0, 1.5]])
+    assert explorer.path_blocked(grid, costs, off_map)
+
+
+def test_bad_parameters_are_named():
+    with pytest.raises(ValueError, match="lookahead"):
+        ExploreParams(lookahead=0.0)
+    with pytest.raises(ValueError, match="gain_scale"):
+        ExploreParams(gain_scale=float("nan"))
+    with pytest.raises(ValueError, match="resolution"):
+        Explorer(ExploreParams(), 0.05).costs(grid_of(rooms()))
+
+
+def test_exploring_the_room_maps_its_reachable_free_space_without_collision():
+    world = open_world("room")
+    result = build_map("room", params=slam_params_for(world, {"particles": 10}), max_sim_s=600.0)
+    assert result.finished and result.goals >= 3
+    assert result.collisions == 0
+    assert explored_share(result.grid, world) >= 0.95
+    comparison = compare_with_truth(result.grid, world)
+    assert comparison.agreement >= 0.95 and comparison.within_one_cell >= 0.95
