@@ -10,6 +10,10 @@ REPEATS times, the fastest counting (as the planner bench: other load on the sha
 inflates the figures less); median and p99 are over the poses. Sampling: the ROS defaults with vx_samples 6, vy_samples 10 (+ y_vels and 0),
 vtheta_samples 20 and max_vel_y 0.5, which gives over a thousand trajectories per cycle.
 
+Elastic band, in the same run: ElasticBandPlanner.compute (EBAND_PARAMS: holonomic, TEB's 3 m
+lookahead and 5 × 4 iterations) at the same poses and velocity; per pose one cold cycle (a new
+band) and then REPEATS warm-started cycles on the same path, the fastest counting.
+
 Reference, in the same run: the same rollout and checks written as a plain per-trajectory Python
 loop (odometry.integrate per step, costmap lookups per pose) on REFERENCE_SAMPLES trajectories of
 each of the first cycles, scaled to the cycle's sample count; its legality and costs are compared
@@ -37,14 +41,16 @@ from ..global_planner import astar
 from ..global_planner.bench import MAP, pick_pairs
 from ..global_planner.params import GlobalPlannerParams
 from ..map_server.mapio import MapError, cell_to_world, in_grid, load_map, world_to_cell
+from . import eband
 from .dwa import DwaPlanner, footprint_check_cost, warm_up
-from .params import DwaParams
+from .params import DwaParams, ElasticBandParams
 
 CYCLES, REPEATS, SPACING_M, WINDOW_M = 60, 5, 0.5, 6.0
 SPEED = 0.4                 # m/s along the path
 REFERENCE_SAMPLES, REFERENCE_CYCLES = 40, 5
 BAR_MS = 10.0
 PARAMS = DwaParams(vx_samples=6, vy_samples=10, vtheta_samples=20, max_vel_y=0.5, min_vel_y=-0.5)
+EBAND_PARAMS = ElasticBandParams(holonomic_robot=True, max_vel_y=0.4, min_obstacle_dist=0.1, inflation_dist=0.2)
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -108,6 +114,7 @@ def main(args: argparse.Namespace) -> int:
         return 2
     costmap_layers.warm_up()
     astar.warm_up()
+    eband.warm_up()
     start = time.perf_counter()
     warm_up()
     warm_ms = (time.perf_counter() - start) * 1e3
@@ -155,6 +162,25 @@ def main(args: argparse.Namespace) -> int:
                 mismatches += int(ref_ok != ok[k] or ref_cost != max_cost[k])
             reference_ms.append((time.perf_counter() - begin) * 1e3 * len(result.samples) / REFERENCE_SAMPLES)
 
+    band = eband.ElasticBandPlanner(EBAND_PARAMS, fp.points, planner.check_cost)
+    band_ms, band_cold_ms, band_poses, band_statuses = [], [], [], {}
+    for index in picks:
+        pose = plan.poses[index]
+        local_costs, local_info = crop(costs, info, pose[0], pose[1])
+        velocity = np.array([SPEED, 0.0, 0.0])
+        band.reset()
+        begin = time.perf_counter()
+        band.compute(pose, velocity, local_costs, local_info, plan.poses)
+        band_cold_ms.append((time.perf_counter() - begin) * 1e3)
+        fastest = np.inf
+        for _ in range(REPEATS):
+            begin = time.perf_counter()
+            band_result = band.compute(pose, velocity, local_costs, local_info, plan.poses)
+            fastest = min(fastest, time.perf_counter() - begin)
+        band_ms.append(fastest * 1e3)
+        band_poses.append(len(band_result.trajectory))
+        band_statuses[band_result.status] = band_statuses.get(band_result.status, 0) + 1
+
     figures = {
         "map": str(path), "cycles": len(picks), "repeats": REPEATS, "window_cells": [local_info.width, local_info.height],
         "samples": int(min(samples)), "samples_median": float(statistics.median(samples)),
@@ -165,6 +191,9 @@ def main(args: argparse.Namespace) -> int:
         "reference": f"per-trajectory Python loop on {REFERENCE_SAMPLES} samples of {len(reference_ms)} cycles, scaled",
         "reference_cycle_median_ms": statistics.median(reference_ms),
         "reference_mismatches": mismatches, "bar_ms": BAR_MS,
+        "eband_cycle_median_ms": statistics.median(band_ms), "eband_cycle_p99_ms": _percentile(band_ms, 99),
+        "eband_cold_median_ms": statistics.median(band_cold_ms), "eband_poses_median": statistics.median(band_poses),
+        "eband_statuses": band_statuses,
     }
     if args.json:
         print(json.dumps(figures))
@@ -178,4 +207,8 @@ def main(args: argparse.Namespace) -> int:
           f"legal median {figures['legal_median']:.0f}; statuses {statuses}")
     print(f"  reference {figures['reference']}: median {figures['reference_cycle_median_ms']:.0f} ms per cycle; "
           f"{mismatches} disagreements in legality or cost")
+    print(f"elastic band cycle ({EBAND_PARAMS.max_global_plan_lookahead_dist:.0f} m lookahead, median "
+          f"{figures['eband_poses_median']:.0f} poses), warm-started: median "
+          f"{figures['eband_cycle_median_ms']:.2f} ms, p99 {figures['eband_cycle_p99_ms']:.2f} ms "
+          f"(bar {BAR_MS:.0f} ms); cold: median {figures['eband_cold_median_ms']:.2f} ms; statuses {band_statuses}")
     return 0

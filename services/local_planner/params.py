@@ -167,3 +167,75 @@ class CollisionMonitorParams:
     @classmethod
     def from_mapping(cls, values: dict | None, source: str = "collision_monitor") -> CollisionMonitorParams:
         return load_params(cls, values, source)
+
+
+@dataclass(frozen=True)
+class ElasticBandParams:
+    """teb_local_planner's names and defaults (ROS wiki / TebConfig); holonomic_robot and
+    controller_frequency are base_local_planner's (TEB infers holonomy from max_vel_y > 0)."""
+    # robot
+    max_vel_x: float = 0.4                  # m/s
+    max_vel_x_backwards: float = 0.2        # m/s (a magnitude)
+    max_vel_y: float = 0.0                  # m/s: strafing, holonomic robots only
+    max_vel_theta: float = 0.3              # rad/s
+    acc_lim_x: float = 0.5                  # m/s²
+    acc_lim_y: float = 0.5                  # m/s²
+    acc_lim_theta: float = 0.5              # rad/s²
+    holonomic_robot: bool = False           # false: differential drive, vy ≡ 0 and the band keeps to arcs
+    controller_frequency: float = 20.0      # Hz: the command's acceleration window is one period
+    # trajectory
+    dt_ref: float = 0.3                     # s: desired time interval between band poses
+    dt_hysteresis: float = 0.1              # s: intervals outside dt_ref ± this are split or merged
+    min_samples: int = 3                    # band poses, at least
+    max_samples: int = 500                  # band poses, at most
+    max_global_plan_lookahead_dist: float = 3.0   # m of the global path the band spans
+    force_reinit_new_goal_dist: float = 1.0       # m: a local goal moved further restarts the band
+    force_reinit_new_goal_angular: float = 0.5 * math.pi   # rad: likewise for its heading
+    free_goal_vel: bool = False             # false: the band stops at the path's final goal
+    feasibility_check_no_poses: int = 5     # band poses (from the robot) that must be collision-free
+    # obstacles
+    min_obstacle_dist: float = 0.5          # m between the footprint and an obstacle
+    inflation_dist: float = 0.6             # m: a small extra penalty within this distance
+    # optimisation
+    no_inner_iterations: int = 5            # solver iterations per outer iteration
+    no_outer_iterations: int = 4            # resize + solve rounds per cycle
+    penalty_epsilon: float = 0.1            # safety margin inside the soft limits
+    weight_max_vel_x: float = 2.0
+    weight_max_vel_y: float = 2.0
+    weight_max_vel_theta: float = 1.0
+    weight_acc_lim_x: float = 1.0
+    weight_acc_lim_y: float = 1.0
+    weight_acc_lim_theta: float = 1.0
+    weight_kinematics_nh: float = 1000.0
+    weight_kinematics_forward_drive: float = 1.0
+    weight_optimaltime: float = 1.0
+    weight_obstacle: float = 50.0
+    weight_inflation: float = 0.1
+    weight_adapt_factor: float = 2.0        # weight_obstacle grows by this factor every outer iteration
+
+    def __post_init__(self):
+        _check(self, ("max_vel_x", "max_vel_theta", "acc_lim_x", "acc_lim_theta", "controller_frequency",
+                      "dt_ref", "max_global_plan_lookahead_dist"), strict=True)
+        _check(self, ("max_vel_x_backwards", "max_vel_y", "acc_lim_y", "dt_hysteresis", "force_reinit_new_goal_dist",
+                      "force_reinit_new_goal_angular", "min_obstacle_dist", "inflation_dist", "penalty_epsilon",
+                      "weight_max_vel_x", "weight_max_vel_y", "weight_max_vel_theta", "weight_acc_lim_x",
+                      "weight_acc_lim_y", "weight_acc_lim_theta", "weight_kinematics_nh",
+                      "weight_kinematics_forward_drive", "weight_optimaltime", "weight_obstacle", "weight_inflation"))
+        _check(self, ("weight_adapt_factor",), minimum=1.0)
+        if self.holonomic_robot and not (self.max_vel_y > 0 and self.acc_lim_y > 0):
+            raise ValueError("holonomic_robot needs max_vel_y and acc_lim_y > 0 "
+                             f"(got {self.max_vel_y}, {self.acc_lim_y})")
+        if self.dt_hysteresis >= self.dt_ref:
+            raise ValueError(f"dt_hysteresis ({self.dt_hysteresis}) must be below dt_ref ({self.dt_ref})")
+        if self.inflation_dist < self.min_obstacle_dist:
+            raise ValueError(f"inflation_dist ({self.inflation_dist}) must be at least min_obstacle_dist "
+                             f"({self.min_obstacle_dist})")
+        if not 3 <= self.min_samples <= self.max_samples:
+            raise ValueError(f"need 3 ≤ min_samples ≤ max_samples, got {self.min_samples} and {self.max_samples}")
+        for name in ("no_inner_iterations", "no_outer_iterations", "feasibility_check_no_poses"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"{name} must be ≥ 1, got {getattr(self, name)}")
+
+    @classmethod
+    def from_mapping(cls, values: dict | None, source: str = "local_planner") -> ElasticBandParams:
+        return load_params(cls, values, source)
