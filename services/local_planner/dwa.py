@@ -116,12 +116,31 @@ def _cell_cost(costs, x, y, ox, oy, cos_o, sin_o, inv_res):
 
 
 @njit(cache=True)
+def _pose_cost(costs, x, y, th, grid, outline, check_cost):
+    """The centre cost of the robot at (x, y, th), or -1 when that pose is illegal: its centre cell
+    inscribed, lethal, unknown or off the grid, or — from check_cost on — a point of the outline on
+    a lethal or unknown cell or off the grid. grid as in _rollout."""
+    ox, oy, cos_o, sin_o, inv_res = grid[0], grid[1], grid[2], grid[3], grid[4]
+    cost = _cell_cost(costs, x, y, ox, oy, cos_o, sin_o, inv_res)
+    if cost < 0 or cost >= INSCRIBED_INFLATED_OBSTACLE:
+        return -1
+    if cost >= check_cost:
+        c, s = math.cos(th), math.sin(th)
+        for p in range(outline.shape[0]):
+            px = x + c * outline[p, 0] - s * outline[p, 1]
+            py = y + s * outline[p, 0] + c * outline[p, 1]
+            edge = _cell_cost(costs, px, py, ox, oy, cos_o, sin_o, inv_res)
+            if edge < 0 or edge >= LETHAL_OBSTACLE:
+                return -1
+    return cost
+
+
+@njit(cache=True)
 def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, grid, outline, check_cost,
              poses, max_cost, legal):
     """Roll out and check every sample; fills poses (T, n_steps+1, 3), max_cost (T,), legal (T,).
 
     grid = (origin x, origin y, cos origin yaw, sin origin yaw, 1/resolution)."""
-    ox, oy, cos_o, sin_o, inv_res = grid[0], grid[1], grid[2], grid[3], grid[4]
     for t in range(samples.shape[0]):
         if ramp:
             vx, vy, w = v0[0], v0[1], v0[2]
@@ -147,27 +166,22 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, grid, out
             x, y, th = x + c * bx - s * by, y + s * bx + c * by, th + phi
             k += 1
             poses[t, k, 0], poses[t, k, 1], poses[t, k, 2] = x, y, th
-            cost = _cell_cost(costs, x, y, ox, oy, cos_o, sin_o, inv_res)
-            if cost < 0 or cost >= INSCRIBED_INFLATED_OBSTACLE:
+            cost = _pose_cost(costs, x, y, th, grid, outline, check_cost)
+            if cost < 0:
                 ok = False
                 break
-            if cost >= check_cost:
-                c, s = math.cos(th), math.sin(th)
-                for p in range(outline.shape[0]):
-                    px = x + c * outline[p, 0] - s * outline[p, 1]
-                    py = y + s * outline[p, 0] + c * outline[p, 1]
-                    edge = _cell_cost(costs, px, py, ox, oy, cos_o, sin_o, inv_res)
-                    if edge < 0 or edge >= LETHAL_OBSTACLE:
-                        ok = False
-                        break
-                if not ok:
-                    break
             if cost > worst:
                 worst = cost
         for j in range(k + 1, n_steps + 1):   # a stopped rollout keeps its last pose
             poses[t, j, 0], poses[t, j, 1], poses[t, j, 2] = x, y, th
         legal[t] = ok
         max_cost[t] = worst
+
+
+@njit(cache=True)
+def _check_poses(poses, costs, grid, outline, check_cost, legal):
+    for i in range(poses.shape[0]):
+        legal[i] = _pose_cost(costs, poses[i, 0], poses[i, 1], poses[i, 2], grid, outline, check_cost) >= 0
 
 
 def footprint_outline(points: np.ndarray, spacing: float) -> np.ndarray:
@@ -200,6 +214,11 @@ class DwaResult:
     @property
     def legal(self) -> np.ndarray:
         return np.isfinite(self.scores)
+
+    @property
+    def trajectory(self) -> np.ndarray:
+        """(S + 1, 3) the chosen rollout's poses; (0, 3) when none was chosen."""
+        return self.poses[self.best] if self.best >= 0 else np.zeros((0, 3))
 
 
 def reachable(params: DwaParams, velocity) -> tuple[np.ndarray, np.ndarray]:
@@ -243,6 +262,12 @@ def sample_velocities(params: DwaParams, velocity) -> np.ndarray:
     return grid[~(in_place & (np.abs(grid[:, 2]) < params.min_in_place_vel_theta))]
 
 
+def _grid(info: MapMetaData) -> np.ndarray:
+    """The kernels' view of the grid: (origin x, origin y, cos origin yaw, sin origin yaw, 1/resolution)."""
+    theta = info.origin.theta
+    return np.array([info.origin.x, info.origin.y, math.cos(theta), math.sin(theta), 1.0 / info.resolution])
+
+
 class DwaPlanner:
     """The pure DWA core: `compute` is one control cycle. `footprint` is the (padded) polygon in the
     robot frame; `check_cost` the centre cost from which the footprint's outline is checked
@@ -276,12 +301,18 @@ class DwaPlanner:
         poses = np.empty((len(samples), n + 1, 3))
         max_cost = np.empty(len(samples), np.int64)
         legal = np.empty(len(samples), np.bool_)
-        theta = info.origin.theta
-        grid = np.array([info.origin.x, info.origin.y, math.cos(theta), math.sin(theta), 1.0 / info.resolution])
         _rollout(samples, np.asarray(velocity, np.float64), step_limit, not p.dwa, n, dt,
-                 np.asarray(pose, np.float64), np.ascontiguousarray(costs, np.uint8), grid,
+                 np.asarray(pose, np.float64), np.ascontiguousarray(costs, np.uint8), _grid(info),
                  self._outline(info.resolution), self.check_cost, poses, max_cost, legal)
         return poses, max_cost, legal
+
+    def legal_poses(self, poses, costs: np.ndarray, info: MapMetaData) -> np.ndarray:
+        """(N,) whether the robot may stand at each pose (N, 3), by the rollout's test."""
+        poses = np.ascontiguousarray(poses, np.float64).reshape(-1, 3)
+        legal = np.empty(len(poses), np.bool_)
+        _check_poses(poses, np.ascontiguousarray(costs, np.uint8), _grid(info), self._outline(info.resolution),
+                     self.check_cost, legal)
+        return legal
 
     def score(self, poses, max_cost, legal, maps: PathMaps, info: MapMetaData) -> np.ndarray:
         """Scores (T,) of rolled-out trajectories; inf where illegal."""
@@ -335,3 +366,4 @@ def warm_up() -> None:
     for dwa in (True, False):
         DwaPlanner(DwaParams(dwa=dwa), square).rollout(np.array([[0.1, 0.0, 0.1]]), (0.2, 0.2, 0.0), (0.0, 0.0, 0.0),
                         np.zeros((4, 4), np.uint8), info)
+    DwaPlanner(DwaParams(), square).legal_poses(np.array([[0.2, 0.2, 0.0]]), np.zeros((4, 4), np.uint8), info)

@@ -113,16 +113,17 @@ class FollowerCommand:
 
 
 class PathFollower:
-    """Follows one path (a list of Line / Arc segments, in order); `step` once per control period."""
+    """Follows one path (a list of Line / Arc segments, in order); `step` once per control period.
+    `speed` is the robot's speed along the path when it starts (it may already be moving)."""
 
-    def __init__(self, params: FollowerParams, segments: list[Segment]):
+    def __init__(self, params: FollowerParams, segments: list[Segment], speed: float = 0.0):
         if not segments:
             raise ValueError("a path needs at least one segment")
         self.params = params
         self.segments = list(segments)
         self._starts = np.concatenate([[0.0], np.cumsum([seg.length for seg in self.segments])])
-        self._index = 0        # the segment the robot is on; only moves forward
-        self._speed = 0.0      # the last commanded speed along the path
+        self._index = 0                  # the segment the robot is on; only moves forward
+        self._speed = max(speed, 0.0)    # the last commanded speed along the path
         self._cross = Pid(params.kp_cross, params.ki_cross, params.kd_cross, params.integral_limit)
         self._heading = Pid(params.kp_heading, params.ki_heading, params.kd_heading, params.integral_limit)
 

@@ -1,0 +1,150 @@
+"""The two gates between the navigator and the chassis: velocity_smoother and collision_monitor.
+
+    navigator --cmd_vel_nav--> velocity_smoother --cmd_vel_smoothed--> collision_monitor --cmd_vel--> chassis
+
+velocity_smoother (VelocitySmoother, smoother.py) runs on the sim clock: a smoothing tick falls on
+the clock stamped at or first after each multiple of 1/smoothing_frequency of sim time, and every
+tick publishes the smoothed command (zeros while there is nothing to do, so the collision monitor
+downstream always has a stream to follow). cmd_vel_nav is sporadic: a command stamped t takes
+effect at the first tick after t + command_delay_s — the time the navigator's command may take to
+get here, live, behind the clock; whether it arrives before or after the clocks stamped in
+(t, t + delay] then cannot change the output. Added latency: with the local planner and the
+smoother both at 20 Hz (ticks on the same multiples of 50 ms) and the default 0.04 s delay, one
+period, 50 ms. No command for velocity_timeout seconds of sim time → the output decelerates to zero.
+
+collision_monitor (CollisionMonitor, collision.py) follows cmd_vel_smoothed (its only synced input)
+and answers every command at once with cmd_vel, stamped the same: no added latency. Scans are
+sporadic: a scan stamped t is used from the first command stamped after t + scan_delay_s (the
+time a scan may take to arrive, live) until a newer one takes effect; its points are placed in the
+robot frame by the laser's mount on the robot (laser_x, laser_y, laser_yaw: the simulated lidar's
+mount by default, as the costmap). No scan, or one older than source_timeout, stops the robot:
+the monitor cannot see. The zones do not account for the robot's motion since the scan (as Nav2's
+without its source_timeout shift), so at 0.5 m/s the scan in use is up to 7.5 cm behind.
+"""
+from __future__ import annotations
+
+import bisect
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...schemas.messages import Clock, Header, LaserScan, Twist
+from ...sim.raycast import LidarParams
+from ..runtime.node import NS_PER_S, Node
+from .collision import CollisionMonitor, robot_frame_points
+from .params import CollisionMonitorParams, VelocitySmootherParams
+from .smoother import VelocitySmoother
+
+
+def _twist(msg: Twist) -> np.ndarray:
+    return np.array([msg.linear_x, msg.linear_y, msg.angular_z])
+
+
+def _message(twist: np.ndarray, stamp_ns: int) -> Twist:
+    vx, vy, wz = (float(v) for v in twist)
+    return Twist(header=Header(stamp_ns=stamp_ns, frame_id="base_link"), linear_x=vx, linear_y=vy, angular_z=wz)
+
+
+def _check_delay(name: str, value: float) -> None:
+    if not (np.isfinite(value) and value >= 0):
+        raise ValueError(f"{name} must be zero or positive, got {value}")
+
+
+@dataclass(frozen=True)
+class VelocitySmootherNodeParams(VelocitySmootherParams):
+    """Nav2's velocity_smoother names; the limits default to what the chassis allows on every axis
+    (Nav2's defaults are a differential drive's, vy 0, which would stop a mecanum robot strafing)."""
+    max_velocity: tuple[float, float, float] = (0.5, 0.5, 2.5)
+    min_velocity: tuple[float, float, float] = (-0.5, -0.5, -2.5)
+    max_accel: tuple[float, float, float] = (2.5, 2.5, 3.2)
+    max_decel: tuple[float, float, float] = (-2.5, -2.5, -3.2)
+    command_delay_s: float = 0.04       # sim s from a command's stamp until it takes effect
+
+    def __post_init__(self):
+        super().__post_init__()
+        _check_delay("command_delay_s", self.command_delay_s)
+
+
+class VelocitySmootherNode(Node):
+    service = "velocity_smoother"
+    Params = VelocitySmootherNodeParams
+
+    def setup(self) -> None:
+        p = self.params
+        self.smoother = VelocitySmoother(p)
+        self.period_ns = round(NS_PER_S / p.smoothing_frequency)
+        self.delay_ns = round(p.command_delay_s * NS_PER_S)
+        self.next_tick_ns: int | None = None
+        self.pending: list[tuple[int, int, Twist]] = []   # (stamp, seq, command) not yet in effect
+        self.out_pub = self.publisher("cmd_vel_smoothed")
+        self.subscribe("sim/clock", self.on_clock)
+        self.subscribe("cmd_vel_nav", self.on_command, synced=False, max_delay_s=p.command_delay_s)
+
+    def on_command(self, msg: Twist) -> None:
+        bisect.insort(self.pending, (msg.header.stamp_ns, msg.header.seq, msg), key=lambda item: item[:2])
+
+    def on_clock(self, msg: Clock) -> None:
+        t = msg.header.stamp_ns
+        if self.next_tick_ns is None:
+            self.next_tick_ns = -(-t // self.period_ns) * self.period_ns
+        if t < self.next_tick_ns:
+            return
+        self.next_tick_ns = (t // self.period_ns + 1) * self.period_ns
+        while self.pending and self.pending[0][0] + self.delay_ns < t:
+            stamp, _, command = self.pending.pop(0)
+            self.smoother.command(_twist(command), stamp)
+            self.counters["commands"] += 1
+        out = self.smoother.step(t)
+        self.counters["timed_out_ticks" if out.timed_out else "ticks"] += 1
+        self.out_pub.publish(_message(out.twist, t))
+
+
+@dataclass(frozen=True)
+class CollisionMonitorNodeParams(CollisionMonitorParams):
+    laser_x: float = LidarParams.mount_x     # m: the laser on the robot (the simulated lidar's mount)
+    laser_y: float = LidarParams.mount_y
+    laser_yaw: float = LidarParams.mount_yaw
+    scan_delay_s: float = 0.05               # sim s from a scan's stamp until it is used
+    source_timeout: float = 1.0              # s: an older scan is no scan (Nav2's name; its default is 2)
+
+    def __post_init__(self):
+        super().__post_init__()
+        _check_delay("scan_delay_s", self.scan_delay_s)
+        if not (np.isfinite(self.source_timeout) and self.source_timeout > self.scan_delay_s):
+            raise ValueError(f"source_timeout must exceed scan_delay_s ({self.scan_delay_s}), "
+                             f"got {self.source_timeout}")
+
+
+class CollisionMonitorNode(Node):
+    service = "collision_monitor"
+    Params = CollisionMonitorNodeParams
+
+    def setup(self) -> None:
+        p = self.params
+        self.monitor = CollisionMonitor(p)
+        self.laser = np.array([p.laser_x, p.laser_y, p.laser_yaw])
+        self.delay_ns = round(p.scan_delay_s * NS_PER_S)
+        self.timeout_ns = round(p.source_timeout * NS_PER_S)
+        self.pending: list[tuple[int, int, LaserScan]] = []   # (stamp, seq, scan) not yet in effect
+        self.scan_stamp_ns: int | None = None                 # of the scan in effect
+        self.points = np.zeros((0, 2))                        # its points, robot frame
+        self.out_pub = self.publisher("cmd_vel")
+        self.subscribe("cmd_vel_smoothed", self.on_command)
+        self.subscribe("scan", self.on_scan, synced=False, max_delay_s=p.scan_delay_s)
+
+    def on_scan(self, msg: LaserScan) -> None:
+        bisect.insort(self.pending, (msg.header.stamp_ns, msg.header.seq, msg), key=lambda item: item[:2])
+
+    def on_command(self, msg: Twist) -> None:
+        t = msg.header.stamp_ns
+        while self.pending and self.pending[0][0] + self.delay_ns < t:
+            self.scan_stamp_ns, _, scan = self.pending.pop(0)
+            self.points = robot_frame_points(scan, self.laser)
+        twist = _twist(msg)
+        if self.scan_stamp_ns is None or t - self.scan_stamp_ns > self.timeout_ns:
+            action, twist = "no_scan", np.zeros(3)
+        else:
+            result = self.monitor.check(twist, self.points)
+            action, twist = result.action, result.twist
+        self.counters[f"action/{action}"] += 1
+        self.out_pub.publish(_message(twist, t))

@@ -1,0 +1,360 @@
+"""The local_planner service: follows the navigator's path on the local costmap (move_base's
+controller loop), with DWA, the elastic band or the path follower, and a precise final approach.
+
+Inputs, in merge order: odom (synced); costmap/local, tf/map_odom, follow_path (sporadic). A
+sporadic message stamped t takes effect at the first control tick stamped after
+t + request_delay_s, as in global_planner/node.py: the costmap runs up to a scan period behind the
+clock, and deferred, whether a message reached the node before or after the odometry stamped in
+(t, t + delay] cannot change the commands — a live run replays byte for byte. The default, 0.5 s,
+is above the 0.1–0.3 s by which live costmaps trailed the clock on a loaded 2-core machine (it
+is the costmap's age that grows, not the path's, which the controller tracks on fresh odometry).
+
+Control ticks fall on the odometry stamped at or first after each multiple of
+1/controller_frequency of sim time. Each tick publishes a LocalCommand on local_cmd, stamped with
+that odometry: idle (no path, or an empty follow_path) → ok, zero twist, goal_id "", reason
+"idle"; else the answer for the followed path (its goal_id), and the chosen trajectory on
+local_plan (costmap frame).
+
+Frames: the controller works in the local costmap's frame (odom for the rolling window), where the
+robot is the latest odometry; the path (map frame) is carried into it by the tf/map_odom in effect
+(initial_pose_* until a localizer sends one, frames.py). The final approach runs in the map frame
+on the odometry carried into the map the same way, so the goal is reached where the localization
+says it is. A localizer's `pose` adds nothing here: it is always older than the odometry of a tick.
+
+Within final_approach_distance of the path's end (straight-line) the FinalApproach (approach.py)
+takes over as long as the poses it will pass through are free on the costmap; when they are not,
+the controller carries on along the path. It reports ok with a zero twist ("goal_reached") once
+within xy_goal_tolerance and yaw_goal_tolerance; the navigator decides success by its own.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+import statistics
+import time
+from collections import deque
+from dataclasses import dataclass, field, fields
+
+import numpy as np
+
+from ...schemas import MessageError
+from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Path
+from ...sim.world import DEFAULT_FOOTPRINT
+from ..chassis.odometry import compose, inverse
+from ..costmap.footprint import make_footprint
+from ..costmap.frames import RobotFrames
+from ..runtime.node import NS_PER_S, Node
+from ..runtime.params import ParamError, load_params
+from .approach import FinalApproach
+from .dwa import DwaPlanner, footprint_check_cost, reachable, warm_up
+from .follower import PathFollower, segments_from_poses
+from .params import DwaParams, FollowerParams
+
+CONTROLLERS = ("dwa", "eband", "follower")
+TIMES_KEPT = 10_000     # cycle times kept for the diagnostic's median
+COSTMAP, MAP_ODOM, PATH = range(3)    # sporadic inputs, in input order (the order of equal stamps)
+APPROACH_HYSTERESIS = 0.1             # m beyond final_approach_distance before an approach is given up
+
+# ROS local planner sections (move_base loads them under the planner's name) and how their names
+# map onto DwaParams; names that mean nothing here are accepted without effect (docs/local_planner.md)
+ROS_SECTIONS = {
+    "TrajectoryPlannerROS": {"max_rotational_vel": "max_vel_theta", "min_in_place_rotational_vel":
+                             "min_in_place_vel_theta", "backup_vel": "escape_vel",
+                             "pdist_scale": "path_distance_bias", "gdist_scale": "goal_distance_bias"},
+    "DWAPlannerROS": {"vth_samples": "vtheta_samples", "max_rot_vel": "max_vel_theta",
+                      "min_rot_vel": "min_in_place_vel_theta", "min_vel_theta": "min_in_place_vel_theta",
+                      "acc_lim_th": "acc_lim_theta", "use_dwa": "dwa"},
+}
+ROS_WITHOUT_EFFECT = {
+    "meter_scoring", "heading_lookahead", "heading_scoring", "heading_scoring_timestep", "simple_attractor",
+    "angular_sim_granularity", "prune_plan", "publish_cost_grid_pc", "publish_cost_grid", "publish_traj_pc",
+    "global_frame_id", "latch_xy_goal_tolerance", "oscillation_reset_dist", "oscillation_reset_angle",
+    "escape_reset_dist", "escape_reset_theta", "restore_defaults", "trans_stopped_vel", "theta_stopped_vel",
+    "rot_stopped_vel", "stop_time_buffer", "scaling_speed", "max_scaling_factor", "twirling_scale",
+    "acc_lim_trans", "max_vel_trans", "min_vel_trans", "max_trans_vel", "min_trans_vel", "use_sim_time",
+}
+
+
+@dataclass(frozen=True)
+class LocalPlannerNodeParams(DwaParams):
+    """DwaParams (TrajectoryPlannerROS / DWAPlannerROS names) plus the node's own; the tolerances
+    are the final approach's, tighter than ROS's."""
+    xy_goal_tolerance: float = 0.02      # m: the controller stops here (the navigator judges success)
+    yaw_goal_tolerance: float = 0.02     # rad
+    controller: str = "dwa"              # dwa | eband | follower
+    final_approach_distance: float = 0.6  # m from the path's end where the final approach takes over
+    path_follower: dict = field(default_factory=dict)   # FollowerParams by name (drive: from holonomic_robot)
+    elastic_band: dict = field(default_factory=dict)    # ElasticBandParams by name; limits default to the above
+    # the robot, spelled as costmap_2d spells it (the local costmap's values)
+    footprint: tuple[tuple[float, float], ...] = tuple(map(tuple, DEFAULT_FOOTPRINT.tolist()))
+    robot_radius: float = 0.46           # m, when footprint is empty
+    footprint_padding: float = 0.01      # m
+    inflation_radius: float = 0.55       # m: with cost_scaling_factor, where the footprint check starts
+    cost_scaling_factor: float = 10.0    # 1/m
+    initial_pose_x: float = 0.0          # the odom frame's pose in the map until tf/map_odom
+    initial_pose_y: float = 0.0
+    initial_pose_a: float = 0.0
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+    request_delay_s: float = 0.5         # sim s from a costmap / tf / path stamp to its effect
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
+        for name in ("final_approach_distance", "request_delay_s", "robot_radius", "footprint_padding",
+                     "inflation_radius", "cost_scaling_factor"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be zero or positive, got {value}")
+        if self.footprint and len(self.footprint) < 3:
+            raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
+        for name in ("path_follower", "elastic_band"):
+            if not isinstance(getattr(self, name), dict):
+                raise ValueError(f"{name} must be a mapping of parameter names to values, got {getattr(self, name)!r}")
+        self.follower_params()
+
+    def follower_params(self) -> FollowerParams:
+        drive = "holonomic" if self.holonomic_robot else "diff"
+        values = dict(self.path_follower)
+        if values.setdefault("drive", drive) != drive:
+            raise ValueError(f"path_follower: drive {values['drive']!r} contradicts holonomic_robot "
+                             f"{self.holonomic_robot}")
+        return FollowerParams.from_mapping(values, "path_follower")
+
+    @classmethod
+    def from_mapping(cls, values: dict | None, source: str = "local_planner") -> LocalPlannerNodeParams:
+        """Flat names, plus ROS TrajectoryPlannerROS / DWAPlannerROS sections as move_base reads them."""
+        values = dict(values or {})
+        for section, aliases in ROS_SECTIONS.items():
+            ros = values.pop(section, None)
+            if ros is None:
+                continue
+            if not isinstance(ros, dict):
+                raise ParamError(f"{source}: {section} must be a mapping of parameters, got {ros!r}")
+            for key, value in ros.items():
+                name = aliases.get(key, key)
+                if name in ROS_WITHOUT_EFFECT:
+                    continue
+                if name in values and values[name] != value:
+                    raise ParamError(f"{source}: {name} is given twice ({section}: {key}: {value!r}, "
+                                     f"and {values[name]!r})")
+                values[name] = value
+            if section == "DWAPlannerROS" and "max_vel_theta" in values:
+                values.setdefault("min_vel_theta", -values["max_vel_theta"])   # DWA's limits are magnitudes
+        return load_params(cls, values, source)
+
+
+@dataclass(frozen=True)
+class Control:
+    """One tick's answer."""
+    twist: np.ndarray
+    ok: bool
+    reason: str
+    trajectory: np.ndarray      # (K, 3) in the costmap frame, for local_plan
+
+
+class LocalPlannerNode(Node):
+    service = "local_planner"
+    Params = LocalPlannerNodeParams
+
+    def setup(self) -> None:
+        p = self.params
+        warm_up()   # compile (or load) the rollout kernels now, never inside a cycle
+        self.frames = RobotFrames(p.map_frame, p.odom_frame, (p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
+        fp = make_footprint(p.footprint, p.robot_radius, p.footprint_padding)
+        check_cost = footprint_check_cost(fp.inscribed_radius, fp.circumscribed_radius, p.inflation_radius,
+                                          p.cost_scaling_factor)
+        self.dwa = DwaPlanner(DwaParams(**{f.name: getattr(p, f.name) for f in fields(DwaParams)}), fp.points,
+                              check_cost)
+        self.follower_params = p.follower_params()
+        self.controller = self._make_controller(fp.points, check_cost)
+        self.period_ns = round(NS_PER_S / p.controller_frequency)
+        self.dt = self.period_ns / NS_PER_S
+        self.delay_ns = round(p.request_delay_s * NS_PER_S)
+        self.next_tick_ns: int | None = None
+        self.pending: list[tuple[int, int, int, object]] = []   # (stamp, kind, seq, message) not yet in effect
+        self.costmap: Costmap | None = None
+        self.path: Path | None = None            # followed; None: idle
+        self.path_follower: PathFollower | None = None      # controller "follower", on the path in the map frame
+        self.approach: FinalApproach | None = None
+        self.arrived = False
+        self.cycle_ms: deque[float] = deque(maxlen=TIMES_KEPT)
+        self.cmd_pub = self.publisher("local_cmd")
+        self.plan_pub = self.publisher("local_plan")
+        self.subscribe("odom", self.on_odom)
+        self.in_keys: dict[int, str] = {}
+        for kind, topic, check in ((COSTMAP, "costmap/local", self._check_costmap),
+                                   (MAP_ODOM, "tf/map_odom", self.frames.transform_problem),
+                                   (PATH, "follow_path", self._check_path)):
+            self.in_keys[kind] = self.keys.resolve(topic)
+            self.subscribe(topic, lambda msg, k=kind, c=check: self._receive(k, c, msg), synced=False,
+                           max_delay_s=p.request_delay_s)
+
+    def _make_controller(self, footprint: np.ndarray, check_cost: int):
+        p = self.params
+        if p.controller == "dwa":
+            return self.dwa
+        if p.controller == "eband":
+            try:
+                from .eband import ElasticBandPlanner
+                from .params import ElasticBandParams
+            except ImportError as exc:
+                raise ValueError(f"controller 'eband': the elastic band is not available ({exc})") from None
+            # one set of robot limits: the band's default to the node's (TEB spells them alike)
+            shared = ["holonomic_robot", "controller_frequency", "max_vel_x", "max_vel_theta", "acc_lim_x",
+                      "acc_lim_theta", *(["max_vel_y", "acc_lim_y"] if p.holonomic_robot else [])]
+            values = {**{name: getattr(p, name) for name in shared}, **p.elastic_band}
+            return ElasticBandPlanner(load_params(ElasticBandParams, values, "elastic_band"), footprint, check_cost)
+        return None     # follower: built per path
+
+    # ------------------------------------------------------------ inputs
+
+    def _receive(self, kind: int, check, msg) -> None:
+        problem = check(msg)
+        if problem:
+            key = self.in_keys[kind]
+            self.reject(key, MessageError(problem, type_name=type(msg).__name__, key=key))
+            return
+        # sorted as replay feeds them, whatever order they arrived in
+        bisect.insort(self.pending, (msg.header.stamp_ns, kind, msg.header.seq, msg), key=lambda item: item[:3])
+
+    def _frame_problem(self, frame: str) -> str:
+        if frame not in (self.frames.map_frame, self.frames.odom_frame):
+            return f"frame {frame!r} is neither {self.frames.map_frame!r} nor {self.frames.odom_frame!r}"
+        return ""
+
+    def _check_costmap(self, msg: Costmap) -> str:
+        if msg.data.shape != (msg.info.height, msg.info.width) or msg.data.size == 0:
+            return f"data of shape {msg.data.shape} for a grid of {msg.info.height} x {msg.info.width} cells"
+        return self._frame_problem(msg.header.frame_id)
+
+    def _check_path(self, msg: Path) -> str:
+        return self._frame_problem(msg.header.frame_id) if len(msg.poses) else ""
+
+    def _apply_due(self, now_ns: int) -> None:
+        """Put into effect the sporadic inputs stamped before now − request_delay_s, in stamp order."""
+        while self.pending and self.pending[0][0] + self.delay_ns < now_ns:
+            _, kind, _, msg = self.pending.pop(0)
+            if kind == COSTMAP:
+                self.costmap = msg
+            elif kind == MAP_ODOM:
+                self.frames.set_map_odom(msg)
+            else:
+                self._follow(msg)
+
+    def _follow(self, msg: Path) -> None:
+        self.path = msg if len(msg.poses) else None
+        self.approach, self.arrived, self.path_follower = None, False, None
+        self.counters["paths" if self.path is not None else "stops"] += 1
+        if self.path is not None and self.params.controller == "follower":
+            segments = segments_from_poses(self._in_frame(msg.poses, msg.header.frame_id, self.frames.map_frame))
+            self.path_follower = PathFollower(self.follower_params, segments) if segments else None
+
+    # ------------------------------------------------------------ control
+
+    def on_odom(self, msg: Odometry) -> None:
+        self.frames.set_odom(msg)
+        t = msg.header.stamp_ns
+        if self.next_tick_ns is None:
+            self.next_tick_ns = -(-t // self.period_ns) * self.period_ns    # the first due time ≥ t
+        if t < self.next_tick_ns:
+            return
+        self.next_tick_ns = (t // self.period_ns + 1) * self.period_ns
+        self._apply_due(t)
+        velocity = np.array([msg.twist.linear_x, msg.twist.linear_y, msg.twist.angular_z])
+        began = time.perf_counter()     # instrumentation only
+        control = self._control(velocity)
+        self.cycle_ms.append((time.perf_counter() - began) * 1e3)
+        goal_id = "" if self.path is None else self.path.goal_id
+        status = control.reason.split(":")[0] if control.reason else "ok"
+        self.counters[f"status/{status}"] += 1
+        vx, vy, wz = (float(v) for v in control.twist)
+        self.cmd_pub.publish(LocalCommand(header=self.header("base_link", t), goal_id=goal_id, linear_x=vx, linear_y=vy,
+                                          angular_z=wz, ok=control.ok, reason=control.reason))
+        if self.path is not None and self.costmap is not None:
+            self.plan_pub.publish(Path(header=self.header(self.costmap.header.frame_id, t),
+                                       poses=np.ascontiguousarray(control.trajectory, np.float64).reshape(-1, 3),
+                                       goal_id=goal_id))
+
+    def _in_frame(self, poses: np.ndarray, source: str, target: str) -> np.ndarray:
+        """Poses (N, 3) given in the map or odom frame, in the other one (or the same)."""
+        poses = np.asarray(poses, np.float64).reshape(-1, 3)
+        if source == target:
+            return poses
+        map_odom = self.frames.map_odom
+        return compose(map_odom, poses) if target == self.frames.map_frame else compose(inverse(map_odom), poses)
+
+    def _brake(self, velocity: np.ndarray) -> np.ndarray:
+        low, high = reachable(self.dwa.params, velocity)
+        return np.clip(0.0, low, high)
+
+    def _control(self, velocity: np.ndarray) -> Control:
+        none = np.zeros((0, 3))
+        if self.path is None:
+            return Control(np.zeros(3), True, "idle", none)
+        if self.arrived:
+            return Control(np.zeros(3), True, "goal_reached", none)
+        if self.costmap is None:
+            return Control(self._brake(velocity), False, "no_costmap: no local costmap yet", none)
+        frame = self.costmap.header.frame_id
+        path = self._in_frame(self.path.poses, self.path.header.frame_id, frame)
+        robot = self.frames.robot(frame)
+        approach = self._approach(velocity)
+        if approach is not None:
+            return approach
+        if self.params.controller == "follower":
+            return self._follow_path(velocity, path, robot)
+        result = self.controller.compute(robot, velocity, self.costmap.data, self.costmap.info, path)
+        reason = result.status if result.status in ("ok", "escape") else f"{result.status}: {result.message}"
+        return Control(result.cmd, result.status in ("ok", "escape"), "" if result.status == "ok" else reason,
+                       result.trajectory)
+
+    def _approach(self, velocity: np.ndarray) -> Control | None:
+        """The final approach's answer, or None when the robot is not close to the goal or the
+        approach is blocked."""
+        p = self.params
+        robot = self.frames.robot(self.frames.map_frame)
+        goal = self._in_frame(self.path.poses[-1:], self.path.header.frame_id, self.frames.map_frame)[0]
+        distance = math.hypot(*(goal[:2] - robot[:2]))
+        if self.approach is not None and distance > p.final_approach_distance + APPROACH_HYSTERESIS:
+            self.approach = None
+        if self.approach is None:
+            if distance > p.final_approach_distance:
+                return None
+            moving = compose((0.0, 0.0, robot[2]), (*velocity[:2], 0.0))[:2]    # the robot's velocity, map axes
+            along = float(np.dot(moving, goal[:2] - robot[:2]) / max(distance, 1e-9))
+            self.approach = FinalApproach(self.follower_params, goal, robot, along, p.xy_goal_tolerance,
+                                          p.yaw_goal_tolerance)
+        frame = self.costmap.header.frame_id
+        poses = self._in_frame(self.approach.planned_poses(robot, self.costmap.info.resolution / 2),
+                               self.frames.map_frame, frame)
+        if not self.dwa.legal_poses(poses, self.costmap.data, self.costmap.info).all():
+            self.approach = None
+            self.counters["approach_blocked"] += 1
+            return None
+        command = self.approach.step(robot, self.dt)
+        if command.phase == "arrived":
+            self.arrived = True
+            return Control(np.zeros(3), True, "goal_reached", poses[-1:])
+        return Control(command.twist, True, "final_approach", poses)
+
+    def _follow_path(self, velocity: np.ndarray, path: np.ndarray, robot: np.ndarray) -> Control:
+        """The path follower's command, unless the path ahead (as far as the robot gets in sim_time)
+        is blocked on the costmap."""
+        if self.path_follower is None:
+            return Control(self._brake(velocity), False, "no_path: the path has no length", np.zeros((0, 3)))
+        command = self.path_follower.step(self.frames.robot(self.frames.map_frame), self.dt)
+        nearest = int(np.argmin(np.hypot(path[:, 0] - robot[0], path[:, 1] - robot[1])))
+        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path[nearest:, :2], axis=0).T))])
+        ahead = path[nearest:][along <= self.follower_params.cruise_speed * self.params.sim_time]
+        if not self.dwa.legal_poses(ahead, self.costmap.data, self.costmap.info).all():
+            return Control(self._brake(velocity), False, "path_blocked: the path ahead collides on the local costmap",
+                           ahead)
+        return Control(command.twist, True, "", ahead)
+
+    def diagnostic(self) -> Diagnostic:
+        diag = super().diagnostic()
+        if self.cycle_ms:
+            diag.values["cycle_ms"] = statistics.median(self.cycle_ms)
+        return diag
