@@ -15,7 +15,7 @@ from conftest import REPO, wait_until
 from omninav.schemas import decode, encode
 from omninav.schemas.attachment import pack_attachment
 from omninav.schemas.keys import KeyLayout
-from omninav.schemas.messages import (Clock, Costmap as CostmapMsg, Goal, Header, LaserScan, MapMetaData,
+from omninav.schemas.messages import (ClearCostmaps, Clock, Costmap as CostmapMsg, Goal, Header, LaserScan, MapMetaData,
                                       OccupancyGrid, Odometry, Path, Pose2D, Transform)
 from omninav.services.chassis.node import ChassisNode
 from omninav.services.costmap.footprint import make_footprint
@@ -176,6 +176,48 @@ global_costmap:
     assert list(zip(rows, cols)) == [tuple(int(v) for v in world_to_cell(glob.info, 2.02, 5.13))]
 
 
+def test_a_clear_forgets_obstacles_outside_the_square_around_the_robot_in_both_costmaps(tmp_path):
+    layer = """
+  robot_radius: 0.1
+  update_frequency: 10.0
+  plugins:
+    - {name: obstacles, type: "costmap_2d::ObstacleLayer"}
+  obstacles:
+    observation_sources: laser
+    laser: {topic: scan, marking: true, clearing: false, obstacle_range: 5.0}
+"""
+    (tmp_path / "global.yaml").write_text("global_costmap:\n  global_frame: map\n  width: 10.0\n  height: 10.0\n"
+                                          "  origin_x: -5.0\n  origin_y: -5.0" + layer)
+    (tmp_path / "local.yaml").write_text("local_costmap:\n  global_frame: odom\n  rolling_window: true\n"
+                                         "  width: 6.0\n  height: 6.0" + layer)
+    node = CostmapNode(CostmapNodeParams(global_costmap_files=(str(tmp_path / "global.yaml"),),
+                                         local_costmap_files=(str(tmp_path / "local.yaml"),), request_delay_s=0.3))
+
+    def scan(t, ranges):   # straight ahead and to the left
+        return LaserScan(header=Header(stamp_ns=ns(t), frame_id="laser"), angle_min=0.0, angle_max=math.pi / 2,
+                         angle_increment=math.pi / 2, range_min=0.1, range_max=10.0,
+                         ranges=np.array(ranges, np.float32))
+
+    def lethal(key):
+        costmap = node.answer(key, {})
+        rows, cols = np.nonzero(costmap.data == LETHAL_OBSTACLE)
+        return {(round(float(x), 1), round(float(y), 1)) for x, y in zip(*cell_to_world(costmap.info, rows, cols))}
+
+    messages = [(KEYS.robot("odom"), odometry(t, 0.0, 0.0)) for t in (0.05, 0.15, 0.25)]
+    messages += [(KEYS.robot("scan"), scan(0.05, [1.0, 2.5])),            # a hit 1 m ahead, one 2.5 m left
+                 (KEYS.robot("scan"), scan(0.15, [1.0, np.inf])),         # then only the near one is seen
+                 (KEYS.robot("costmap/clear"), ClearCostmaps(header=Header(stamp_ns=ns(0.25)), reset_distance=3.0))]
+    messages += [(KEYS.sim("clock"), Clock(header=Header(stamp_ns=ns(t)))) for t in (0.1, 0.2, 0.3, 0.4, 0.5)]
+    feed(node, messages)
+    seen = {(1.0, 0.0), (0.0, 2.5)}
+    assert lethal(GLOBAL) == lethal(LOCAL) == seen
+    feed(node, [(KEYS.sim("clock"), Clock(header=Header(stamp_ns=ns(0.6))))])   # the first cycle after 0.25 + 0.3 s
+    assert lethal(GLOBAL) == lethal(LOCAL) == {(1.0, 0.0)}                     # within ±1.5 m of the robot
+    assert node.counters["clears/global"] == node.counters["clears/local"] == 1
+    feed(node, [(KEYS.robot("costmap/clear"), ClearCostmaps(header=Header(stamp_ns=ns(0.6)), reset_distance=-1.0))])
+    assert node.counters[f"malformed/{KEYS.robot('costmap/clear')}"] == 1
+
+
 def _room_grid() -> OccupancyGrid:
     data = np.zeros((60, 80), np.int8)
     data[[0, -1], :] = data[:, [0, -1]] = 100
@@ -219,7 +261,7 @@ local_costmap:
                 (KEYS.robot("odom"), odometry(0.1, 0.5, 0.2)),
                 (KEYS.sim("clock"), Clock(header=Header(stamp_ns=ns(0.2))))])
     assert [i.key for i in node.inputs] == [KEYS.sim("clock"), KEYS.robot("odom"), KEYS.robot("scan"),
-                                            KEYS.robot("map"), KEYS.robot("tf/map_odom")]
+                                            KEYS.robot("map"), KEYS.robot("tf/map_odom"), KEYS.robot("costmap/clear")]
     glob, local = node.answer(GLOBAL, {}), node.answer(LOCAL, {})
     assert [key for key, _ in out] == [LOCAL]           # publish_frequency 0: the global one only answers
     assert glob.info == _room_grid().info

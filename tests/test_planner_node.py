@@ -221,6 +221,29 @@ def test_a_localizer_pose_newer_than_the_odometry_is_the_start_and_failures_publ
     np.testing.assert_allclose(ask(node, goal="8,7").poses[0, :2], ROOM_START)   # now the newer odometry
 
 
+def test_plans_name_the_request_they_answer_and_failures_say_why():
+    node = planner_with(room_costmap(), request_delay_s=0.0, goal_topic="plan_request",
+                        initial_pose_x=ROOM_START[0], initial_pose_y=ROOM_START[1])
+    assert all(i.key != KEYS.robot("goal") for i in node.inputs)     # the navigator's requests only
+    plans = capture(node)
+    feed(node, [(KEYS.robot("plan_request"), Goal(header=Header(stamp_ns=ns(0.1), frame_id="map"), goal_id="g1#1",
+                                                  pose=Pose2D(8.0, 7.0))),
+                (KEYS.robot("odom"), odometry(0.2, 0.0)),
+                (KEYS.robot("plan_request"), Goal(header=Header(stamp_ns=ns(0.25), frame_id="map", seq=2),
+                                                  goal_id="g1#2", pose=Pose2D(5.0, 4.0))),   # the pillar
+                (KEYS.robot("odom"), odometry(0.3, 0.0))])
+    assert [(p.goal_id, len(p.poses) > 0) for p in plans] == [("g1#1", True), ("g1#2", False)]
+    assert plans[0].error == ""
+    assert plans[1].error.startswith("goal_in_obstacle: the goal cell") and "cost 254" in plans[1].error
+
+
+def test_the_goal_topic_must_carry_goals():
+    with pytest.raises(ParamError, match="goal_topic 'scan' does not carry Goal messages"):
+        build_node("global_planner", overrides={"goal_topic": "scan"})
+    with pytest.raises(ParamError, match="goal_topic 'nowhere': unknown robot topic"):
+        build_node("global_planner", overrides={"goal_topic": "nowhere"})
+
+
 def test_inputs_in_the_wrong_frame_are_rejected_and_counted():
     node = PlannerNode()
     feed(node, [(KEYS.robot("goal"), Goal(header=Header(stamp_ns=1, frame_id="odom"))),

@@ -20,7 +20,7 @@ from pathlib import Path
 import numpy as np
 
 from ...schemas.messages import Header, LaserScan, MapMetaData, OccupancyGrid, Pose2D
-from ..map_server.mapio import in_grid, load_map, world_to_cell
+from ..map_server.mapio import cell_to_world, in_grid, load_map, world_to_cell
 from .footprint import Footprint, footprint_from_params
 from .layers import (FREE_SPACE, NO_INFORMATION, Box, InflationLayer, KeepoutLayer, ObstacleLayer, StaticLayer,
                      View, grow, same_geometry, shift_grid, union, whole)
@@ -132,6 +132,18 @@ class Costmap:
         for layer in self.layers:
             if isinstance(layer, ObstacleLayer):
                 layer.reset()
+        self._pending = whole(self.info)
+
+    def clear_outside(self, x: float, y: float, side: float) -> None:
+        """Forget the obstacles seen in cells whose centres lie outside the axis-aligned square of
+        `side` metres centred on (x, y) in the global frame (ROS clear_costmap_recovery resetting
+        its obstacle layers around the robot). Buffered scans stay, as in ROS."""
+        rows, cols = np.indices(self.costs.shape)
+        cx, cy = cell_to_world(self.info, rows, cols)
+        outside = (np.abs(cx - x) > side / 2) | (np.abs(cy - y) > side / 2)
+        for layer in self.layers:
+            if isinstance(layer, ObstacleLayer):
+                layer.costs[outside] = layer.default
         self._pending = whole(self.info)
 
     # ------------------------------------------------------------ updating

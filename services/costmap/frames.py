@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...schemas.messages import Odometry, Pose2D, Transform
+from ...schemas.messages import Odometry, Pose2D, PoseWithCovariance, Transform
 from ..chassis.odometry import compose
 
 
@@ -48,6 +48,14 @@ class RobotFrames:
     def robot(self, frame: str) -> np.ndarray | None:
         """The robot's latest pose in `frame`, or None before any odometry."""
         return None if self.odom is None else self.in_frame(frame, self.odom)
+
+    def robot_with_pose(self, frame: str, pose: PoseWithCovariance | None) -> np.ndarray | None:
+        """The robot in `frame`: a localizer's pose (map frame) when it is newer than the odometry,
+        else the odometry carried into `frame`; None before either."""
+        if pose is not None and frame == self.map_frame and (
+                self.odom_stamp_ns is None or pose.header.stamp_ns > self.odom_stamp_ns):
+            return np.array([pose.pose.x, pose.pose.y, pose.pose.theta])
+        return self.robot(frame)
 
     def frame_in_map(self, frame: str) -> Pose2D | None:
         """The pose of `frame` in the map frame (None: it is the map frame)."""

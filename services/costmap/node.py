@@ -5,8 +5,8 @@ file first, then the costmap's own; see docs/costmap_and_planner.md): by default
 compose/params, which make the global costmap static + obstacle + inflation in the map frame and
 the local one a 6 m rolling window of obstacle + inflation in the odom frame.
 
-Inputs, in merge order: odom, then the scan topic of every observation source (synced); map and
-tf/map_odom (sporadic). A scan is placed with the latest odometry at or before its stamp (the sim
+Inputs, in merge order: odom, then the scan topic of every observation source (synced); map,
+tf/map_odom and costmap/clear (sporadic). A scan is placed with the latest odometry at or before its stamp (the sim
 stamps both alike): laser → base_link by the laser_* mount, → odom by the odometry, → map by
 map→odom, which is the initial_pose_* until a localizer publishes tf/map_odom (frames.py).
 
@@ -15,6 +15,13 @@ costs, the whole grid) every 1/publish_frequency of sim time, as ROS (publish_fr
 published, only answered); `get` on either key answers its costs after the last update. Both are
 stamped with the sim time they are sent at, which runs up to a scan period behind the clock: the
 node waits for the scans (consumers defer them, see global_planner/node.py).
+
+costmap/clear (ClearCostmaps, the navigator's clear_costmaps recovery) forgets the obstacle layers'
+cells outside the square of side reset_distance around the robot, in both costmaps, as move_base's
+clear_costmap_recovery. A clear stamped t takes effect at each costmap's first update cycle stamped
+after t + request_delay_s (the navigator's commands follow the odometry, which the cycles may have
+passed): whenever it arrives within that delay, the costmaps come out the same, and replay is
+exact. A costmap that never cycles (update_frequency 0) never clears.
 
 A map is applied at the costmap's next update; before its first update cycle (no sim clock yet, or
 update_frequency 0) a new map updates the costmap at once and publishes it, so map_server +
@@ -27,6 +34,8 @@ The Diagnostic carries, per costmap and layer, the median wall time of its last 
 """
 from __future__ import annotations
 
+import bisect
+import math
 import statistics
 from collections import deque
 from dataclasses import dataclass, replace
@@ -36,11 +45,11 @@ import numpy as np
 from ...schemas import MessageError
 from ...schemas.keys import type_for_key
 from ...schemas.messages import Costmap as CostmapMsg
-from ...schemas.messages import Diagnostic, Header, LaserScan, OccupancyGrid, Transform
+from ...schemas.messages import ClearCostmaps, Diagnostic, Header, LaserScan, OccupancyGrid, Transform
 from ...sim.raycast import LidarParams
 from ..chassis.odometry import compose
 from ..map_server.mapio import MapError, load_map
-from ..runtime.node import Node, QueryError
+from ..runtime.node import NS_PER_S, Node, QueryError
 from .costmap import Costmap
 from .frames import RobotFrames
 from .layers import same_geometry, warm_up
@@ -66,6 +75,11 @@ class CostmapNodeParams:
     initial_pose_a: float = 0.0
     map_frame: str = "map"
     odom_frame: str = "odom"
+    request_delay_s: float = 0.3  # sim s from a costmap/clear stamp to its effect
+
+    def __post_init__(self) -> None:
+        if not (math.isfinite(self.request_delay_s) and self.request_delay_s >= 0):
+            raise ValueError(f"request_delay_s must be zero or positive, got {self.request_delay_s}")
 
 
 class ServedCostmap:
@@ -82,6 +96,7 @@ class ServedCostmap:
         self.cycles = 0                         # update cycles run (by the timer)
         self.updated_ns: int | None = None      # sim time of the last update
         self.times: dict[str, deque[float]] = {}
+        self.clears: list[tuple[int, int, ClearCostmaps]] = []   # (stamp, seq, request) not yet in effect
 
     def waiting_for(self, robot) -> str:
         """What keeps this costmap from updating, or ''."""
@@ -133,6 +148,9 @@ class CostmapNode(Node):
         if not p.map_file:
             self.subscribe("map", self.on_map, synced=False)
         self.subscribe("tf/map_odom", self.on_map_odom, synced=False)
+        self.clear_key = self.keys.resolve("costmap/clear")
+        self.clear_delay_ns = round(p.request_delay_s * NS_PER_S)
+        self.subscribe("costmap/clear", self.on_clear, synced=False, max_delay_s=p.request_delay_s)
         # updates before publishes: a publish due at the same instant sends that update
         for served in self.costmaps.values():
             if served.core.params.update_frequency > 0:
@@ -200,11 +218,32 @@ class CostmapNode(Node):
         else:
             self.frames.set_map_odom(msg)
 
+    def on_clear(self, msg: ClearCostmaps) -> None:
+        if not msg.reset_distance >= 0:
+            self.reject(self.clear_key, MessageError(f"reset_distance {msg.reset_distance} is negative",
+                                                     type_name="ClearCostmaps", key=self.clear_key))
+            return
+        for served in self.costmaps.values():
+            # sorted as replay feeds them, whatever order they arrived in
+            bisect.insort(served.clears, (msg.header.stamp_ns, msg.header.seq, msg), key=lambda item: item[:2])
+
     # ------------------------------------------------------------ cycles
 
     def on_cycle(self, served: ServedCostmap) -> None:
         served.cycles += 1
+        self._apply_clears(served)
         self._update(served)
+
+    def _apply_clears(self, served: ServedCostmap) -> None:
+        """The clears stamped before now − request_delay_s, around the robot where it is now."""
+        while served.clears and served.clears[0][0] + self.clear_delay_ns < self.now_ns:
+            request = served.clears.pop(0)[2]
+            robot = self.frames.robot(served.frame)
+            if robot is None:
+                self.counters[f"clears_before_odometry/{served.name}"] += 1
+                continue
+            served.core.clear_outside(robot[0], robot[1], request.reset_distance)
+            self.counters[f"clears/{served.name}"] += 1
 
     def _update(self, served: ServedCostmap) -> None:
         robot = self.frames.robot(served.frame)

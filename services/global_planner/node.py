@@ -7,14 +7,17 @@ an error whose text begins with the status (`no_path`, `goal_in_obstacle`, `off_
 malformed parameters, or no costmap yet, answer an error saying so. `get` without parameters
 answers the plan last published.
 
-For the navigator: a goal (Goal; its pose — waypoints are the navigator's to send one by one) is
-planned from the robot's pose when it takes effect, and again every 1/planner_frequency of sim
-time while it is active (planner_frequency 0: once per goal, as move_base), until a cancel naming
-it (or naming no goal). Each plan is published on the plan key, stamped with the sim time it was
-made; a failed one as an empty Path, as ROS global_planner does, counted in the Diagnostic as
-plans/<status>. A goal that comes before a costmap or a pose is planned when they are there.
+Goals: a Goal on goal_topic (`goal`, from users; the navigation compose uses `plan_request`, the
+navigator's requests, with planner_frequency 0 since the navigator replans itself) is planned
+from the robot's pose when it takes effect (its pose only: waypoints are the navigator's to send
+one by one), and again every 1/planner_frequency of sim time while it is active (0: once per
+goal, as move_base), until a cancel naming it (or naming no goal). Each plan is published on the
+plan key, stamped with the sim time it was made, with the goal's goal_id; a failed one as an
+empty Path, as ROS global_planner does, whose error says "<status>: <reason>", counted in the
+Diagnostic as plans/<status>. A goal that comes before a costmap or a pose is planned when they
+are there.
 
-Inputs, in merge order: odom (synced); costmap/global, tf/map_odom, pose, goal, cancel (sporadic).
+Inputs, in merge order: odom (synced); costmap/global, tf/map_odom, pose, goal_topic, cancel (sporadic).
 A sporadic message stamped t takes effect at the first odometry or planning tick stamped after
 t + request_delay_s, as the localizer defers its requests: the costmap service runs up to a scan
 period behind the clock (it waits for the scans), so its costmaps come after the odometry of their
@@ -37,6 +40,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...schemas import MessageError
+from ...schemas.keys import KeyLayout, type_for_key
 from ...schemas.messages import Costmap, Diagnostic, Goal, Header, Odometry, Path, PoseWithCovariance
 from ..costmap.frames import RobotFrames
 from ..runtime.node import NS_PER_S, Node, QueryError
@@ -57,11 +61,18 @@ class PlannerNodeParams(GlobalPlannerParams):
     map_frame: str = "map"
     odom_frame: str = "odom"
     request_delay_s: float = 0.3  # sim s from a costmap / tf / pose / goal / cancel stamp to its effect
+    goal_topic: str = "goal"      # where goals come from: "goal" (users) or "plan_request" (the navigator)
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if not (math.isfinite(self.request_delay_s) and self.request_delay_s >= 0):
             raise ValueError(f"request_delay_s must be zero or positive, got {self.request_delay_s}")
+        try:
+            carries = type_for_key(KeyLayout().resolve(self.goal_topic))
+        except KeyError as exc:
+            raise ValueError(f"goal_topic {self.goal_topic!r}: {exc.args[0]}") from None
+        if carries is not Goal:
+            raise ValueError(f"goal_topic {self.goal_topic!r} does not carry Goal messages")
 
 
 def parse_pose(name: str, text: str) -> np.ndarray:
@@ -99,7 +110,7 @@ class PlannerNode(Node):
         self.in_keys: dict[int, str] = {}
         for kind, topic, check in ((COSTMAP, "costmap/global", self._check_costmap),
                                    (MAP_ODOM, "tf/map_odom", self.frames.transform_problem),
-                                   (POSE, "pose", self._check_pose), (GOAL, "goal", self._check_goal),
+                                   (POSE, "pose", self._check_pose), (GOAL, p.goal_topic, self._check_goal),
                                    (CANCEL, "cancel", None)):
             self.in_keys[kind] = self.keys.resolve(topic)
             self.subscribe(topic, lambda msg, k=kind, c=check: self._receive(k, c, msg), synced=False,
@@ -167,14 +178,6 @@ class PlannerNode(Node):
 
     # ------------------------------------------------------------ planning
 
-    def robot_pose(self, frame: str) -> np.ndarray | None:
-        """The robot in `frame`: the localizer's pose when newer than the odometry, else the odometry."""
-        odom_stamp = self.frames.odom_stamp_ns
-        if self.pose is not None and frame == self.frames.map_frame and (
-                odom_stamp is None or self.pose.header.stamp_ns > odom_stamp):
-            return np.array([self.pose.pose.x, self.pose.pose.y, self.pose.pose.theta])
-        return self.frames.robot(frame)
-
     def _plan(self, costmap: Costmap, start, goal) -> PlanResult:
         began = time.perf_counter()   # instrumentation only
         result = self.planner.plan(costmap.data, costmap.info, start, goal)
@@ -185,14 +188,16 @@ class PlannerNode(Node):
         """Plan the active goal from the robot's pose and publish it."""
         if self.goal is None:
             return
-        start = None if self.costmap is None else self.robot_pose(self.costmap.header.frame_id)
+        start = None if self.costmap is None else self.frames.robot_with_pose(self.costmap.header.frame_id,
+                                                                               self.pose)
         self.waiting = start is None
         if self.waiting:
             return
         g = self.goal.pose
         result = self._plan(self.costmap, start, (g.x, g.y, g.theta))
         self.counters[f"plans/{result.status}"] += 1
-        self.plan = Path(header=self.header(self.costmap.header.frame_id), poses=result.poses)
+        self.plan = Path(header=self.header(self.costmap.header.frame_id), poses=result.poses,
+                         goal_id=self.goal.goal_id, error="" if result.ok else f"{result.status}: {result.message}")
         self.plan_pub.publish(self.plan)
 
     def answer_plan(self, parameters: dict[str, str]) -> Path | None:
@@ -209,7 +214,7 @@ class PlannerNode(Node):
         if costmap is None:
             raise QueryError(f"{self.plan_key}: no global costmap yet (on {self.in_keys[COSTMAP]})")
         if start is None:
-            start = self.robot_pose(costmap.header.frame_id)
+            start = self.frames.robot_with_pose(costmap.header.frame_id, self.pose)
             if start is None:
                 raise QueryError(f"{self.plan_key}: no start= given and the robot's pose is not known yet")
         result = self._plan(costmap, start, goal)

@@ -4,15 +4,28 @@ xy_goal_tolerance, yaw_goal_tolerance and escape_vel are base_local_planner's (i
 planner decides arrival; here the navigator does, so both see the same numbers). The recovery
 behaviours' own settings (rotate_angle, max_rotational_vel, backup_dist, wait_duration) carry the
 names of rotate_recovery and Nav2's BackUp/Wait behaviours.
+
+ROS move_base files load unchanged (from_mapping; flat or under `move_base:`): `recovery_behaviors`
+may be move_base's list of `{name, type}` plugin entries, whose types map onto the behaviours here
+(ROS_RECOVERY_TYPES); the namespaces those entries name (e.g. `conservative_reset:
+{reset_distance: 3.0}`) and the plugin and make_plan settings in ROS_IGNORED are accepted without
+effect (each behaviour takes its settings from the names above). Anything else unknown is an
+error naming the key.
 """
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass
 
-from ..runtime.params import load_params
+from ..runtime.params import ParamError, load_params, unwrap_ros
 
 RECOVERY_NAMES = ("clear_costmaps", "rotate", "back_up", "wait")
+# move_base recovery plugin types -> the behaviour here
+ROS_RECOVERY_TYPES = {"clear_costmap_recovery/ClearCostmapRecovery": "clear_costmaps",
+                      "rotate_recovery/RotateRecovery": "rotate"}
+# move_base settings of plugins and services that have no meaning here
+ROS_IGNORED = frozenset({"base_global_planner", "base_local_planner", "make_plan_clear_costmap",
+                         "make_plan_add_unreachable_goal", "restore_defaults", "use_sim_time"})
 
 
 @dataclass(frozen=True)
@@ -65,4 +78,23 @@ class NavigatorParams:
 
     @classmethod
     def from_mapping(cls, values: dict | None, source: str = "navigator") -> NavigatorParams:
+        """From our names or a ROS move_base parameter mapping (see the module's docstring)."""
+        values = {k: v for k, v in unwrap_ros(values or {}, "move_base").items() if k not in ROS_IGNORED}
+        entries = values.get("recovery_behaviors")
+        if isinstance(entries, (list, tuple)) and any(isinstance(e, dict) for e in entries):
+            values["recovery_behaviors"] = [_ros_recovery(e, source) for e in entries]
+            for entry in entries:
+                if isinstance(entry, dict) and isinstance(values.get(entry.get("name")), dict):
+                    del values[entry["name"]]
         return load_params(cls, values, source)
+
+
+def _ros_recovery(entry, source: str) -> str:
+    """One move_base recovery_behaviors entry ({name, type}, or one of our names) as our name."""
+    if not isinstance(entry, dict):
+        return entry
+    kind = entry.get("type")
+    if kind not in ROS_RECOVERY_TYPES:
+        raise ParamError(f"{source}: recovery_behaviors entry {entry!r}: type {kind!r} has no equivalent here; "
+                         f"known: {sorted(ROS_RECOVERY_TYPES)} or the names {list(RECOVERY_NAMES)}")
+    return ROS_RECOVERY_TYPES[kind]

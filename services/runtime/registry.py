@@ -17,7 +17,13 @@ SERVICES: dict[str, str] = {
     "map_server": "omninav.services.map_server.node:MapServerNode",
     "costmap": "omninav.services.costmap.node:CostmapNode",
     "slam": "omninav.services.slam.node:SlamNode",
+    "explore": "omninav.services.slam.explore_node:ExploreNode",
     "global_planner": "omninav.services.global_planner.node:PlannerNode",
+    "local_planner": "omninav.services.local_planner.node:LocalPlannerNode",
+    "velocity_smoother": "omninav.services.local_planner.gate_nodes:VelocitySmootherNode",
+    "collision_monitor": "omninav.services.local_planner.gate_nodes:CollisionMonitorNode",
+    "navigator": "omninav.services.navigator.node:NavigatorNode",
+    "truth_pose": "omninav.services.navigator.truth_pose:TruthPoseNode",
 }
 
 

@@ -19,7 +19,9 @@ def build_node(service: str, params_file: str | None = None, overrides: dict | N
     # (e.g. a lidar's angle_min from its fov) that an override must be free to change
     values = read_params_mapping(params_file, name or service) if params_file else {}
     source = " with overrides".join(filter(None, [params_file or service, "" if overrides else None]))
-    params = load_params(cls.Params, {**values, **(overrides or {})}, source)
+    # a Params class with from_mapping (e.g. ROS names accepted without effect) loads itself
+    load = getattr(cls.Params, "from_mapping", None) or (lambda mapping, where: load_params(cls.Params, mapping, where))
+    params = load({**values, **(overrides or {})}, source)
     return cls(params, robot=robot, name=name)
 
 

@@ -1,0 +1,239 @@
+"""The navigator service: move_base around the Navigator state machine (core.py).
+
+It ticks on the local planner's answers: every `local_cmd` (LocalCommand, stamped with the
+odometry it was computed on) calls Navigator.step(now = its stamp, ...) with that answer as the
+control result when its goal_id is the active goal's (an idle or stale answer counts as none),
+and with the robot's pose (below). Then it carries out the actions:
+
+- plan_request (Goal, map frame): goal_id "<goal_id>#<request_id>", pose = the target (the next
+  waypoint or the goal); the global planner (goal_topic: plan_request) plans it from its own pose
+  estimate and answers on `plan` with that goal_id. An answer counts when its goal_id names the
+  active goal and its request id is the latest request's; a Path with an error (or no poses) is a
+  failed plan with the error as the reason.
+- follow_path (Path, map frame, goal_id = the user's goal): each newly accepted plan; an empty
+  Path when the goal ends, is preempted, or recovery starts (the local planner then stops).
+- cmd_vel_nav (Twist, base_link): every tick while a goal is active (the local planner's twist
+  while controlling, a recovery's motion, else zeros), then zeros for stop_duration_s of sim
+  time after it ends, so a smoother downstream brings the robot to rest.
+- costmap/clear (ClearCostmaps, reset_distance = conservative_reset_dist) when the
+  clear_costmaps recovery starts.
+- nav_status (NavStatus): whenever goal, status or reason change, and every status_period_s of
+  sim time while the goal is pending or active. `get` on nav_status answers the latest status;
+  before the first goal it answers an error saying there is none yet.
+
+Inputs, in merge order: local_cmd, odom (synced); then tf/map_odom, pose, plan, goal, cancel
+(sporadic). local_cmd goes first so that a tick waits for nothing but the odometry stamped at
+it: the tick at t uses the odometry stamped before t (the odometry at t sorts after the tick),
+one odometry period older than the local planner's; ordered the other way, every tick would wait
+for the next odometry, delaying every command by an odometry period. A sporadic message stamped
+t takes effect at the first tick stamped after t + request_delay_s, as the global planner defers
+its inputs: so whether it arrived before or after the ticks in (t, t + delay], the outputs are
+the same, and a live run replays byte for byte. Goals and cancels that take effect at the same tick each get a
+step of their own, in stamp order, before the tick's step.
+
+The robot's pose: the latest `pose` in effect (map frame) when newer than the odometry, else the
+odometry carried into the map by tf/map_odom (or initial_pose_* until one comes), as the planner.
+"""
+from __future__ import annotations
+
+import bisect
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from ...schemas import MessageError
+from ...schemas.messages import (CancelGoal, ClearCostmaps, Goal, LocalCommand, NavStatus, Odometry, Path, Pose2D,
+                                 Twist)
+from ..costmap.frames import RobotFrames
+from ..runtime.node import NS_PER_S, Node, QueryError
+from .core import ACTIVE, ControlResult, Navigator, NavActions, NavInputs, PlanResult, State
+from .params import NavigatorParams
+from .recovery import ZERO
+
+MAP_ODOM, POSE, PLAN, GOAL, CANCEL = range(5)   # sporadic inputs, in input order (the order of equal stamps)
+REQUEST_SEPARATOR = "#"                        # plan_request goal_id: "<goal_id>#<request_id>"
+FOLLOWING = (State.PLANNING, State.CONTROLLING)   # states in which the local planner keeps its plan
+
+
+@dataclass(frozen=True)
+class NavigatorNodeParams(NavigatorParams):
+    """move_base's parameters (params.py) plus what the node needs around the core."""
+    initial_pose_x: float = 0.0   # the odom frame's pose in the map (where odometry started) until tf/map_odom
+    initial_pose_y: float = 0.0
+    initial_pose_a: float = 0.0
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+    base_frame: str = "base_link"
+    request_delay_s: float = 0.3  # sim s from a tf / pose / plan / goal / cancel stamp to its effect
+    stop_duration_s: float = 0.5  # sim s of zero commands after a goal ends
+    status_period_s: float = 1.0  # sim s between repeated statuses while a goal is pending or active
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        for name in ("request_delay_s", "stop_duration_s"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be zero or positive, got {value}")
+        if not (math.isfinite(self.status_period_s) and self.status_period_s > 0):
+            raise ValueError(f"status_period_s must be positive, got {self.status_period_s}")
+
+
+def plan_result(plan: Path, request_id: int) -> PlanResult:
+    if plan.error or not len(plan.poses):
+        return PlanResult(request_id, False, reason=plan.error or "empty plan")
+    return PlanResult(request_id, True, np.asarray(plan.poses, dtype=float))
+
+
+class NavigatorNode(Node):
+    service = "navigator"
+    Params = NavigatorNodeParams
+
+    def setup(self) -> None:
+        p = self.params
+        self.core = Navigator(p)
+        self.frames = RobotFrames(p.map_frame, p.odom_frame, (p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
+        self.delay_ns = round(p.request_delay_s * NS_PER_S)
+        self.stop_ns = round(p.stop_duration_s * NS_PER_S)
+        self.status_period_ns = round(p.status_period_s * NS_PER_S)
+        self.pending: list[tuple[int, int, int, object]] = []   # (stamp, kind, seq, message) not yet in effect
+        self.pose = None                      # the latest PoseWithCovariance in effect
+        self.status: NavStatus | None = None  # the latest published
+        self.status_ns = 0                    # when it was published
+        self.last_cmd_ns: int | None = None   # the last tick a goal was running
+        self.followed = ""                    # goal_id of the plan the local planner follows ("" none)
+        self.plan_request_pub = self.publisher("plan_request")
+        self.follow_pub = self.publisher("follow_path")
+        self.cmd_pub = self.publisher("cmd_vel_nav")
+        self.clear_pub = self.publisher("costmap/clear")
+        self.status_pub = self.publisher("nav_status")
+        self.subscribe("local_cmd", self.on_local_cmd)
+        self.subscribe("odom", self.on_odom)
+        self.in_keys: dict[int, str] = {}
+        for kind, topic, check in ((MAP_ODOM, "tf/map_odom", self.frames.transform_problem),
+                                   (POSE, "pose", self._check_map_frame), (PLAN, "plan", self._check_map_frame),
+                                   (GOAL, "goal", None), (CANCEL, "cancel", None)):
+            self.in_keys[kind] = self.keys.resolve(topic)
+            self.subscribe(topic, lambda msg, k=kind, c=check: self._receive(k, c, msg), synced=False,
+                           max_delay_s=p.request_delay_s)
+        self.queryable("nav_status", self.answer_status)
+
+    # ------------------------------------------------------------ inputs
+
+    def _check_map_frame(self, msg) -> str:
+        if msg.header.frame_id != self.frames.map_frame:
+            return f"frame {msg.header.frame_id!r}, expected the map frame {self.frames.map_frame!r}"
+        return ""
+
+    def _receive(self, kind: int, check, msg) -> None:
+        problem = check(msg) if check is not None else ""
+        if problem:
+            key = self.in_keys[kind]
+            self.reject(key, MessageError(problem, type_name=type(msg).__name__, key=key))
+            return
+        # sorted as replay feeds them, whatever order they arrived in
+        bisect.insort(self.pending, (msg.header.stamp_ns, kind, msg.header.seq, msg), key=lambda item: item[:3])
+
+    def on_odom(self, msg: Odometry) -> None:
+        self.frames.set_odom(msg)
+
+    def _due(self, now_ns: int) -> tuple[list[Goal | CancelGoal], Path | None]:
+        """Put into effect the sporadic inputs stamped before now − request_delay_s, in stamp order;
+        returns the goals and cancels among them, and the newest plan."""
+        events, plan = [], None
+        while self.pending and self.pending[0][0] + self.delay_ns < now_ns:
+            _, kind, _, msg = self.pending.pop(0)
+            if kind == MAP_ODOM:
+                self.frames.set_map_odom(msg)
+            elif kind == POSE:
+                self.pose = msg
+            elif kind == PLAN:
+                plan = msg
+            else:
+                events.append(msg)
+        return events, plan
+
+    # ------------------------------------------------------------ the tick
+
+    def on_local_cmd(self, msg: LocalCommand) -> None:
+        now_s = self.now_ns / NS_PER_S
+        events, plan = self._due(self.now_ns)
+        robot = self.frames.robot_with_pose(self.frames.map_frame, self.pose)
+        for event in events:
+            is_goal = isinstance(event, Goal)
+            self.counters["goals" if is_goal else "cancels"] += 1
+            self._carry_out(self.core.step(now_s, NavInputs(pose=robot, goal=event if is_goal else None,
+                                                            cancel=None if is_goal else event)), final=False)
+        inputs = NavInputs(pose=robot, plan=self._plan_result(plan), control=self._control(msg))
+        self._carry_out(self.core.step(now_s, inputs), final=True)
+
+    def _plan_result(self, plan: Path | None) -> PlanResult | None:
+        if plan is None:
+            return None
+        goal_id, _, request = plan.goal_id.rpartition(REQUEST_SEPARATOR)
+        if goal_id != self.core.goal_id or not request.isdigit():
+            self.counters["plans_of_other_goals"] += 1
+            return None
+        return plan_result(plan, int(request))
+
+    def _control(self, msg: LocalCommand) -> ControlResult | None:
+        if self.core.state not in ACTIVE or msg.goal_id != self.core.goal_id:
+            return None   # idle, or still about a goal that has ended
+        return ControlResult(msg.ok, (msg.linear_x, msg.linear_y, msg.angular_z), msg.reason)
+
+    def _carry_out(self, actions: NavActions, final: bool) -> None:
+        core = self.core
+        if actions.cmd is not None:   # a goal ran in this step (perhaps ending in it)
+            self.last_cmd_ns = self.now_ns
+        if actions.recovery is not None:
+            self.counters[f"recoveries/{actions.recovery.name}"] += 1
+            if actions.recovery.name == "clear_costmaps":
+                self.clear_pub.publish(ClearCostmaps(header=self.header(),
+                                                     reset_distance=self.params.conservative_reset_dist))
+        if actions.plan_request is not None:
+            request = actions.plan_request
+            self.plan_request_pub.publish(Goal(header=self.header(self.frames.map_frame),
+                                               goal_id=f"{core.goal_id}{REQUEST_SEPARATOR}{request.request_id}",
+                                               pose=Pose2D(*request.goal)))
+        if actions.controller_plan is not None:
+            self._follow(core.goal_id, actions.controller_plan)
+        elif self.followed and (core.state not in FOLLOWING or core.goal_id != self.followed):
+            self._follow(self.followed, np.zeros((0, 3)))
+        for status in actions.statuses[:-1] if final else actions.statuses:
+            self._publish_status(status)
+        if final:
+            self._publish_command(actions)
+            if actions.statuses:
+                self._publish_status(actions.statuses[-1], periodic=core.state in ACTIVE)
+
+    def _follow(self, goal_id: str, poses: np.ndarray) -> None:
+        self.follow_pub.publish(Path(header=self.header(self.frames.map_frame), poses=poses, goal_id=goal_id))
+        self.followed = goal_id if len(poses) else ""
+
+    def _publish_command(self, actions: NavActions) -> None:
+        if actions.cmd is not None:
+            cmd = actions.cmd
+        elif self.last_cmd_ns is not None and self.now_ns <= self.last_cmd_ns + self.stop_ns:
+            cmd = ZERO
+        else:
+            return
+        self.cmd_pub.publish(Twist(header=self.header(self.params.base_frame), linear_x=cmd[0], linear_y=cmd[1],
+                                   angular_z=cmd[2]))
+
+    def _publish_status(self, status: NavStatus, periodic: bool = False) -> None:
+        last = self.status
+        changed = last is None or (status.goal_id, status.status, status.reason) != (last.goal_id, last.status,
+                                                                                     last.reason)
+        if changed or (periodic and self.now_ns >= self.status_ns + self.status_period_ns):
+            self.status = replace(status, header=self.header(self.frames.map_frame))
+            self.status_ns = self.now_ns
+            self.status_pub.publish(self.status)
+
+    # ------------------------------------------------------------ queries
+
+    def answer_status(self, parameters: dict[str, str]) -> NavStatus:
+        if parameters:
+            raise QueryError(f"{self.status_pub.key}: takes no parameters, got {sorted(parameters)}")
+        if self.status is None:
+            raise QueryError(f"{self.status_pub.key}: no goal yet (send one on {self.in_keys[GOAL]})")
+        return self.status

@@ -1,0 +1,103 @@
+"""The whole navigation stack in lockstep, in one process: sim (room), chassis, lidar, map_server,
+truth_pose (the pose source), costmap, global_planner (answering plan_request), local_planner,
+velocity_smoother, collision_monitor and navigator. A goal across the room is reached without
+touching anything, within 5 cm and 2° by the simulator's truth; a goal inside the pillar ends
+aborted, naming why."""
+import math
+
+import numpy as np
+
+from conftest import REPO
+from omninav.schemas import decode
+from omninav.schemas.keys import KeyLayout
+from omninav.schemas.messages import Goal, Header, Pose2D
+from omninav.services.chassis.node import ChassisNode
+from omninav.services.chassis.odometry import wrap_angle
+from omninav.services.costmap.node import CostmapNode, CostmapNodeParams
+from omninav.services.global_planner.node import PlannerNode, PlannerNodeParams
+from omninav.services.lidar.node import LidarNode, LidarNodeParams
+from omninav.services.local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
+from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
+from omninav.services.map_server.node import MapServerNode, MapServerParams
+from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
+from omninav.services.navigator.truth_pose import TruthPoseNode
+from omninav.services.runtime.inprocess import InProcessRunner
+from omninav.services.runtime.node import NS_PER_S, Node
+from omninav.sim.node import SimNode, SimNodeParams
+from omninav.sim.world import load_world, world_path
+
+KEYS = KeyLayout("r1")
+PARAMS = REPO / "compose" / "params"
+START = tuple(float(v) for v in load_world(world_path("room")).robot.start)
+
+
+class GoalAt(Node):
+    """Sends one goal on the first clock at or after `at_s` of sim time (a user, in lockstep)."""
+    service = "goal_sender"
+
+    def __init__(self, goal: Goal, at_s: float):
+        self.goal, self.at_ns = goal, round(at_s * NS_PER_S)
+        super().__init__()
+
+    def setup(self) -> None:
+        self.sent = False
+        self.goal_pub = self.publisher("goal")
+        self.subscribe("sim/clock", self.on_clock)
+
+    def on_clock(self, clock) -> None:
+        if not self.sent and clock.header.stamp_ns >= self.at_ns:
+            self.goal.header.stamp_ns = clock.header.stamp_ns
+            self.goal_pub.publish(self.goal)
+            self.sent = True
+
+
+def navigate_room(x: float, y: float, yaw: float, goal_id: str, max_sim_s: float):
+    """Run the stack until the goal ends (or max_sim_s); returns (sim node, the statuses)."""
+    start = dict(initial_pose_x=START[0], initial_pose_y=START[1], initial_pose_a=START[2])
+    sim = SimNode(SimNodeParams(world="room", dt=0.02))   # 50 Hz physics: the control loop runs at 20 Hz
+    navigator = NavigatorNode(NavigatorNodeParams(xy_goal_tolerance=0.03, yaw_goal_tolerance=0.025,
+                                                  planner_patience=2.0, recovery_behaviors=("clear_costmaps",),
+                                                  **start))
+    nodes = [sim, ChassisNode(), LidarNode(LidarNodeParams(world="room")),
+             MapServerNode(MapServerParams(yaml_filename=str(REPO / "compose" / "maps" / "room.yaml"),
+                                           publish_period_s=1.0)),
+             TruthPoseNode(),
+             CostmapNode(CostmapNodeParams(
+                 global_costmap_files=(str(PARAMS / "costmap_common_params.yaml"),
+                                       str(PARAMS / "costmap_global_params.yaml")),
+                 local_costmap_files=(str(PARAMS / "costmap_common_params.yaml"),
+                                      str(PARAMS / "costmap_local_params.yaml")), **start)),
+             PlannerNode(PlannerNodeParams(goal_topic="plan_request", planner_frequency=0.0, use_dijkstra=False,
+                                           **start)),
+             LocalPlannerNode(LocalPlannerNodeParams(**start)),
+             VelocitySmootherNode(), CollisionMonitorNode(), navigator,
+             GoalAt(Goal(header=Header(frame_id="map"), goal_id=goal_id, pose=Pose2D(x, y, yaw)), at_s=1.0)]
+    runner = InProcessRunner(nodes)
+    statuses = []
+    runner.tap(lambda key, payload, stamp: statuses.append(decode(payload))
+               if key == KEYS.robot("nav_status") else None)
+    ended = lambda: bool(statuses) and statuses[-1].status in ("succeeded", "aborted", "canceled")
+    runner.run_until(ended, round(max_sim_s / sim.params.dt))
+    runner.run_until(lambda: False, round(1.0 / sim.params.dt))     # the robot comes to rest
+    runner.close()
+    return sim, statuses
+
+
+def test_a_goal_across_the_room_is_reached_without_touching_anything():
+    goal = (8.3, 3.8, math.pi / 2)          # past the round table, between the pillar and the desk
+    sim, statuses = navigate_room(*goal, goal_id="across", max_sim_s=60.0)
+    assert [(s.goal_id, s.status) for s in statuses][-1] == ("across", "succeeded"), statuses[-1].reason
+    assert sim.sim.collisions == 0
+    truth = sim.last_truth.pose
+    assert math.hypot(truth.x - goal[0], truth.y - goal[1]) <= 0.05
+    assert abs(float(wrap_angle(truth.theta - goal[2]))) <= math.radians(2.0)
+
+
+def test_a_goal_inside_the_pillar_ends_aborted_naming_why():
+    sim, statuses = navigate_room(5.0, 4.0, 0.0, goal_id="pillar", max_sim_s=30.0)
+    final = statuses[-1]
+    assert (final.goal_id, final.status) == ("pillar", "aborted")
+    assert "goal_in_obstacle" in final.reason and "clear_costmaps" in final.reason
+    assert sim.sim.collisions == 0
+    start = np.array(START[:2])
+    assert np.hypot(sim.last_truth.pose.x - start[0], sim.last_truth.pose.y - start[1]) < 0.05   # never moved
