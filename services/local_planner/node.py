@@ -196,11 +196,8 @@ class LocalPlannerNode(Node):
         if p.controller == "dwa":
             return self.dwa
         if p.controller == "eband":
-            try:
-                from .eband import ElasticBandPlanner
-                from .params import ElasticBandParams
-            except ImportError as exc:
-                raise ValueError(f"controller 'eband': the elastic band is not available ({exc})") from None
+            from .eband import ElasticBandPlanner    # numba-compiled: loaded only when chosen
+            from .params import ElasticBandParams
             # one set of robot limits: the band's default to the node's (TEB spells them alike)
             shared = ["holonomic_robot", "controller_frequency", "max_vel_x", "max_vel_theta", "acc_lim_x",
                       "acc_lim_theta", *(["max_vel_y", "acc_lim_y"] if p.holonomic_robot else [])]
