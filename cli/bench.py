@@ -13,6 +13,8 @@ BENCHES: dict[str, str] = {
     "amcl": "omninav.services.localizer.bench",
     "planner": "omninav.services.global_planner.bench",
     "local": "omninav.services.local_planner.bench",
+    "missions": "omninav.services.navigator.bench",
+    "paper": "omninav.services.navigator.paper_bench",
 }
 
 

@@ -1,10 +1,12 @@
-"""`omninav demo`: the main job. The simulated robot runs as separate processes under `omninav up`
-(recorder, sim, chassis, lidar), a teleop script drives it round the room, and then the recording
-is replayed deterministically into the chassis (byte-for-byte compare) and drawn as a picture."""
+"""`omninav demo`: the main job. A navigation mission in the simulated room: `omninav navigate`
+starts every service as its own process (recorder, sim, chassis, lidar, map_server, AMCL on the
+room's map, costmap, global and local planner, velocity smoother, collision monitor, navigator),
+sends the goals one after another and scores the run against the ground truth; then the recording
+is replayed deterministically into the chassis (byte-for-byte compare) and drawn as a picture:
+map, global costmap, planned and driven paths, scans."""
 from __future__ import annotations
 
 import argparse
-import signal
 import subprocess
 import sys
 import time
@@ -12,20 +14,17 @@ from pathlib import Path
 
 import yaml
 
-from ..schemas.keys import KeyLayout
-from ..services.runtime.zenoh_config import free_loopback_endpoint, open_client
-
 REPO = Path(__file__).resolve().parents[1]
-COMPOSE = REPO / "compose" / "sim.yaml"
-# along the wall, sideways into the open, a turn on the spot, diagonally on: what a mecanum robot can do
-ROUTE = "0.4,0,0,7;0,0.3,0,5;0,0,0.6,2.6;0.3,0.1,0,3"
-STEP_TIMEOUT_S = 300
-READY_TIMEOUT_S = 180
+# across the room to the square table's side, then back past the pillar to the dining table
+GOALS = ((8.3, 3.5, 90.0), (3.0, 4.8, 180.0))
+STEP_TIMEOUT_S = 900
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--out", help="output folder (default out/demo-<date>-<time>)")
-    parser.add_argument("--route", default=ROUTE, help=f"teleop script 'vx,vy,wz,seconds;…' (default {ROUTE})")
+    parser.add_argument("--goal", nargs=3, type=float, action="append", metavar=("X", "Y", "YAW"),
+                        help="a goal in the room (m, m, degrees); repeat for several (default: "
+                             + ", then ".join(f"({x:g}, {y:g}, {yaw:g}°)" for x, y, yaw in GOALS) + ")")
     parser.add_argument("--rate", type=float, default=2.0, help="sim speed, sim seconds per wall second (default 2)")
 
 
@@ -33,66 +32,40 @@ def _omninav(*args: str) -> list[str]:
     return [sys.executable, "-m", "omninav.cli.main", *args]
 
 
-def _wait_until_ready(router: str, names: list[str], up: subprocess.Popen) -> bool:
-    """Until every service of the compose file has declared its liveliness token (or up died)."""
-    keys = KeyLayout()
-    deadline = time.monotonic() + READY_TIMEOUT_S
-    with open_client(router) as session:
-        while time.monotonic() < deadline and up.poll() is None:
-            if all(any(r.ok is not None for r in session.liveliness().get(keys.alive(n), timeout=0.2)) for n in names):
-                return True
-            time.sleep(0.2)
-    return False
-
-
-def _compose_for(out: Path, rate: float) -> tuple[Path, list[str]]:
-    """compose/sim.yaml with the recording in the demo's folder and the chosen sim rate, and the
-    names of its services."""
-    compose = yaml.safe_load(COMPOSE.read_text())
-    for service in compose["services"]:
-        if service.get("service") == "recorder":
-            service.setdefault("params", {})["output"] = str(out / "run.mcap")
-        if service.get("service") == "sim":
-            service.setdefault("params", {})["rate"] = rate
-    path = out / "compose.yaml"
-    path.write_text(yaml.safe_dump(compose, sort_keys=False))
-    return path, [service.get("name") or service["service"] for service in compose["services"]]
-
-
-def _step(title: str, cmd: list[str], log: Path) -> int:
+def _step(title: str, cmd: list[str], log: Path, show_output: bool = False) -> int:
     print(f"== {title}", flush=True)
     with open(log, "ab") as sink:
-        code = subprocess.run(cmd, cwd=REPO, stdout=sink, stderr=subprocess.STDOUT, timeout=STEP_TIMEOUT_S).returncode
-    print(f"   {'ok' if code == 0 else f'FAILED (exit {code}), see {log}'}", flush=True)
-    return code
+        done = subprocess.run(cmd, cwd=REPO, stdout=subprocess.PIPE if show_output else sink,
+                              stderr=sink, timeout=STEP_TIMEOUT_S)
+    if show_output:
+        print("   " + done.stdout.decode(errors="replace").strip().replace("\n", "\n   "), flush=True)
+    print(f"   {'ok' if done.returncode == 0 else f'FAILED (exit {done.returncode}), see {log}'}", flush=True)
+    return done.returncode
+
+
+def _params_of(compose: Path, name: str) -> list[str]:
+    """`--set k=v` for each parameter the mission's compose file gave a service: the replay must
+    run the service as the live run did."""
+    service = next(s for s in yaml.safe_load(compose.read_text())["services"] if s["name"] == name)
+    return [arg for key, value in service.get("params", {}).items() for arg in ("--set", f"{key}={value}")]
 
 
 def main(args: argparse.Namespace) -> int:
     out = Path(args.out or REPO / "out" / time.strftime("demo-%Y%m%d-%H%M%S")).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    router = free_loopback_endpoint()
     log = out / "demo.log"
-    print(f"== omninav up {COMPOSE.relative_to(REPO)}: recorder, sim, chassis, lidar (log: {log})", flush=True)
-    compose, names = _compose_for(out, args.rate)
-    with open(log, "wb") as sink:
-        up = subprocess.Popen(_omninav("up", str(compose), "--router", router),
-                              cwd=REPO, stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
-    try:
-        if not _wait_until_ready(router, names, up):
-            print(f"   the services did not all start; see {log}", file=sys.stderr)
-            return 1
-        drove = _step(f"teleop --script {args.route}", _omninav("teleop", "--script", args.route, "--router", router), log)
-    finally:
-        up.send_signal(signal.SIGINT)
-        stopped = up.wait(60)
-    print(f"== stopped every service (up exit {stopped})", flush=True)
     recording = out / "run.mcap"
-    if drove != 0 or stopped != 0 or not recording.is_file():
-        print(f"demo failed; the log is {log}", file=sys.stderr)
+    goals = [str(v) for goal in (args.goal or GOALS) for v in ("--goal", *goal)]
+    navigated = _step("navigate --world room --localization amcl (every service its own process)",
+                      _omninav("navigate", "--world", "room", *goals, "--localization", "amcl", "--rate", str(args.rate),
+                               "-o", str(out), "--record", str(recording)), log, show_output=True)
+    if not recording.is_file():
+        print(f"demo failed: no recording; the log is {log}", file=sys.stderr)
         return 1
     replayed = _step("replay run.mcap --into chassis --compare",
-                     _omninav("replay", str(recording), "--into", "chassis", "--compare"), log)
+                     _omninav("replay", str(recording), "--into", "chassis", "--compare",
+                              *_params_of(out / "compose.yaml", "chassis")), log)
     drawn = _step("report run.mcap -o run.png",
                   _omninav("report", str(recording), "-o", str(out / "run.png"), "--world", "sim/worlds/room.yaml"), log)
     print(f"\nrecording {recording}\npicture   {out / 'run.png'}\nlog       {log}")
-    return 0 if replayed == 0 and drawn == 0 else 1
+    return 0 if navigated == 0 and replayed == 0 and drawn == 0 else 1

@@ -1,6 +1,7 @@
 """`omninav report FILE.mcap -o run.png`: one picture of what happened in a recorded run.
 
-It draws the world (or its map), the true trajectory, the wheel-odometry trajectory (and the
+It draws the world (or its map), the map the robot navigated on and the last global costmap when
+the recording has them (a navigation run), the global plans and goals, the true trajectory, the wheel-odometry trajectory (and the
 follower-wheel one) expressed in the world frame by aligning the first odometry pose with the truth
 at the same stamp, the scans at a few moments (endpoints placed with the true pose at the scan's
 stamp), the movers' traces, start and end; the title sums up duration, distance, the final
@@ -24,13 +25,13 @@ from matplotlib.axes import Axes
 from matplotlib.collections import PathCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
-from matplotlib.patches import Circle, Polygon
+from matplotlib.patches import Circle, Patch, Polygon
 from mcap.exceptions import McapError
 
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..schemas import MessageError, decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
-from ..schemas.messages import Diagnostic, LaserScan, Obstacles, Odometry
+from ..schemas.messages import Costmap, Diagnostic, Goal, LaserScan, Obstacles, OccupancyGrid, Odometry, Path as PathMsg
 from ..services.chassis.odometry import compose, inverse, wrap_angle
 from ..services.recorder.mcap_io import Record, read_records
 from ..sim.raycast import LidarParams, laser_pose
@@ -82,6 +83,10 @@ class RunData:
     mover_circles: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))   # (T, K, 3)
     sim_values: dict = field(default_factory=dict)      # the last sim Diagnostic's values
     malformed: int = 0
+    map: OccupancyGrid | None = None                    # the last map served (navigation runs)
+    costmap: Costmap | None = None                      # the last global costmap
+    plans: list[PathMsg] = field(default_factory=list)  # the global plans with poses, in stamp order
+    goals: list[Goal] = field(default_factory=list)
 
     @property
     def span_ns(self) -> tuple[int, int] | None:
@@ -116,7 +121,9 @@ def load_run(path: str | Path, robot: str = DEFAULT_ROBOT) -> RunData:
     path = Path(path)
     keys = KeyLayout(robot)
     wanted = {keys.sim_robot("truth"): "truth", keys.robot("odom"): "odom",
-              keys.robot("odom_follower"): "follower", keys.robot("scan"): "scan", keys.sim("movers"): "movers"}
+              keys.robot("odom_follower"): "follower", keys.robot("scan"): "scan", keys.sim("movers"): "movers",
+              keys.robot("map"): "map", keys.robot("costmap/global"): "costmap", keys.robot("plan"): "plans",
+              keys.robot("goal"): "goals"}
     diag_prefix = keys.diagnostics("sim").rsplit("/", 1)[0] + "/"
     found: dict[str, list] = {name: [] for name in wanted.values()}
     run = RunData()
@@ -144,6 +151,12 @@ def load_run(path: str | Path, robot: str = DEFAULT_ROBOT) -> RunData:
         run.mover_stamps = np.array([m.header.stamp_ns for m in movers], np.int64)
         run.mover_circles = np.array([m.circles for m in movers], np.float64).reshape(len(movers), count, 3)
     run.sim_values = dict(sim_diag.values) if sim_diag is not None else {}
+    for name in ("map", "costmap", "plans", "goals"):
+        found[name].sort(key=lambda m: (m.header.stamp_ns, m.header.seq))
+    run.map = found["map"][-1] if found["map"] else None
+    run.costmap = found["costmap"][-1] if found["costmap"] else None
+    run.plans = [p for p in found["plans"] if len(p.poses)]
+    run.goals = found["goals"]
     return run
 
 
@@ -202,15 +215,30 @@ def new_figure(world: World | None = None, width_in: float = 11.0) -> tuple[Figu
     return fig, ax
 
 
+def _extent(info) -> tuple[float, float, float, float]:
+    x0, y0 = info.origin.x, info.origin.y
+    return x0, x0 + info.width * info.resolution, y0, y0 + info.height * info.resolution
+
+
+def draw_grid(ax: Axes, grid: OccupancyGrid, **style) -> None:
+    """An occupancy grid with an unrotated origin: occupied dark, unknown light grey, free white."""
+    shade = np.where(grid.data > GRID_OBSTACLE, 0.1, np.where(grid.data < 0, 0.85, 1.0))
+    ax.imshow(shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", interpolation="nearest",
+              extent=_extent(grid.info), **{"zorder": 0, **style})
+
+
+def draw_costmap(ax: Axes, costmap: Costmap, **style):
+    """A costmap's non-zero costs (inflation to lethal) over whatever is drawn below; unknown left out."""
+    costs = np.ma.masked_where((costmap.data == 0) | (costmap.data == 255), costmap.data)
+    return ax.imshow(costs, cmap="YlOrRd", vmin=0, vmax=254, origin="lower", interpolation="nearest",
+                     extent=_extent(costmap.info), **{"alpha": 0.45, "zorder": 0.5, **style})
+
+
 def draw_world(ax: Axes, world: World) -> None:
     """The static world: the map's cells (occupied dark, unknown light grey), solids, circles."""
     if world.grid is not None:
-        grid = world.grid if world.grid.info.origin.theta == 0.0 else world.rasterize(world.grid.info.resolution)
-        info = grid.info
-        shade = np.where(grid.data > GRID_OBSTACLE, 0.1, np.where(grid.data < 0, 0.85, 1.0))
-        x0, y0 = info.origin.x, info.origin.y
-        ax.imshow(shade, cmap="gray", vmin=0.0, vmax=1.0, origin="lower", interpolation="nearest", zorder=0,
-                  extent=(x0, x0 + info.width * info.resolution, y0, y0 + info.height * info.resolution))
+        draw_grid(ax, world.grid if world.grid.info.origin.theta == 0.0
+                  else world.rasterize(world.grid.info.resolution))
     for quad in world.solids:
         ax.add_patch(Polygon(quad, closed=True, facecolor="0.55", edgecolor="0.35", linewidth=0.5, zorder=1))
     for x, y, r in world.circles:
@@ -253,6 +281,29 @@ def draw_run(ax: Axes, run: RunData, world: World | None = None, scan_moments: i
     """Trajectories, scans, movers and markers of a run; returns the legend handles."""
     handles = []
     footprint = world.robot.footprint if world is not None else DEFAULT_FOOTPRINT
+    if run.map is not None and run.map.info.origin.theta == 0.0:
+        draw_grid(ax, run.map, alpha=0.5, zorder=0.2)
+    if run.costmap is not None and run.costmap.info.origin.theta == 0.0:
+        draw_costmap(ax, run.costmap)
+        handles.append(Patch(facecolor=colormaps["YlOrRd"](0.6), alpha=0.45, label="global costmap (last)"))
+    first_plans = {}
+    for plan in run.plans:          # the first plan of each goal stands out; replans are thin
+        first_plans.setdefault(plan.goal_id.split("#")[0], plan)
+    for k, plan in enumerate(run.plans):
+        first = first_plans.get(plan.goal_id.split("#")[0]) is plan
+        (line,) = ax.plot(plan.poses[:, 0], plan.poses[:, 1], color="tab:purple", zorder=4.5,
+                          linewidth=1.4 if first else 0.6, alpha=0.9 if first else 0.4, linestyle="-")
+        if k == 0:
+            line.set_label("global plans (first per goal bold)")
+            handles.append(line)
+    for k, goal in enumerate(run.goals):
+        g = goal.pose
+        marker = ax.plot(g.x, g.y, "*", color="tab:purple", markersize=13, zorder=8,
+                         label="goals" if k == 0 else None)[0]
+        ax.annotate("", (g.x + 0.4 * math.cos(g.theta), g.y + 0.4 * math.sin(g.theta)), (g.x, g.y), zorder=8,
+                    arrowprops=dict(arrowstyle="->", color="tab:purple", linewidth=1.2))
+        if k == 0:
+            handles.append(marker)
     for k in range(run.mover_circles.shape[1]):
         trace = run.mover_circles[:, k]
         (line,) = ax.plot(trace[:, 0], trace[:, 1], color="tab:red", linewidth=0.8, alpha=0.5, linestyle=":")

@@ -4,7 +4,7 @@ from omninav.services.recorder.mcap_io import read_records
 
 def test_demo_runs_records_replays_and_draws(processes_no_router, tmp_path):
     out = tmp_path / "demo"
-    demo = processes_no_router.omninav("demo", "-o", str(out), "--route", "0.3,0,0,2;0,0.2,0,1")
+    demo = processes_no_router.omninav("demo", "-o", str(out), "--goal", "3.2", "0.9", "30")
     assert demo.wait(300) == 0, processes_no_router.log_of(demo)
     log = processes_no_router.log_of(demo)
     assert "replay run.mcap --into chassis --compare\n   ok" in log

@@ -4,9 +4,10 @@ import numpy as np
 import pytest
 
 from omninav.cli.main import main
-from omninav.cli.report import in_world_frame, load_run, summarize
+from omninav.cli.report import in_world_frame, load_run, report_figure, summarize
 from omninav.schemas import encode
-from omninav.schemas.messages import Diagnostic, Header, Obstacles, Odometry, Pose2D
+from omninav.schemas.messages import (Costmap, Diagnostic, Goal, Header, MapMetaData, Obstacles, OccupancyGrid,
+                                      Odometry, Path, Pose2D)
 from omninav.services.chassis.odometry import integrate
 from omninav.services.recorder.mcap_io import RecordingWriter
 from omninav.sim.raycast import LidarParams, make_scan, scan
@@ -131,3 +132,25 @@ def test_missing_damaged_and_wrong_inputs_fail_clearly(tmp_path, capsys):
     assert main(["report", str(recording), "-o", str(out), "--robot", "r2"]) == 2
     assert "nothing to draw for robot 'r2'" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_navigation_run_brings_its_map_costmap_plans_and_goals(tmp_path):
+    recording = tmp_path / "nav.mcap"
+    info = MapMetaData(resolution=0.05, width=200, height=160, origin=Pose2D(0.0, 0.0, 0.0))
+    costs = np.zeros((160, 200), np.uint8)
+    costs[40:60, 40:60] = 254
+    with RecordingWriter(recording) as writer:
+        def put(key, msg, t_s):
+            msg.header.stamp_ns, msg.header.seq = round(t_s * 1e9), 1
+            writer.write(key, type(msg).__name__, encode(msg), 1, msg.header.stamp_ns, msg.header.stamp_ns)
+        put("omninav/r1/map", OccupancyGrid(info=info, data=np.zeros((160, 200), np.int8)), 0.5)
+        put("omninav/r1/costmap/global", Costmap(info=info, data=costs), 1.0)
+        put("omninav/r1/goal", Goal(goal_id="g1", pose=Pose2D(4.0, 2.0, 1.0)), 1.0)
+        put("omninav/r1/plan", Path(goal_id="g1#1", poses=np.zeros((0, 3)), error="no_path: x"), 1.2)
+        put("omninav/r1/plan", Path(goal_id="g1#2", poses=np.array([[1.2, 1.0, 0.0], [4.0, 2.0, 1.0]])), 1.5)
+    run = load_run(recording)
+    assert run.map.info.width == 200 and run.costmap.data.max() == 254
+    assert [p.goal_id for p in run.plans] == ["g1#2"] and run.goals[0].goal_id == "g1"    # failed plans left out
+    out = tmp_path / "nav.png"
+    report_figure(run, load_world(world_path("room")), "room").savefig(out)
+    assert out.read_bytes()[:8] == PNG_MAGIC

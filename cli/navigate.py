@@ -1,0 +1,376 @@
+"""`omninav navigate --world W --goal X Y YAW [--goal …]`: one navigation mission in the simulator.
+
+Every service runs as its own process under `omninav up` (a compose file written into the run's
+folder, every service with restart: no): recorder, sim, chassis, lidar, map_server (the world's
+map; a world without a shipped map is rasterized into the run's folder), the localization (amcl:
+the localizer on that map starting at the world's start pose; slam: the slam service, which then
+serves the map; truth: truth_pose, the ground truth relayed as the pose), costmap, global_planner
+(answering the navigator's plan_request), local_planner, velocity_smoother, collision_monitor and
+navigator. Once every service is alive, the goals are sent one after another on `goal` (stamped
+with the sim clock); each ends with its nav_status (succeeded, aborted, canceled) or, after
+--timeout sim seconds, with a cancel. A failed goal ends the mission. Then everything is stopped
+(the recorder last) and the summary is computed from the recording (services/navigator/mission.py).
+
+Exit status: 0 every goal reached without collision; 1 the mission failed; 2 a user error (unknown
+world, a goal outside the map) or a service that could not start or died — the recording is kept.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import queue
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+import zenoh
+
+from ..schemas.keys import DEFAULT_ROBOT, KeyLayout
+from ..schemas.messages import CancelGoal, Clock, Goal, Header, NavStatus, Pose2D
+from ..services.chassis.kinematics import DRIVES
+from ..services.map_server.mapio import save_map
+from ..services.navigator.mission import TERMINAL, load_mission, summarize_mission, summary_lines
+from ..services.runtime.compose import ComposeError, load_compose
+from ..services.runtime.errors import UserError, exits_2_on_user_error
+from ..services.runtime.live import LiveRunner
+from ..services.runtime.node import NS_PER_S, Node
+from ..services.runtime.zenoh_config import free_loopback_endpoint, open_client
+from ..sim.node import open_world
+from ..sim.world import World, WorldError, world_path
+
+REPO = Path(__file__).resolve().parents[1]
+PARAMS = REPO / "compose" / "params"
+SHIPPED_MAPS = {"room": REPO / "compose" / "maps" / "room.yaml"}   # shipped world name -> its map file
+MAP_RESOLUTION = 0.05
+LOCALIZATIONS = ("amcl", "slam", "truth")
+# the navigator's arrival check, tighter than move_base's 0.10 m / 0.05 rad: the local planner's
+# final approach stops within 0.02 m / 0.02 rad, and a mission aims for 5 cm and 2°
+ARRIVAL = {"xy_goal_tolerance": 0.03, "yaw_goal_tolerance": 0.03}
+SETTLE_S = 1.0          # sim s after the last goal ends: the robot comes to rest before the stop
+CANCEL_WAIT_S = 2.0     # sim s to wait for the navigator to confirm a cancel
+POLL_S = 0.1
+STOP_TIMEOUT_S = 120
+READY_TIMEOUT_S = 300   # wall s for every service to come up (numba warm-ups on a loaded machine)
+CLOCK_WAIT_S = 30.0     # wall s for the first clock once every service is alive
+
+
+class NavigateError(UserError):
+    """A user error or a mission that could not run: one line, exit status 2."""
+
+
+# ---------------------------------------------------------------- the mission, as a Node on the bus
+
+class MissionNode(Node):
+    """Publishes the goals and cancels the main thread hands it, stamped with the sim clock, and
+    keeps the latest nav_status of every goal."""
+    service = "navigate"
+
+    def setup(self) -> None:
+        self.goal_pub = self.publisher("goal")
+        self.cancel_pub = self.publisher("cancel")
+        self.subscribe("sim/clock", self.on_clock)
+        self.subscribe("nav_status", self.on_status, synced=False)
+        self.outbox: queue.SimpleQueue = queue.SimpleQueue()
+        self.statuses: dict[str, NavStatus] = {}
+        self.clock_seen = threading.Event()
+
+    def on_clock(self, _msg: Clock) -> None:
+        self.clock_seen.set()       # Node.process keeps now_ns, the latest sim time
+
+    def on_status(self, msg: NavStatus) -> None:
+        self.statuses[msg.goal_id] = msg
+
+    def pace_s(self) -> float:
+        return POLL_S / 2
+
+    def tick(self) -> None:
+        while self.clock_seen.is_set():
+            try:
+                msg = self.outbox.get_nowait()
+            except queue.Empty:
+                return
+            msg.header = self.header("map")
+            (self.goal_pub if isinstance(msg, Goal) else self.cancel_pub).publish(msg)
+
+    def send(self, msg: Goal | CancelGoal) -> None:
+        self.outbox.put(msg)
+
+    @property
+    def now_s(self) -> float:
+        return self.now_ns / NS_PER_S
+
+
+# ---------------------------------------------------------------- the compose file
+
+def map_for(world: World, name: str, folder: Path) -> Path:
+    """The map_server YAML of the world: the shipped one, or the world rasterized into `folder`."""
+    shipped = SHIPPED_MAPS.get(name)
+    if shipped is not None and Path(world.source).resolve() == world_path(name).resolve():
+        return shipped
+    return save_map(world.rasterize(MAP_RESOLUTION), folder / f"{world.name}_map")
+
+
+def localization_service(kind: str, start: dict, map_file: Path, seed: int) -> dict:
+    if kind == "truth":
+        return {"name": "truth_pose", "service": "truth_pose"}
+    if kind == "slam":
+        return {"name": "slam", "service": "slam", "params": {**start, "seed": seed}}
+    return {"name": "localizer", "service": "localizer", "params_file": str(PARAMS / "amcl_paper.yaml"),
+            "params": {"map_file": str(map_file), **start, "seed": seed,
+                       "initial_cov_xx": 0.0025, "initial_cov_yy": 0.0025, "initial_cov_aa": 0.0025}}
+
+
+def drive_params(drive: str) -> dict:
+    """The local planner's settings for the drive: a differential drive cannot strafe."""
+    return {} if drive != "diff" else {"holonomic_robot": False, "max_vel_y": 0.0, "min_vel_y": 0.0, "y_vels": []}
+
+
+def compose_for(world: World, world_file: Path, map_file: Path, drive: str, localization: str, recording: Path,
+                seed: int, rate: float, robot: str) -> dict:
+    """The compose mapping of a mission (absolute paths: `up` may run anywhere)."""
+    x, y, yaw = (float(v) for v in world.robot.start)
+    start = {"initial_pose_x": x, "initial_pose_y": y, "initial_pose_a": yaw}
+    costmap_files = {f"{which}_costmap_files": [str(PARAMS / "costmap_common_params.yaml"),
+                                                str(PARAMS / f"costmap_{which}_params.yaml")]
+                     for which in ("global", "local")}
+    services = [
+        {"name": "recorder", "service": "recorder", "params": {"output": str(recording)}},
+        {"name": "sim", "service": "sim", "params": {"world": str(world_file), "drive": drive, "seed": seed,
+                                                     "rate": rate}},
+        {"name": "chassis", "service": "chassis", "params": {"drive": drive}},
+        {"name": "lidar", "service": "lidar", "params": {"world": str(world_file)}},
+    ]
+    if localization != "slam":      # slam serves its own map
+        services.append({"name": "map_server", "service": "map_server",
+                         "params": {"yaml_filename": str(map_file), "publish_period_s": 1.0}})
+    services += [
+        localization_service(localization, start, map_file, seed),
+        {"name": "costmap", "service": "costmap", "params": {**costmap_files, **start}},
+        {"name": "global_planner", "service": "global_planner",
+         "params": {"goal_topic": "plan_request", "planner_frequency": 0.0, "use_dijkstra": False, **start}},
+        {"name": "local_planner", "service": "local_planner", "params": {**drive_params(drive), **start}},
+        {"name": "velocity_smoother", "service": "velocity_smoother"},
+        {"name": "collision_monitor", "service": "collision_monitor"},
+        {"name": "navigator", "service": "navigator", "params": {**start, **ARRIVAL}},
+    ]
+    for service in services:
+        service["restart"] = "no"       # a service that dies ends the mission, it is not hidden by a restart
+    return {"robot": robot, "services": services}
+
+
+# ---------------------------------------------------------------- arguments
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--world", required=True, help="a shipped world's name (room, office, ...) or a world file")
+    parser.add_argument("--goal", nargs=3, type=float, action="append", metavar=("X", "Y", "YAW"),
+                        help="a goal in the map frame: metres, metres, degrees; repeat for several, visited "
+                             "in order (default: the world file's goals)")
+    parser.add_argument("--drive", choices=DRIVES, help="the robot's drive (default: the world's)")
+    parser.add_argument("--localization", choices=LOCALIZATIONS, default="amcl",
+                        help="amcl on the world's map (default), slam, or truth (the simulator's true pose)")
+    parser.add_argument("--record", metavar="FILE", help="the recording (default OUT/run.mcap)")
+    parser.add_argument("-o", "--out", help="folder for the compose file, map and logs "
+                                            "(default out/navigate-<date>-<time>)")
+    parser.add_argument("--timeout", type=float, default=120.0, metavar="S",
+                        help="sim seconds allowed per goal before it is canceled (default 120)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="seed of the simulator's noise and of the localization's filter (default 0)")
+    parser.add_argument("--rate", type=float, default=1.0, help="sim seconds per wall second (default 1)")
+    parser.add_argument("--robot", default=DEFAULT_ROBOT, help="robot namespace (default r1)")
+    parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+
+
+def mission_goals(args: argparse.Namespace, world: World) -> np.ndarray:
+    """The goals (K, 3) in metres and radians; NavigateError if one lies outside the world's map."""
+    if args.goal:
+        goals = np.array([(x, y, math.radians(yaw)) for x, y, yaw in args.goal])
+    elif len(world.goals):
+        goals = world.goals.copy()
+    else:
+        raise NavigateError(f"world {world.name!r} names no goals: give --goal X Y YAW")
+    xmin, ymin, xmax, ymax = world.extent
+    for x, y, yaw in goals:
+        if not all(math.isfinite(v) for v in (x, y, yaw)):
+            raise NavigateError(f"goal ({x}, {y}, {yaw}) is not a finite pose")
+        if world.outside(np.array([x, y])):
+            raise NavigateError(f"goal ({x:g}, {y:g}) lies outside the map of {world.name!r}, which spans "
+                                f"x {xmin:g}..{xmax:g}, y {ymin:g}..{ymax:g} m")
+    return goals
+
+
+def check_numbers(args: argparse.Namespace) -> None:
+    for name, value in (("--timeout", args.timeout), ("--rate", args.rate)):
+        if not (math.isfinite(value) and value > 0):
+            raise NavigateError(f"{name} must be a positive number, got {value:g}")
+    if args.seed < 0:
+        raise NavigateError(f"--seed must be ≥ 0, got {args.seed}")
+
+
+# ---------------------------------------------------------------- running it
+
+class ServiceDied(Exception):
+    """A service of the mission is gone."""
+
+
+class Mission:
+    """The running stack: `up`, the mission node, and a liveliness subscriber that notices a
+    service whose token goes away (its process ended)."""
+
+    def __init__(self, router: str, names: list[str], up: subprocess.Popen, robot: str, log: Path):
+        self.names, self.up, self.log = names, up, log
+        self.node = MissionNode(robot=robot)
+        self.runner = LiveRunner(self.node, router)
+        self.worker = threading.Thread(target=self.runner.run, name="navigate-bus", daemon=True)
+        self.session = open_client(router)
+        self.prefix = KeyLayout(robot).alive("x")[:-1]
+        self.gone: list[str] = []
+        self.watch = self.session.liveliness().declare_subscriber(self.prefix + "*", self._on_token)
+
+    def _on_token(self, sample) -> None:
+        name = str(sample.key_expr)[len(self.prefix):]
+        if sample.kind == zenoh.SampleKind.DELETE and name in self.names:
+            self.gone.append(name)
+
+    def __enter__(self) -> "Mission":
+        self.worker.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.runner.stop()
+        self.worker.join(10.0)
+        self.watch.undeclare()
+        self.session.close()
+
+    def check_alive(self) -> None:
+        """ServiceDied naming the services whose liveliness token went away, or if `up` ended."""
+        if self.gone:
+            raise ServiceDied(f"service(s) {', '.join(self.gone)} stopped; see {self.log}")
+        if self.up.poll() is not None:
+            raise ServiceDied(f"omninav up ended (exit {self.up.returncode}); see {self.log}")
+
+    def wait_sim(self, done, seconds: float) -> bool:
+        """Until done() or `seconds` of sim time have passed (False then); checks the services."""
+        until = self.node.now_s + seconds
+        while not done():
+            if self.node.now_s >= until:
+                return False
+            self.check_alive()
+            time.sleep(POLL_S)
+        return True
+
+    def run_goal(self, goal_id: str, pose, timeout_s: float, say) -> str:
+        """Send one goal and wait for its end; the final status ('timeout' if it had to be canceled)."""
+        node = self.node
+        x, y, yaw = (float(v) for v in pose)
+        node.send(Goal(header=Header(), goal_id=goal_id, pose=Pose2D(x, y, yaw)))
+        say(f"{goal_id}: goal ({x:.2f}, {y:.2f}, {math.degrees(yaw):.1f} deg) sent at sim {node.now_s:.1f} s")
+
+        def ended() -> bool:
+            status = node.statuses.get(goal_id)
+            return status is not None and status.status in TERMINAL
+
+        if not self.wait_sim(ended, timeout_s):
+            node.send(CancelGoal(header=Header(), goal_id=goal_id))
+            self.wait_sim(ended, CANCEL_WAIT_S)
+            say(f"{goal_id}: no result within {timeout_s:g} sim s; canceled")
+            return "timeout"
+        status = node.statuses[goal_id]
+        say(f"{goal_id}: {status.status}{f' ({status.reason})' if status.reason else ''} at sim {node.now_s:.1f} s")
+        return status.status
+
+
+def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot: str) -> bool:
+    """Until every service of the compose file has declared its liveliness token (or up died)."""
+    keys = KeyLayout(robot)
+    deadline = time.monotonic() + READY_TIMEOUT_S
+    with open_client(router) as session:
+        while time.monotonic() < deadline and up.poll() is None:
+            if all(any(r.ok is not None for r in session.liveliness().get(keys.alive(n), timeout=0.2)) for n in names):
+                return True
+            time.sleep(0.2)
+    return False
+
+
+def start_stack(compose_file: Path, router: str, log: Path) -> subprocess.Popen:
+    with open(log, "wb") as sink:
+        return subprocess.Popen([sys.executable, "-m", "omninav.cli.main", "up", str(compose_file), "--router", router],
+                                cwd=REPO, stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
+
+
+def stop_stack(up: subprocess.Popen) -> int:
+    if up.poll() is None:
+        up.send_signal(signal.SIGINT)
+    try:
+        return up.wait(STOP_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        up.kill()
+        return up.wait()
+
+
+@exits_2_on_user_error("navigate")
+def main(args: argparse.Namespace) -> int:
+    check_numbers(args)
+    try:
+        world = open_world(args.world)
+    except WorldError as exc:
+        raise NavigateError(str(exc)) from None
+    world_file = Path(world.source).resolve()
+    drive = args.drive or world.robot.drive
+    goals = mission_goals(args, world)
+    out = Path(args.out or REPO / "out" / time.strftime("navigate-%Y%m%d-%H%M%S")).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    recording = Path(args.record).resolve() if args.record else out / "run.mcap"
+    recording.parent.mkdir(parents=True, exist_ok=True)
+    if recording.exists():
+        raise NavigateError(f"{recording} exists already; give another --record")
+    log = out / "services.log"
+    say = (lambda text: print(f"navigate: {text}", file=sys.stderr, flush=True)) if args.json else \
+        (lambda text: print(f"navigate: {text}", flush=True))
+
+    map_file = map_for(world, args.world, out)
+    compose = compose_for(world, world_file, map_file, drive, args.localization, recording, args.seed,
+                          args.rate, args.robot)
+    compose_file = out / "compose.yaml"
+    compose_file.write_text(yaml.safe_dump(compose, sort_keys=False))
+    try:
+        load_compose(compose_file)
+    except ComposeError as exc:
+        raise NavigateError(f"the mission's compose file is not usable: {exc}") from None
+    names = [s["name"] for s in compose["services"]]
+
+    router = free_loopback_endpoint()
+    say(f"starting {len(names)} services ({args.localization} localization, {drive} drive) in {world.name}; "
+        f"log {log}")
+    up = start_stack(compose_file, router, log)
+    problem = ""
+    try:
+        if not wait_until_ready(router, names, up, args.robot):
+            problem = f"the services did not all start; see {log}"
+        else:
+            with Mission(router, names, up, args.robot, log) as mission:
+                if not mission.node.clock_seen.wait(CLOCK_WAIT_S):
+                    raise ServiceDied(f"no sim clock within {CLOCK_WAIT_S:g} s; see {log}")
+                for k, goal in enumerate(goals):
+                    if mission.run_goal(f"g{k + 1}", goal, args.timeout, say) != "succeeded":
+                        break
+                mission.wait_sim(lambda: False, SETTLE_S)
+    except ServiceDied as exc:
+        problem = str(exc)
+    finally:
+        stopped = stop_stack(up)
+    say(f"stopped every service (up exit {stopped})")
+    if problem:
+        raise NavigateError(f"{problem}; the recording is kept: {recording}")
+    summary = summarize_mission(load_mission(recording, args.robot), world, goals_total=len(goals),
+                                recording=str(recording))
+    if args.json:
+        print(json.dumps(summary.to_json()))
+    else:
+        print("\n".join(summary_lines(summary)))
+    return 0 if summary.success else 1

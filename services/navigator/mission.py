@@ -1,0 +1,238 @@
+"""What a navigation mission achieved, from its recording and its world: the figures `omninav
+navigate` prints and `omninav bench missions` tabulates.
+
+`load_mission` reads what the summary needs from a recording (the ground truth, the movers, the
+goals sent, nav_status, the global plans and the sim's last Diagnostic); `summarize_mission` is
+pure and computes:
+
+- per goal: its last status (nav_status), the sim time from sending it to that status, the length
+  of its first global plan (the first non-empty plan whose goal_id is "<goal_id>#…") and the pose
+  error against the goal: at the status's stamp, or for the last goal where the robot came to
+  rest (the last ground truth recorded);
+- for the mission: time_s from the first goal sent to the last goal's end (or the last truth),
+  path_length_m of the true trajectory over that span, min_clearance_m between the footprint and
+  static obstacles and movers along it, and the collisions the sim counted (its contact starts;
+  sim/physics.py).
+
+success: every requested goal reached (status succeeded) and no collision.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+from mcap.exceptions import McapError
+
+from ...schemas import MessageError, decode
+from ...schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
+from ...schemas.messages import Goal, NavStatus, Path as PathMsg
+from ...sim.world import World, point_segment_distance, points_in_polygons, transform_points
+from ..chassis.odometry import wrap_angle
+from ..recorder.mcap_io import read_records
+from ..runtime.errors import UserError
+from ..runtime.node import NS_PER_S
+
+TERMINAL = ("succeeded", "aborted", "canceled")
+CLEARANCE_CHUNK = 2048      # poses per vectorised clearance computation (bounds the temporaries)
+
+
+class MissionError(UserError):
+    """A recording that does not hold a mission (no ground truth, unreadable)."""
+
+
+@dataclass
+class MissionRecord:
+    """What a recording says about a mission; every list in stamp order."""
+    truth_stamps: np.ndarray                    # (N,) ns
+    truth_poses: np.ndarray                     # (N, 3) world = map frame
+    mover_stamps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
+    mover_circles: np.ndarray = field(default_factory=lambda: np.zeros((0, 0, 3)))   # (T, K, 3)
+    goals: list[Goal] = field(default_factory=list)
+    statuses: list[NavStatus] = field(default_factory=list)
+    plans: list[PathMsg] = field(default_factory=list)
+    sim_values: dict = field(default_factory=dict)      # the sim's last Diagnostic values
+
+
+@dataclass(frozen=True)
+class GoalOutcome:
+    goal_id: str
+    goal: tuple[float, float, float]
+    status: str                     # the last nav_status, "none" if the navigator never answered
+    reason: str
+    time_s: float                   # sim s from sending the goal to its last status
+    xy_error_m: float
+    yaw_error_deg: float
+    plan_length_m: float | None     # the first global plan's length
+
+
+@dataclass(frozen=True)
+class MissionSummary:
+    success: bool
+    goals_reached: int
+    goals_total: int
+    time_s: float
+    path_length_m: float
+    plan_length_m: float | None     # the first global plans of the goals sent, summed
+    final_xy_error_m: float | None
+    final_yaw_error_deg: float | None
+    collisions: int | None          # None: the recording holds no sim Diagnostic
+    min_clearance_m: float
+    recording: str
+    goals: list[GoalOutcome]
+
+    def to_json(self) -> dict:
+        return asdict(self)
+
+
+# ---------------------------------------------------------------- reading a recording
+
+def load_mission(path: str | Path, robot: str = DEFAULT_ROBOT) -> MissionRecord:
+    """The mission's messages from a recording (MissionError if unreadable or without truth)."""
+    path, keys = Path(path), KeyLayout(robot)
+    wanted = {keys.sim_robot("truth"): "truth", keys.sim("movers"): "movers", keys.robot("goal"): "goals",
+              keys.robot("nav_status"): "statuses", keys.robot("plan"): "plans",
+              keys.diagnostics("sim"): "sim"}
+    found: dict[str, list] = {name: [] for name in wanted.values()}
+    try:
+        for rec in read_records(path, wanted):
+            try:
+                found[wanted[rec.key]].append(decode(rec.payload, type_for_key(rec.key), key=rec.key))
+            except MessageError:
+                continue
+    except FileNotFoundError:
+        raise MissionError(f"{path}: no such recording") from None
+    except (McapError, EOFError, ValueError, OSError) as exc:
+        raise MissionError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc}); "
+                           f"`omninav recover {path}` rewrites what is readable") from None
+    if not found["truth"]:
+        raise MissionError(f"{path}: no ground truth ({keys.sim_robot('truth')}): was the sim recorded?")
+    for name in found:
+        found[name].sort(key=lambda m: (m.header.stamp_ns, m.header.seq))
+    truth = found["truth"]
+    record = MissionRecord(np.array([m.header.stamp_ns for m in truth], np.int64),
+                           np.array([(m.pose.x, m.pose.y, m.pose.theta) for m in truth], np.float64),
+                           goals=found["goals"], statuses=found["statuses"], plans=found["plans"],
+                           sim_values=dict(found["sim"][-1].values) if found["sim"] else {})
+    movers = found["movers"]
+    if movers and len(movers[0].circles):
+        count = len(movers[0].circles)
+        movers = [m for m in movers if len(m.circles) == count]
+        record.mover_stamps = np.array([m.header.stamp_ns for m in movers], np.int64)
+        record.mover_circles = np.array([m.circles for m in movers], np.float64).reshape(len(movers), count, 3)
+    return record
+
+
+# ---------------------------------------------------------------- the figures
+
+def path_length(poses: np.ndarray) -> float:
+    return float(np.hypot(*np.diff(poses[:, :2], axis=0).T).sum()) if len(poses) > 1 else 0.0
+
+
+def movers_clearance(footprint: np.ndarray, poses: np.ndarray, circles: np.ndarray) -> np.ndarray:
+    """Distance (Q,) between the footprint at each pose (Q, 3) and that moment's movers (Q, K, 3);
+    0 when they overlap, inf without movers."""
+    if circles.shape[1] == 0:
+        return np.full(len(poses), np.inf)
+    poly = transform_points(footprint, poses)                            # (Q, P, 2)
+    a, b = poly[:, :, None, :], np.roll(poly, -1, axis=1)[:, :, None, :]
+    centres = circles[:, None, :, :2]                                     # (Q, 1, K, 2)
+    gap = np.maximum(point_segment_distance(centres, a, b).min(axis=1) - circles[:, :, 2], 0.0)   # (Q, K)
+    gap[points_in_polygons(circles[:, :, :2], poly[:, None])[..., 0]] = 0.0
+    return gap.min(axis=1)
+
+
+def clearance_along(world: World, poses: np.ndarray, mover_circles: np.ndarray) -> float:
+    """The smallest distance between the footprint and any obstacle or mover along a trajectory."""
+    best = math.inf
+    for start in range(0, len(poses), CLEARANCE_CHUNK):
+        chunk = slice(start, start + CLEARANCE_CHUNK)
+        static = world.footprint_clearance(poses[chunk])
+        moving = movers_clearance(world.robot.footprint, poses[chunk], mover_circles[chunk])
+        best = min(best, float(np.minimum(static, moving).min()))
+    return best
+
+
+def _pose_error(pose: np.ndarray, goal: np.ndarray) -> tuple[float, float]:
+    return (float(np.hypot(*(pose[:2] - goal[:2]))), abs(math.degrees(float(wrap_angle(pose[2] - goal[2])))))
+
+
+def _truth_at(record: MissionRecord, stamp_ns: int) -> np.ndarray:
+    """The last true pose stamped at or before stamp_ns (the first one if none is)."""
+    i = max(int(np.searchsorted(record.truth_stamps, stamp_ns, side="right")) - 1, 0)
+    return record.truth_poses[i]
+
+
+def _movers_at(record: MissionRecord, stamps: np.ndarray) -> np.ndarray:
+    """The movers (len(stamps), K, 3) at the truth's stamps (the last recorded at or before each)."""
+    if len(record.mover_stamps) == 0:
+        return np.zeros((len(stamps), 0, 3))
+    i = np.clip(np.searchsorted(record.mover_stamps, stamps, side="right") - 1, 0, len(record.mover_stamps) - 1)
+    return record.mover_circles[i]
+
+
+def _first_plan_length(plans: list[PathMsg], goal_id: str) -> float | None:
+    prefix = f"{goal_id}#"
+    for plan in plans:
+        if plan.goal_id.startswith(prefix) and len(plan.poses):
+            return path_length(plan.poses)
+    return None
+
+
+def summarize_mission(record: MissionRecord, world: World, goals_total: int | None = None,
+                      recording: str = "") -> MissionSummary:
+    """The mission's figures; goals_total is how many goals were to be sent (default: those sent)."""
+    goals_total = len(record.goals) if goals_total is None else goals_total
+    end_ns = int(record.truth_stamps[-1])
+    outcomes, last_end_ns = [], None
+    for index, goal in enumerate(record.goals):
+        statuses = [s for s in record.statuses if s.goal_id == goal.goal_id]
+        final = next((s for s in reversed(statuses) if s.status in TERMINAL), statuses[-1] if statuses else None)
+        ended_ns = final.header.stamp_ns if final is not None and final.status in TERMINAL else end_ns
+        last_end_ns = ended_ns
+        target = np.array([goal.pose.x, goal.pose.y, goal.pose.theta])
+        pose = record.truth_poses[-1] if index == len(record.goals) - 1 else _truth_at(record, ended_ns)
+        xy, yaw = _pose_error(pose, target)
+        outcomes.append(GoalOutcome(goal.goal_id, tuple(float(v) for v in target),
+                                    final.status if final is not None else "none",
+                                    final.reason if final is not None else "",
+                                    (ended_ns - goal.header.stamp_ns) / NS_PER_S, xy, yaw,
+                                    _first_plan_length(record.plans, goal.goal_id)))
+    start_ns = record.goals[0].header.stamp_ns if record.goals else int(record.truth_stamps[0])
+    span = (record.truth_stamps >= start_ns) & (record.truth_stamps <= end_ns)
+    poses = record.truth_poses[span] if span.any() else record.truth_poses[-1:]
+    stamps = record.truth_stamps[span] if span.any() else record.truth_stamps[-1:]
+    reached = sum(o.status == "succeeded" for o in outcomes)
+    collisions = record.sim_values.get("collisions")
+    collisions = int(collisions) if isinstance(collisions, (int, float)) else None
+    plan_lengths = [o.plan_length_m for o in outcomes if o.plan_length_m is not None]
+    return MissionSummary(
+        success=reached == goals_total and collisions == 0,
+        goals_reached=reached, goals_total=goals_total,
+        time_s=((last_end_ns if last_end_ns is not None else end_ns) - start_ns) / NS_PER_S,
+        path_length_m=path_length(poses),
+        plan_length_m=sum(plan_lengths) if plan_lengths else None,
+        final_xy_error_m=outcomes[-1].xy_error_m if outcomes else None,
+        final_yaw_error_deg=outcomes[-1].yaw_error_deg if outcomes else None,
+        collisions=collisions,
+        min_clearance_m=clearance_along(world, poses, _movers_at(record, stamps)),
+        recording=recording, goals=outcomes)
+
+
+def summary_lines(summary: MissionSummary) -> list[str]:
+    """The summary as text, one fact per line."""
+    def num(value, fmt):
+        return "n/a" if value is None else format(value, fmt)
+
+    lines = [f"{'SUCCESS' if summary.success else 'FAILED'}: {summary.goals_reached}/{summary.goals_total} goals "
+             f"reached, {num(summary.collisions, 'd')} collisions",
+             f"time {summary.time_s:.1f} sim s, driven {summary.path_length_m:.2f} m "
+             f"(first global plans {num(summary.plan_length_m, '.2f')} m), min clearance {summary.min_clearance_m:.3f} m",
+             f"final error {num(summary.final_xy_error_m, '.3f')} m, {num(summary.final_yaw_error_deg, '.2f')} deg"]
+    for o in summary.goals:
+        why = f" ({o.reason})" if o.reason else ""
+        lines.append(f"  {o.goal_id} ({o.goal[0]:.2f}, {o.goal[1]:.2f}, {math.degrees(o.goal[2]):.1f} deg): "
+                     f"{o.status}{why} after {o.time_s:.1f} s, error {o.xy_error_m:.3f} m {o.yaw_error_deg:.2f} deg")
+    lines.append(f"recording {summary.recording}")
+    return lines

@@ -1,0 +1,73 @@
+"""`omninav bench paper`: the mecanum paper's indoor-navigation experiment, repeated.
+
+The paper drove its robot 20 times from the origin to (4.0 m, −3.0 m) facing +y (yaw 90°) with
+AMCL on a map and reached the goal within 10 cm and ±5°. sim/worlds/paper.yaml lays out that
+room (start at the origin, the goal in its `goals`); each run is one `omninav navigate --world
+paper` with its own seed (the simulator's noise and the filter's), and the final error is measured
+against the ground truth where the robot came to rest. The aim here: every run within 5 cm and 2°.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import sys
+import time
+from pathlib import Path
+
+from .bench import REPO, run_navigate
+
+AIM_XY_M, AIM_YAW_DEG = 0.05, 2.0
+PAPER_XY_M, PAPER_YAW_DEG = 0.10, 5.0
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--runs", type=int, default=20, help="runs, seeds 0..RUNS-1 (default 20)")
+    parser.add_argument("--localization", choices=("amcl", "slam", "truth"), default="amcl",
+                        help="as navigate's (default amcl, as the paper)")
+    parser.add_argument("--rate", type=float, default=1.0, help="sim seconds per wall second (default 1)")
+    parser.add_argument("-o", "--out", help="folder for the runs (default out/paper-<date>-<time>)")
+
+
+def main(args: argparse.Namespace) -> int:
+    out = Path(args.out or REPO / "out" / time.strftime("paper-%Y%m%d-%H%M%S")).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for seed in range(args.runs):
+        cmd = [sys.executable, "-m", "omninav.cli.main", "navigate", "--world", "paper", "--localization",
+               args.localization, "--seed", str(seed), "--rate", str(args.rate), "-o", str(out / f"seed{seed}"),
+               "--json"]
+        row = run_navigate(cmd, out / f"seed{seed}.log")
+        row["seed"] = seed
+        row["within_aim"] = bool(row["success"] and row["final_xy_error_m"] <= AIM_XY_M
+                                 and row["final_yaw_error_deg"] <= AIM_YAW_DEG)
+        rows.append(row)
+        if not args.json:
+            print(f"seed {seed:2d}: {'reached' if row['success'] else 'FAILED'} "
+                  + (f"error {row['final_xy_error_m'] * 100:.1f} cm {row['final_yaw_error_deg']:.2f} deg, "
+                     f"{row['time_s']:.1f} s, {row['path_length_m']:.2f} m, collisions {row['collisions']}"
+                     if "final_xy_error_m" in row and row["final_xy_error_m"] is not None else row.get("error", "")),
+                  flush=True)
+    scored = [r for r in rows if r.get("final_xy_error_m") is not None]
+    xy = [r["final_xy_error_m"] for r in scored]
+    yaw = [r["final_yaw_error_deg"] for r in scored]
+    result = {
+        "runs": len(rows), "reached": sum(bool(r["success"]) for r in rows),
+        "within_aim": sum(r["within_aim"] for r in rows),
+        "within_paper": sum(bool(r["success"]) and r["final_xy_error_m"] <= PAPER_XY_M
+                            and r["final_yaw_error_deg"] <= PAPER_YAW_DEG for r in scored),
+        "xy_error_m": {"mean": statistics.fmean(xy), "max": max(xy)} if xy else None,
+        "yaw_error_deg": {"mean": statistics.fmean(yaw), "max": max(yaw)} if yaw else None,
+        "collisions": sum(r.get("collisions") or 0 for r in rows),
+        "localization": args.localization, "rows": rows,
+    }
+    if args.json:
+        print(json.dumps(result))
+    else:
+        print(f"{result['reached']}/{len(rows)} reached; within {AIM_XY_M * 100:.0f} cm and {AIM_YAW_DEG:g}°: "
+              f"{result['within_aim']}; within the paper's {PAPER_XY_M * 100:.0f} cm and {PAPER_YAW_DEG:g}°: "
+              f"{result['within_paper']}; collisions {result['collisions']}")
+        if xy:
+            print(f"final error: mean {statistics.fmean(xy) * 100:.2f} cm (max {max(xy) * 100:.2f}), "
+                  f"mean {statistics.fmean(yaw):.2f}° (max {max(yaw):.2f}); runs in {out}")
+    return 0 if result["within_aim"] == len(rows) and result["collisions"] == 0 else 1

@@ -1,0 +1,278 @@
+"""`omninav navigate` and what it stands on: the truth_pose relay, the mission summary of a
+recording, the command's argument errors and one whole mission as separate processes."""
+from __future__ import annotations
+
+import json
+import math
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from omninav.cli.main import main as cli_main
+from omninav.cli.navigate import REPO, compose_for, map_for
+from omninav.schemas import decode
+from omninav.schemas.messages import Clock, Goal, Header, NavStatus, Odometry, Pose2D, Twist
+from omninav.schemas.messages import Path as PathMsg
+from omninav.services.chassis.node import ChassisNode
+from omninav.services.chassis.odometry import compose
+from omninav.services.navigator.mission import (MissionError, MissionRecord, load_mission, summarize_mission,
+                                                summary_lines)
+from omninav.services.navigator.truth_pose import TruthPoseNode, TruthPoseParams
+from omninav.services.map_server.mapio import load_map
+from omninav.services.recorder.mcap_io import read_records
+from omninav.services.runtime.compose import load_compose
+from omninav.services.runtime.inprocess import InProcessRunner
+from omninav.services.runtime.node import NS_PER_S, Node
+from omninav.sim.node import SimNode, SimNodeParams
+from omninav.sim.world import load_world, world_path
+
+from launching import processes_using
+
+
+class Driver(Node):
+    """Turns while driving forward: odometry drifts from the truth (slip, a gyro-free chassis)."""
+    service = "driver"
+
+    def setup(self) -> None:
+        self.cmd = self.publisher("cmd_vel")
+        self.subscribe("sim/clock", self.on_clock)
+
+    def on_clock(self, msg: Clock) -> None:
+        self.cmd.publish(Twist(header=self.header("base_link"), linear_x=0.3, angular_z=0.4))
+
+
+def test_truth_pose_relays_the_truth_and_carries_odometry_onto_it():
+    nodes = [SimNode(SimNodeParams(wheel_slip_std=0.05, seed=3)), ChassisNode(), Driver(),
+             TruthPoseNode(TruthPoseParams(publish_rate_hz=10.0))]
+    runner = InProcessRunner(nodes)
+    seen: dict[str, list] = {}
+    runner.tap(lambda key, payload, stamp: seen.setdefault(key, []).append(decode(payload)))
+    runner.run_until(lambda: False, max_steps=300)           # 3 sim s
+    truth = {m.header.stamp_ns: m for m in seen["omninav/sim/r1/truth"]}
+    odom = {m.header.stamp_ns: m for m in seen["omninav/r1/odom"]}
+    poses, transforms = seen["omninav/r1/pose"], seen["omninav/r1/tf/map_odom"]
+    assert 29 <= len(poses) <= 31 and len(transforms) == len(poses)      # 10 per sim second
+    drift = 0.0
+    for pose, tf in zip(poses, transforms):
+        t = pose.header.stamp_ns
+        assert tf.header.stamp_ns == t and pose.header.frame_id == "map"
+        assert (tf.header.frame_id, tf.child_frame_id) == ("map", "odom")
+        true = truth[t].pose
+        assert (pose.pose.x, pose.pose.y, pose.pose.theta) == (true.x, true.y, true.theta)
+        o = odom[t].pose
+        carried = compose([tf.transform.x, tf.transform.y, tf.transform.theta], [o.x, o.y, o.theta])
+        np.testing.assert_allclose(carried, [true.x, true.y, true.theta], atol=1e-9)
+        drift = max(drift, np.hypot(o.x + 1.2 - true.x, o.y + 1.0 - true.y))
+    assert drift > 1e-3          # the transform did correct something: odometry is not the truth
+    assert np.all(np.diag(poses[0].covariance) > 0)
+
+
+def test_truth_pose_skips_odometry_without_a_truth_at_its_stamp():
+    node = TruthPoseNode()
+    out = []
+    for pub in node.outputs.values():
+        pub.sink = lambda p, payload, stamp: out.append(p.key)
+    def truth(t):
+        node.process(0, Odometry(header=Header(stamp_ns=t, frame_id="world"), pose=Pose2D(1.0, 2.0, 0.5)))
+
+    def odom(t):
+        node.process(1, Odometry(header=Header(stamp_ns=t, frame_id="odom")))
+
+    odom(NS_PER_S)                       # no truth yet
+    truth(2 * NS_PER_S)
+    odom(2 * NS_PER_S + 1)               # a truth, but of another stamp
+    assert out == [] and node.counters["odom_without_truth"] == 2
+    truth(3 * NS_PER_S)
+    odom(3 * NS_PER_S)
+    assert out == ["omninav/r1/pose", "omninav/r1/tf/map_odom"]
+
+
+def test_truth_pose_rejects_bad_parameters():
+    with pytest.raises(ValueError, match="publish_rate_hz"):
+        TruthPoseParams(publish_rate_hz=-1.0)
+
+
+# ---------------------------------------------------------------- the mission summary
+
+@pytest.fixture(scope="module")
+def box_world(tmp_path_factory):
+    """A 6 m × 4 m room with one box; the robot starts at (1, 1)."""
+    path = tmp_path_factory.mktemp("world") / "box.yaml"
+    path.write_text("name: box\nbounds: [6.0, 4.0]\nboxes: [{center: [3.0, 3.0], size: [1.0, 1.0]}]\n"
+                    "robot: {start: [1.0, 1.0, 0.0]}\n")
+    return load_world(path)
+
+
+def straight_run(stamps_s, start=(1.0, 1.0, 0.0), end=(4.0, 1.0, 0.5)):
+    """Truth moving linearly from start to end over the stamps."""
+    f = np.linspace(0.0, 1.0, len(stamps_s))[:, None]
+    poses = np.asarray(start) + f * (np.asarray(end) - np.asarray(start))
+    return np.round(np.asarray(stamps_s) * NS_PER_S).astype(np.int64), poses
+
+
+def goal(goal_id, x, y, yaw, at_s):
+    return Goal(header=Header(stamp_ns=round(at_s * NS_PER_S), frame_id="map"), goal_id=goal_id,
+                pose=Pose2D(x, y, yaw))
+
+
+def status(goal_id, state, at_s, reason=""):
+    return NavStatus(header=Header(stamp_ns=round(at_s * NS_PER_S)), goal_id=goal_id, status=state, reason=reason)
+
+
+def plan(goal_id, poses):
+    return PathMsg(header=Header(), goal_id=goal_id, poses=np.asarray(poses, np.float64))
+
+
+def test_summary_of_a_mission_with_two_goals(box_world):
+    world = box_world
+    stamps, poses = straight_run(np.arange(0.0, 10.01, 0.01))
+    record = MissionRecord(stamps, poses,
+                           goals=[goal("g1", 2.5, 1.0, 0.0, 1.0), goal("g2", 4.0, 1.02, 0.5, 5.5)],
+                           statuses=[status("g1", "active", 1.1), status("g1", "succeeded", 5.0),
+                                     status("g2", "active", 5.6), status("g2", "succeeded", 9.0)],
+                           plans=[plan("g1#1", []), plan("g1#2", [[1, 1, 0], [2, 1, 0], [2.5, 1, 0]]),
+                                  plan("g1#3", [[1, 1, 0], [9, 1, 0]]), plan("g2#4", [[2.5, 1, 0], [4, 1, 0]])],
+                           sim_values={"collisions": 0})
+    s = summarize_mission(record, world, recording="run.mcap")
+    assert s.success and (s.goals_reached, s.goals_total) == (2, 2)
+    assert s.time_s == pytest.approx(8.0)                        # first goal sent at 1 s, last ended at 9 s
+    assert s.path_length_m == pytest.approx(2.7, abs=1e-9)       # truth from 1 s to the end (10 s)
+    assert s.plan_length_m == pytest.approx(1.5 + 1.5)           # the first non-empty plan of each goal
+    assert s.final_xy_error_m == pytest.approx(0.02) and s.final_yaw_error_deg == pytest.approx(0.0, abs=1e-9)
+    g1 = s.goals[0]                                              # at 5 s the truth was at x = 2.5
+    assert g1.status == "succeeded" and g1.time_s == pytest.approx(4.0)
+    assert g1.xy_error_m == pytest.approx(0.0, abs=1e-9) and g1.yaw_error_deg == pytest.approx(math.degrees(0.25))
+    assert s.to_json()["goals"][1]["goal_id"] == "g2"
+    assert json.loads(json.dumps(s.to_json()))["recording"] == "run.mcap"
+
+
+def test_clearance_counts_movers_and_overlaps(box_world):
+    world = box_world
+    stamps, poses = straight_run(np.arange(0.0, 2.01, 0.01), start=(1.0, 2.0, 0.0), end=(1.5, 2.0, 0.0))
+    clear_static = summarize_mission(MissionRecord(stamps, poses, sim_values={"collisions": 0}), world)
+    # walls at x = 0 and y = 0 / 4: the footprint's left edge at x = 1 − 0.416 is nearest
+    assert clear_static.min_clearance_m == pytest.approx(1.0 - 0.416)
+    mover = np.zeros((len(stamps), 1, 3))
+    mover[:, 0] = (2.5, 2.0, 0.2)                                # the robot's front edge reaches 1.916
+    record = MissionRecord(stamps, poses, mover_stamps=stamps, mover_circles=mover, sim_values={"collisions": 0})
+    assert summarize_mission(record, world).min_clearance_m == pytest.approx(2.5 - 0.2 - 1.916)
+    mover[150:, 0] = (1.8, 2.0, 0.2)                             # inside the footprint
+    assert summarize_mission(record, world).min_clearance_m == 0.0
+
+
+def test_summary_of_a_failed_mission(box_world):
+    world = box_world
+    stamps, poses = straight_run(np.arange(0.0, 4.01, 0.01))
+    record = MissionRecord(stamps, poses, goals=[goal("g1", 4.0, 1.0, 0.5, 0.5)],
+                           statuses=[status("g1", "active", 0.6), status("g1", "aborted", 3.0, "no valid plan")],
+                           sim_values={"collisions": 2})
+    s = summarize_mission(record, world, goals_total=3)
+    assert not s.success and (s.goals_reached, s.goals_total, s.collisions) == (0, 3, 2)
+    assert s.goals[0].status == "aborted" and s.goals[0].reason == "no valid plan" and s.plan_length_m is None
+    text = "\n".join(summary_lines(s))
+    assert "FAILED: 0/3 goals" in text and "no valid plan" in text
+    no_answer = summarize_mission(MissionRecord(stamps, poses, goals=[goal("g1", 4.0, 1.0, 0.5, 0.5)]), world)
+    assert no_answer.goals[0].status == "none" and no_answer.collisions is None and not no_answer.success
+    assert no_answer.time_s == pytest.approx(3.5)                # until the last truth
+
+
+def test_load_mission_reads_a_recording(tmp_path, box_world):
+    from omninav.schemas import encode
+    from omninav.schemas.messages import Diagnostic, Obstacles
+    from omninav.services.recorder.mcap_io import RecordingWriter
+    path = tmp_path / "m.mcap"
+    with RecordingWriter(path) as out:
+        def put(key, msg):
+            out.write(key, type(msg).__name__, encode(msg), msg.header.seq, msg.header.stamp_ns, 0)
+        for k in (2, 1, 3):                                      # out of order on purpose
+            put("omninav/sim/r1/truth", Odometry(header=Header(stamp_ns=k * NS_PER_S, frame_id="world"),
+                                                  pose=Pose2D(float(k), 1.0, 0.0)))
+            put("omninav/sim/movers", Obstacles(header=Header(stamp_ns=k * NS_PER_S),
+                                                circles=np.array([[5.0, 3.0, 0.2]]), velocities=np.zeros((1, 2))))
+        put("omninav/r1/goal", goal("g1", 3.0, 1.0, 0.0, 1.0))
+        put("omninav/r1/nav_status", status("g1", "succeeded", 3.0))
+        put("omninav/r1/diagnostics/sim", Diagnostic(header=Header(stamp_ns=3 * NS_PER_S), name="sim",
+                                                     values={"collisions": 0}))
+    record = load_mission(path)
+    assert record.truth_poses[:, 0].tolist() == [1.0, 2.0, 3.0] and record.mover_circles.shape == (3, 1, 3)
+    s = summarize_mission(record, box_world, recording=str(path))
+    assert s.success and s.path_length_m == pytest.approx(2.0)
+    with pytest.raises(MissionError, match="no such recording"):
+        load_mission(tmp_path / "missing.mcap")
+    empty = tmp_path / "empty.mcap"
+    with RecordingWriter(empty):
+        pass
+    with pytest.raises(MissionError, match="no ground truth"):
+        load_mission(empty)
+
+
+# ---------------------------------------------------------------- the command: arguments and compose
+
+@pytest.mark.parametrize("argv, message", [
+    (["--world", "nowhere", "--goal", "1", "1", "0"], "world 'nowhere': no such file"),
+    (["--world", "room", "--goal", "20", "1", "0"], "goal (20, 1) lies outside the map of 'room'"),
+    (["--world", "room"], "names no goals: give --goal"),
+    (["--world", "room", "--goal", "2", "2", "0", "--timeout", "0"], "--timeout must be a positive number"),
+])
+def test_navigate_argument_errors_exit_2_naming_the_problem(argv, message, capsys, tmp_path):
+    assert cli_main(["navigate", *argv, "-o", str(tmp_path)]) == 2
+    assert message in capsys.readouterr().err
+    assert list(tmp_path.iterdir()) == []            # nothing was started or written
+
+
+@pytest.mark.parametrize("localization, service", [("amcl", "localizer"), ("slam", "slam"), ("truth", "truth_pose")])
+def test_mission_compose_has_every_service_without_restarts(localization, service, tmp_path):
+    world = load_world(world_path("office"))
+    map_file = map_for(world, "office", tmp_path)
+    assert map_file.parent == tmp_path and load_map(map_file).info.resolution == 0.05   # rasterized
+    compose = compose_for(world, Path(world.source), map_file, "diff", localization, tmp_path / "run.mcap",
+                          seed=3, rate=1.0, robot="r1")
+    names = [s["name"] for s in compose["services"]]
+    assert names[0] == "recorder" and service in names       # the recorder first: it is stopped last
+    assert {"sim", "chassis", "lidar", "costmap", "global_planner", "local_planner", "velocity_smoother",
+            "collision_monitor", "navigator"} <= set(names)
+    assert ("map_server" in names) == (localization != "slam")
+    assert all(s["restart"] == "no" for s in compose["services"])
+    by_name = {s["name"]: s for s in compose["services"]}
+    assert by_name["sim"]["params"]["drive"] == by_name["chassis"]["params"]["drive"] == "diff"
+    assert by_name["global_planner"]["params"]["goal_topic"] == "plan_request"
+    x, y, yaw = world.robot.start
+    assert by_name["costmap"]["params"]["initial_pose_x"] == x and by_name["navigator"]["params"]["initial_pose_y"] == y
+    path = tmp_path / "compose.yaml"
+    path.write_text(yaml.safe_dump(compose))
+    assert [s.name for s in load_compose(path).services] == names     # every parameter is valid
+
+
+def test_the_room_uses_its_shipped_map(tmp_path):
+    world = load_world(world_path("room"))
+    assert map_for(world, "room", tmp_path) == REPO / "compose" / "maps" / "room.yaml"
+    assert list(tmp_path.iterdir()) == []
+
+
+# ---------------------------------------------------------------- one whole mission
+
+def test_navigate_drives_a_mission_as_separate_processes_and_scores_it(tmp_path):
+    out = tmp_path / "run"
+    done = subprocess.run([sys.executable, "-m", "omninav.cli.main", "navigate", "--world", "room",
+                           "--goal", "3.2", "0.9", "30", "--localization", "truth", "--rate", "2", "-o", str(out),
+                           "--json"], cwd=REPO, capture_output=True, timeout=600)
+    log = (out / "services.log").read_text(errors="replace")
+    router = re.search(r"router listening on (\S+)", log).group(1)
+    assert processes_using(router) == []                          # every service was stopped
+    assert done.returncode == 0, done.stderr.decode() + log[-3000:]
+    summary = json.loads(done.stdout.decode().strip().splitlines()[-1])
+    assert summary["success"] and (summary["goals_reached"], summary["goals_total"], summary["collisions"]) == (1, 1, 0)
+    assert summary["final_xy_error_m"] < 0.05 and summary["final_yaw_error_deg"] < 2.0
+    straight = math.hypot(3.2 - 1.2, 0.9 - 1.0)
+    assert straight - 0.1 < summary["path_length_m"] < 2 * straight and summary["plan_length_m"] > straight - 0.1
+    assert 0.0 < summary["min_clearance_m"] < 1.0 and summary["time_s"] > 0
+    recording = Path(summary["recording"])
+    assert recording == out / "run.mcap"
+    keys = {rec.key for rec in read_records(recording)}
+    assert {"omninav/r1/goal", "omninav/r1/nav_status", "omninav/r1/plan_request", "omninav/r1/follow_path",
+            "omninav/r1/cmd_vel", "omninav/r1/pose"} <= keys
