@@ -75,13 +75,25 @@ def scan_with_obstacle(distance, bearing=0.0, width=0.3):
 def test_the_collision_monitor_stops_slows_or_lets_pass(bearing):
     monitor = CollisionMonitor(CollisionMonitorParams())    # 0.832 x 0.636 m footprint
     edge = 0.416 if bearing in (0.0, math.pi) else 0.318     # footprint half-size towards the obstacle
-    cmd = np.array([0.4, 0.1, 0.5])
+    cmd = 0.4 * np.array([math.cos(bearing), math.sin(bearing), 0.0]) + (0.0, 0.0, 0.5)   # towards it, turning
     near = monitor.check(cmd, robot_frame_points(scan_with_obstacle(edge + 0.03, bearing), (0.0, 0.0, 0.0)))
     assert near.action == "stop" and np.all(near.twist == 0.0) and near.points >= 4
     middle = monitor.check(cmd, robot_frame_points(scan_with_obstacle(edge + 0.2, bearing), (0.0, 0.0, 0.0)))
     assert middle.action == "slowdown" and np.allclose(middle.twist, cmd * 0.5)
     far = monitor.check(cmd, robot_frame_points(scan_with_obstacle(edge + 0.5, bearing), (0.0, 0.0, 0.0)))
     assert far.action == "none" and np.array_equal(far.twist, cmd)
+
+
+@pytest.mark.parametrize("cmd, action", [((-0.2, 0.0, 0.0), "slowdown"), ((0.0, 0.2, 0.0), "slowdown"),
+                                          ((0.05, 0.0, 0.0), "stop"), ((0.0, 0.2, 0.8), "stop")],
+                         ids=["back-away", "slide-along", "creep-closer", "swing-a-corner-into-it"])
+def test_within_the_stop_zone_only_a_command_that_approaches_the_obstacle_is_stopped(cmd, action):
+    """A robot 3 cm from a wall ahead may still back away or slide along it (slowed), not come closer."""
+    monitor = CollisionMonitor(CollisionMonitorParams())
+    wall = [(0.446, y) for y in np.linspace(-0.6, 0.6, 25)]
+    result = monitor.check(cmd, wall)
+    assert result.action == action
+    assert np.allclose(result.twist, 0.0 if action == "stop" else 0.5 * np.asarray(cmd))
 
 
 def test_the_collision_monitor_ignores_fewer_than_min_points_and_uses_the_sensor_pose():

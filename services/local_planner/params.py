@@ -152,11 +152,13 @@ class CollisionMonitorParams:
     slowdown_padding: float = 0.30       # m added around the footprint for the slowdown zone
     slowdown_ratio: float = 0.5          # Nav2's default
     min_points: int = 4                  # Nav2's default: fewer points inside a zone are noise
+    approach_check_s: float = 0.1        # s: a stop-zone point stops commands that come closer within this
 
     def __post_init__(self):
         if len(self.footprint) < 3:
             raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
         _check(self, ("stop_padding", "slowdown_padding"))
+        _check(self, ("approach_check_s",), strict=True)
         if self.slowdown_padding < self.stop_padding:
             raise ValueError("slowdown_padding must be at least stop_padding")
         if not 0.0 <= self.slowdown_ratio <= 1.0:
