@@ -50,8 +50,11 @@ SHIPPED_MAPS = {"room": REPO / "compose" / "maps" / "room.yaml"}   # shipped wor
 MAP_RESOLUTION = 0.05
 LOCALIZATIONS = ("amcl", "slam", "truth")
 # the navigator's arrival check, tighter than move_base's 0.10 m / 0.05 rad: the local planner's
-# final approach stops within 0.02 m / 0.02 rad, and a mission aims for 5 cm and 2°
-ARRIVAL = {"xy_goal_tolerance": 0.03, "yaw_goal_tolerance": 0.03}
+# final approach stops within 0.02 m / 0.02 rad, and a mission aims for 5 cm and 2°; success only
+# once nearly stopped, so the commands still on their way (about 0.1–0.3 s) cannot carry it past;
+# a robot that stands still for 10 s (move_base's oscillation check, off by default) recovers
+NAVIGATOR = {"xy_goal_tolerance": 0.03, "yaw_goal_tolerance": 0.03, "trans_stopped_vel": 0.02,
+             "rot_stopped_vel": 0.02, "oscillation_timeout": 10.0, "oscillation_distance": 0.2}
 SETTLE_S = 1.0          # sim s after the last goal ends: the robot comes to rest before the stop
 CANCEL_WAIT_S = 2.0     # sim s to wait for the navigator to confirm a cancel
 POLL_S = 0.1
@@ -157,7 +160,7 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "local_planner", "service": "local_planner", "params": {**drive_params(drive), **start}},
         {"name": "velocity_smoother", "service": "velocity_smoother"},
         {"name": "collision_monitor", "service": "collision_monitor"},
-        {"name": "navigator", "service": "navigator", "params": {**start, **ARRIVAL}},
+        {"name": "navigator", "service": "navigator", "params": {**start, **NAVIGATOR}},
     ]
     for service in services:
         service["restart"] = "no"       # a service that dies ends the mission, it is not hidden by a restart

@@ -340,3 +340,11 @@ def test_navigator_drives_recovery_motions_for_their_sim_duration():
     assert len(backing) == 40 and sum(c[0] for c in backing) * DT == pytest.approx(-0.2)   # 0.2 m at 0.1 m/s
     assert poses[first + 45][0] == pytest.approx(-0.2)
     assert log[first + 40].plan_request is not None   # planning resumes right after
+
+
+def test_the_final_pose_counts_only_once_the_robot_has_stopped():
+    nav = Navigator(NavigatorParams(rot_stopped_vel=0.1))
+    nav.step(0.0, NavInputs(goal=goal(0, 0, 0), pose=(0.0, 0.0, 0.0), velocity=(0.0, 0.0, 0.5)))
+    assert nav.state is not State.SUCCEEDED          # at the pose, but still turning at 0.5 rad/s
+    act = nav.step(DT, NavInputs(pose=(0.0, 0.0, 0.0), velocity=(0.0, 0.0, 0.05)))
+    assert nav.state is State.SUCCEEDED and act.statuses[-1].status == "succeeded"

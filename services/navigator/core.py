@@ -25,7 +25,8 @@ SUCCEEDED | ABORTED(reason) | CANCELED(reason). The move_base rules kept:
 - a new goal preempts the current one: the old goal ends CANCELED with the reason
   "preempted by goal <id>" (actionlib's PREEMPTED; NavStatus has no such status).
 - arrival: within xy_goal_tolerance of an intermediate waypoint (no yaw check), and within
-  xy_goal_tolerance and yaw_goal_tolerance of the final pose.
+  xy_goal_tolerance and yaw_goal_tolerance of the final pose, moving no faster than
+  trans_stopped_vel / rot_stopped_vel (when the velocity is known).
 """
 from __future__ import annotations
 
@@ -91,6 +92,7 @@ class ControlResult:
 @dataclass(frozen=True)
 class NavInputs:
     pose: tuple[float, float, float] | np.ndarray | None = None   # robot pose, map frame
+    velocity: tuple[float, float, float] | np.ndarray | None = None   # body twist (odometry); None: unknown
     plan: PlanResult | None = None
     control: ControlResult | None = None   # the local planner's answer for this control cycle
     goal: Goal | None = None
@@ -116,6 +118,7 @@ class Navigator:
         self.targets = np.zeros((0, 3))       # waypoints then the final pose
         self.target_index = 0
         self.pose: np.ndarray | None = None
+        self.velocity: np.ndarray | None = None
         self.path: np.ndarray | None = None
         self._now: float | None = None
         self._next_request_id = 1
@@ -143,6 +146,8 @@ class Navigator:
         self._fresh_plan = False
         if inputs.pose is not None:
             self.pose = np.asarray(inputs.pose, dtype=float).reshape(3)
+        if inputs.velocity is not None:
+            self.velocity = np.asarray(inputs.velocity, dtype=float).reshape(3)
         if inputs.cancel is not None and self._cancel(inputs.cancel, out) and inputs.goal is not None:
             out.statuses.append(self.status())
         if inputs.goal is not None:
@@ -231,9 +236,18 @@ class Navigator:
                 self._recovery_index = 0
                 self._begin_target()
                 continue
-            if abs(float(wrap_angle(target[2] - self.pose[2]))) <= p.yaw_goal_tolerance:
+            if abs(float(wrap_angle(target[2] - self.pose[2]))) <= p.yaw_goal_tolerance and self._stopped():
                 self._finish(State.SUCCEEDED, "", out)
             return
+
+    def _stopped(self) -> bool:
+        """As base_local_planner's goal check: at the goal only once the robot has (nearly) stopped,
+        or it would coast past the tolerance on the commands still on their way to the wheels."""
+        if self.velocity is None:
+            return True
+        p = self.params
+        return (math.hypot(self.velocity[0], self.velocity[1]) <= p.trans_stopped_vel
+                and abs(self.velocity[2]) <= p.rot_stopped_vel)
 
     # ---- planning ------------------------------------------------------------------------
     def _plan_due(self) -> bool:

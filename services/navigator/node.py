@@ -98,6 +98,7 @@ class NavigatorNode(Node):
         self.status_period_ns = round(p.status_period_s * NS_PER_S)
         self.pending: list[tuple[int, int, int, object]] = []   # (stamp, kind, seq, message) not yet in effect
         self.pose = None                      # the latest PoseWithCovariance in effect
+        self.velocity = None                  # the body twist of the latest odometry
         self.status: NavStatus | None = None  # the latest published
         self.status_ns = 0                    # when it was published
         self.last_cmd_ns: int | None = None   # the last tick a goal was running
@@ -136,6 +137,7 @@ class NavigatorNode(Node):
 
     def on_odom(self, msg: Odometry) -> None:
         self.frames.set_odom(msg)
+        self.velocity = (msg.twist.linear_x, msg.twist.linear_y, msg.twist.angular_z)
 
     def _due(self, now_ns: int) -> tuple[list[Goal | CancelGoal], Path | None]:
         """Put into effect the sporadic inputs stamped before now − request_delay_s, in stamp order;
@@ -164,7 +166,7 @@ class NavigatorNode(Node):
             self.counters["goals" if is_goal else "cancels"] += 1
             self._carry_out(self.core.step(now_s, NavInputs(pose=robot, goal=event if is_goal else None,
                                                             cancel=None if is_goal else event)), final=False)
-        inputs = NavInputs(pose=robot, plan=self._plan_result(plan), control=self._control(msg))
+        inputs = NavInputs(pose=robot, velocity=self.velocity, plan=self._plan_result(plan), control=self._control(msg))
         self._carry_out(self.core.step(now_s, inputs), final=True)
 
     def _plan_result(self, plan: Path | None) -> PlanResult | None:

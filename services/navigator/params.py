@@ -44,6 +44,8 @@ class NavigatorParams:
     recovery_behaviors: tuple[str, ...] = RECOVERY_NAMES
     xy_goal_tolerance: float = 0.10       # m
     yaw_goal_tolerance: float = 0.05      # rad (final pose only; waypoints check xy only)
+    trans_stopped_vel: float = 0.1        # m/s: at the final pose, success only below this (dwa_local_planner)
+    rot_stopped_vel: float = 0.1          # rad/s: likewise
     escape_vel: float = -0.1              # m/s along x while backing up (negative: backwards)
     rotate_angle: float = 2 * math.pi     # rad: rotate_recovery turns a full circle
     max_rotational_vel: float = 1.0       # rad/s for rotate
@@ -64,7 +66,7 @@ class NavigatorParams:
             raise ValueError(f"max_planning_retries must be ≥ -1, got {self.max_planning_retries}")
         for name in ("planner_frequency", "planner_patience", "controller_patience", "oscillation_timeout",
                      "oscillation_distance", "conservative_reset_dist", "xy_goal_tolerance",
-                     "yaw_goal_tolerance", "backup_dist", "wait_duration"):
+                     "yaw_goal_tolerance", "trans_stopped_vel", "rot_stopped_vel", "backup_dist", "wait_duration"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a number ≥ 0, got {value}")
