@@ -256,11 +256,18 @@ def test_the_room_uses_its_shipped_map(tmp_path):
 
 # ---------------------------------------------------------------- one whole mission
 
-def test_navigate_drives_a_mission_as_separate_processes_and_scores_it(tmp_path):
-    out = tmp_path / "run"
+@pytest.fixture(scope="module")
+def mission(tmp_path_factory):
+    """One live mission, every service its own process: (the command's result, its run folder)."""
+    out = tmp_path_factory.mktemp("navigate") / "run"
     done = subprocess.run([sys.executable, "-m", "omninav.cli.main", "navigate", "--world", "room",
                            "--goal", "3.2", "0.9", "30", "--localization", "truth", "--rate", "2", "-o", str(out),
                            "--json"], cwd=REPO, capture_output=True, timeout=600)
+    return done, out
+
+
+def test_navigate_drives_a_mission_as_separate_processes_and_scores_it(mission):
+    done, out = mission
     log = (out / "services.log").read_text(errors="replace")
     router = re.search(r"router listening on (\S+)", log).group(1)
     assert processes_using(router) == []                          # every service was stopped
@@ -276,3 +283,15 @@ def test_navigate_drives_a_mission_as_separate_processes_and_scores_it(tmp_path)
     keys = {rec.key for rec in read_records(recording)}
     assert {"omninav/r1/goal", "omninav/r1/nav_status", "omninav/r1/plan_request", "omninav/r1/follow_path",
             "omninav/r1/cmd_vel", "omninav/r1/pose"} <= keys
+
+
+@pytest.mark.parametrize("service", ["local_planner", "navigator"])
+def test_the_live_mission_replays_byte_for_byte_into_the_local_planner_and_the_navigator(mission, service, capsys):
+    """No parameters given: replay builds the service with the compose's (xy_goal_tolerance 0.03 m, ...,
+    not the defaults), which the live service's Diagnostic carries into the recording."""
+    done, out = mission
+    assert done.returncode == 0, done.stderr.decode()
+    assert cli_main(["replay", str(out / "run.mcap"), "--into", service, "--compare"]) == 0, capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "parameters: the live run's, from its Diagnostic" in printed
+    assert "replay reproduces the recorded outputs byte for byte" in printed and "not exactly replayable" not in printed

@@ -2,6 +2,8 @@
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import json
 import random
 import re
 import subprocess
@@ -15,13 +17,16 @@ from omninav.schemas import decode, encode
 from omninav.schemas.attachment import unpack_attachment
 from omninav.schemas.keys import ALL, KeyLayout
 from omninav.schemas.messages import Chatter, Diagnostic, LaserScan
-from omninav.services.demo.listener import Listener
+from omninav.services.demo.listener import Listener, ListenerParams
 from omninav.services.demo.talker import Talker
 from omninav.services.recorder.mcap_io import Record, RecordingWriter, read_records
 from omninav.services.replay import cli
 from omninav.services.replay.into import (capture_outputs, compare, find_alignment, main_into,
                                           payload_differences, replay_into)
 from omninav.services.runtime.merge import StampMerger
+from omninav.services.runtime.node import PARAMS_VALUE
+from omninav.services.runtime.registry import SERVICES
+from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client, open_router
 
 from conftest import REPO, Processes, free_port, wait_until
@@ -152,7 +157,7 @@ def _sink_into(records):
     return lambda pub, payload, stamp: records.append(Record(pub.key, pub.type_name, payload, pub.seq, stamp, stamp))
 
 
-def synthetic_run(seed: int, skip: dict[str, int], stop_s: float):
+def synthetic_run(seed: int, skip: dict[str, int], stop_s: float, listener: Listener | None = None):
     """A talker's outputs, and a 'live' listener that joined late and stopped early, fed like LiveRunner does.
 
     Returns every record such a recording would hold, in a shuffled file order.
@@ -161,7 +166,7 @@ def synthetic_run(seed: int, skip: dict[str, int], stop_s: float):
     talker_out = capture_outputs(talker)
     for _ in range(400):                                    # 4 s of sim time
         talker.tick()
-    listener = Listener()
+    listener = listener or Listener()
     listener_out = capture_outputs(listener)
     diagnostics = []
     listener.diagnostics.sink = _sink_into(diagnostics)
@@ -214,6 +219,46 @@ def test_the_command_reports_the_alignment(tmp_path, capsys):
     write(tmp_path / "nodiag.mcap", no_diag)
     assert replay(tmp_path / "nodiag.mcap", "--into", "listener", "--compare") == 1
     assert f"no Diagnostic on {LISTENER_DIAG}" in capsys.readouterr().out
+
+
+def test_replay_builds_the_service_with_the_live_runs_parameters(tmp_path, capsys):
+    records, _ = synthetic_run(0, {}, stop_s=2.0, listener=Listener(ListenerParams(gain=3.0)))
+    write(tmp_path / "gain3.mcap", records)
+    assert replay(tmp_path / "gain3.mcap", "--into", "listener", "--compare") == 0
+    assert "  parameters: the live run's, from its Diagnostic\n" in capsys.readouterr().out
+    assert replay(tmp_path / "gain3.mcap", "--into", "listener", "--set", "gain=1", "--compare") == 1
+    out = capsys.readouterr().out
+    assert "from its Diagnostic; given here: gain" in out and "FIRST DIVERGENCE" in out
+    # a recording from before the parameters were recorded: replay builds with the defaults and says so
+    unnamed = [_without_params(r) if r.key == LISTENER_DIAG else r for r in records]
+    write(tmp_path / "unnamed.mcap", unnamed)
+    assert replay(tmp_path / "unnamed.mcap", "--into", "listener", "--compare") == 1
+    assert "the recording does not name listener's" in capsys.readouterr().out
+    assert replay(tmp_path / "unnamed.mcap", "--into", "listener", "--set", "gain=3", "--compare") == 0
+    # a parameter the live version had and this one has not is ignored, and named
+    older = [_with_params(r, gain=3.0, offset=1.0) if r.key == LISTENER_DIAG else r for r in records]
+    write(tmp_path / "older.mcap", older)
+    assert replay(tmp_path / "older.mcap", "--into", "listener", "--compare") == 0
+    assert "from its Diagnostic; ignored, unknown to this code: offset" in capsys.readouterr().out
+
+
+def _without_params(rec: Record) -> Record:
+    diag = decode(rec.payload, Diagnostic)
+    del diag.values[PARAMS_VALUE]
+    return dataclasses.replace(rec, payload=encode(diag))
+
+
+def _with_params(rec: Record, **params) -> Record:
+    diag = decode(rec.payload, Diagnostic)
+    diag.values[PARAMS_VALUE] = json.dumps(params)
+    return dataclasses.replace(rec, payload=encode(diag))
+
+
+@pytest.mark.parametrize("service", sorted(set(SERVICES) - {"map_server"}))    # map_server needs a map file
+def test_the_recorded_parameters_build_the_same_parameters(service):
+    live = build_node(service, overrides={"robot_radius": 0.3} if service == "local_planner" else None)
+    recorded = decode(encode(live.diagnostic()), Diagnostic).values[PARAMS_VALUE]
+    assert build_node(service, base=json.loads(recorded)).params == live.params
 
 
 def test_array_fields_name_the_first_differing_index():

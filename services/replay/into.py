@@ -5,12 +5,14 @@ StampMerger releases them: order_key(stamp, input index, seq). It starts where t
 started: the live node's Diagnostic carries the seq of the first message it processed per input key
 ("first_seq/<key>"), and everything recorded before that is skipped. Time comes only from the
 recorded stamps and clock, so the outputs are the live outputs, byte for byte — `--compare` checks
-it and names the first divergence.
+it and names the first divergence. The node is built with the parameters the live service ran with
+(its Diagnostic carries them as "params"), with --params and --set over them.
 """
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import json
 from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
@@ -21,13 +23,14 @@ from mcap.exceptions import McapError
 
 from ..runtime.errors import UserError, exits_2_on_user_error
 from ...schemas import MessageError, decode
+from ...schemas.keys import KeyLayout
 from ...schemas.messages import Diagnostic
 from ..recorder.mcap_io import Record, RecordingWriter, read_records
 from ..runtime.live import RUN_STARTED
 from ..runtime.merge import order_key
-from ..runtime.node import NS_PER_S, Node, Publisher
+from ..runtime.node import NS_PER_S, PARAMS_VALUE, Node, Publisher
 from ..runtime.params import ParamError, parse_overrides
-from ..runtime.registry import UnknownService
+from ..runtime.registry import UnknownService, node_class
 from ..runtime.run import build_node, configure_logging
 
 FIRST_SEQ = "first_seq/"
@@ -47,6 +50,7 @@ class Alignment:
     not_replayable: dict[str, int]              # live counters that break exact replay (late, sync timeouts)
     run_started_ns: int | None = None           # wall time the last recorded run started (restarts)
     earlier_runs: int = 0                       # runs of the service before that one in the recording
+    params: dict | None = None                  # every parameter's live value; None: not recorded
 
 
 def _run_of(diag: Diagnostic) -> int:
@@ -70,11 +74,17 @@ def find_alignment(records: Iterable[Record], diagnostics_key: str) -> Alignment
             last = diag
     if last is None:
         return Alignment(None, {})
+    recorded = last.values.get(PARAMS_VALUE)
+    try:
+        params = json.loads(recorded) if isinstance(recorded, str) else None
+    except ValueError:
+        params = None
     first_seq = {name[len(FIRST_SEQ):]: int(v) for name, v in last.values.items()
                  if name.startswith(FIRST_SEQ) and isinstance(v, (int, float))}
     trouble = {name: int(v) for name, v in last.values.items()
                if name.startswith(NOT_REPLAYABLE) and isinstance(v, (int, float)) and v}
-    return Alignment(first_seq, trouble, _run_of(last) or None, len(runs) - 1)
+    return Alignment(first_seq, trouble, _run_of(last) or None, len(runs) - 1,
+                     params if isinstance(params, dict) else None)
 
 
 # ---------------------------------------------------------------- feeding the node
@@ -276,24 +286,45 @@ def _alignment_notes(node: Node, alignment: Alignment, run: ReplayRun, diag_key:
     return notes
 
 
+def _parameters_note(node: Node, alignment: Alignment, overridden: list[str], unknown: list[str]) -> str:
+    over = f"; given here: {', '.join(overridden)}" if overridden else ""
+    if alignment.params is None:
+        return (f"parameters: the recording does not name {node.name}'s (no \"{PARAMS_VALUE}\" in its Diagnostic): "
+                f"defaults{over} (give the live run's with --params / --set)")
+    dropped = f"; ignored, unknown to this code: {', '.join(unknown)}" if unknown else ""
+    return f"parameters: the live run's, from its Diagnostic{over}{dropped}"
+
+
 @exits_2_on_user_error("replay")
 def main_into(args: argparse.Namespace) -> int:
     try:
-        node = build_node(args.into, args.params, parse_overrides(args.set), args.robot, args.name)
+        overrides = parse_overrides(args.set)
+        cls = node_class(args.into)
+        diag_key = KeyLayout(args.robot).diagnostics(args.name or cls.service)
     except (UnknownService, ParamError, ValueError) as exc:   # ValueError: a bad robot or instance name
+        raise ReplayError(str(exc)) from None
+    # first where the live service started and with which parameters, then the node built like it
+    alignment = find_alignment(_load(args.file, {diag_key}), diag_key)
+    known = {f.name for f in dataclasses.fields(cls.Params) if f.init}
+    recorded = {k: v for k, v in (alignment.params or {}).items() if k in known}
+    unknown = sorted(set(alignment.params or {}) - known)     # recorded by an older version of the service
+    try:
+        node = build_node(args.into, args.params, overrides, args.robot, args.name,
+                          base=recorded if alignment.params is not None else None)
+    except (UnknownService, ParamError, ValueError) as exc:
         raise ReplayError(str(exc)) from None
     configure_logging(f"replay {node.name}", "WARNING")
     if not node.inputs:
         raise ReplayError(f"{args.into} has no inputs (it is a source): there is nothing to replay into it")
     if args.out and Path(args.out).resolve() == Path(args.file).resolve():
         raise ReplayError(f"--out {args.out} is the recording itself; choose another file")
-    diag_key = node.keys.diagnostics(node.name)
     records = _load(args.file, {i.key for i in node.inputs} | set(node.outputs) | {diag_key})
-    alignment = find_alignment(records, diag_key)
     run = replay_into(node, records, alignment.first_seq)
 
     print(f"replay {args.file} into {node.name}: {run.fed} inputs fed, {sum(run.skipped.values())} skipped, "
           f"{run.rejected} malformed")
+    given = [*(["--params " + args.params] if args.params else []), *overrides]
+    print(f"  {_parameters_note(node, alignment, given, unknown)}")
     for note in _alignment_notes(node, alignment, run, diag_key):
         print(f"  {note}")
     per_key = Counter(rec.key for rec in run.outputs)

@@ -6,6 +6,8 @@ recording. Both go through process(), so a replayed service runs exactly the liv
 """
 from __future__ import annotations
 
+import dataclasses
+import json
 import logging
 from collections import Counter
 from dataclasses import dataclass
@@ -19,11 +21,24 @@ from ...schemas.registry import type_info
 
 CLOCK_TOPIC = "sim/clock"
 NS_PER_S = 1_000_000_000
+PARAMS_VALUE = "params"     # Diagnostic value: the service's parameters, as JSON (params_json)
 
 
 @dataclass(frozen=True)
 class NoParams:
     """For services without parameters."""
+
+
+def params_json(params: Any) -> str:
+    """A parameter dataclass as JSON, every field its constructor takes (the Params class loads it
+    back: lists become tuples again by the type hints); "" when JSON cannot carry a value."""
+    if not dataclasses.is_dataclass(params):
+        return ""
+    values = {f.name: getattr(params, f.name) for f in dataclasses.fields(params) if f.init}
+    try:
+        return json.dumps(values, sort_keys=True, allow_nan=False)
+    except (TypeError, ValueError):
+        return ""
 
 
 @dataclass
@@ -81,6 +96,9 @@ class Node:
         self.counters: Counter[str] = Counter()
         self.first_seq: dict[str, int] = {}
         self.now_ns = 0
+        # every parameter's value, defaults included, in every Diagnostic: a replay of the recording
+        # builds the same node without the compose file, even after a default changed in the code
+        self.params_record = params_json(self.params)
         self._timers: list[_Timer] = []
         self._logged_bad_keys: set[str] = set()
         # not in self.outputs: diagnostics count wall-time events, so replay does not compare them
@@ -152,6 +170,8 @@ class Node:
     def diagnostic(self) -> Diagnostic:
         values: dict[str, float | int | str] = dict(self.counters)
         values.update({f"first_seq/{k}": v for k, v in self.first_seq.items()})
+        if self.params_record:
+            values[PARAMS_VALUE] = self.params_record
         trouble = sorted(k for k in self.counters if k.startswith(("malformed/", "late/", "sync_timeout")))
         return Diagnostic(
             header=self.header(),

@@ -12,16 +12,22 @@ from .registry import UnknownService, node_class
 
 
 def build_node(service: str, params_file: str | None = None, overrides: dict | None = None,
-               robot: str = "r1", name: str | None = None, spec: str | None = None):
-    """Construct a service's Node with validated parameters (raises UnknownService / ParamError)."""
+               robot: str = "r1", name: str | None = None, spec: str | None = None, base: dict | None = None):
+    """Construct a service's Node with validated parameters (raises UnknownService / ParamError).
+
+    base: values the file's and the overrides go over (replay: the live run's, from its Diagnostic;
+    built values, so an override there does not re-derive what was derived from it live).
+    """
     cls = node_class(service, spec)
     # merge the raw mappings, not built dataclasses: a built one carries derived defaults
     # (e.g. a lidar's angle_min from its fov) that an override must be free to change
     values = read_params_mapping(params_file, name or service) if params_file else {}
     source = " with overrides".join(filter(None, [params_file or service, "" if overrides else None]))
+    if base is not None:
+        source += " over the recorded parameters"
     # a Params class with from_mapping (e.g. ROS names accepted without effect) loads itself
     load = getattr(cls.Params, "from_mapping", None) or (lambda mapping, where: load_params(cls.Params, mapping, where))
-    params = load({**values, **(overrides or {})}, source)
+    params = load({**(base or {}), **values, **(overrides or {})}, source)
     return cls(params, robot=robot, name=name)
 
 
