@@ -1,13 +1,17 @@
-"""Frontier exploration: frontiers on hand-made maps, the choice of goal and path, and a whole
-exploration of the room world in the simulator."""
+"""Frontier exploration: frontiers on hand-made maps, the choice of goal, and a whole exploration of
+the room world in the simulator through the navigation stack."""
 import dataclasses
 
 import numpy as np
 import pytest
 
-from omninav.schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
+from omninav.schemas import decode
+from omninav.schemas.messages import (CancelGoal, Goal, Header, MapMetaData, NavStatus, OccupancyGrid, Pose2D,
+                                      PoseWithCovariance)
 from omninav.services.slam.explore import (INSCRIBED, Explorer, ExploreParams, find_frontiers, frontier_cells,
                                            still_frontier)
+from omninav.services.runtime.node import NS_PER_S
+from omninav.services.slam.explore_node import ExploreNode, ExploreNodeParams
 from omninav.services.slam.mapping import build_map, compare_with_truth, explored_share, slam_params_for
 from omninav.sim.node import open_world
 
@@ -15,10 +19,10 @@ RES = 0.1
 FREE, OCC, UNKNOWN = 0, 100, -1
 
 
-def grid_of(data) -> OccupancyGrid:
+def grid_of(data, stamp_s: float = 0.0) -> OccupancyGrid:
     data = np.asarray(data, np.int8)
     info = MapMetaData(resolution=RES, width=data.shape[1], height=data.shape[0], origin=Pose2D(0.0, 0.0, 0.0))
-    return OccupancyGrid(header=Header(frame_id="map"), info=info, data=data)
+    return OccupancyGrid(header=Header(stamp_ns=round(stamp_s * NS_PER_S), frame_id="map"), info=info, data=data)
 
 
 def rooms() -> np.ndarray:
@@ -75,7 +79,7 @@ def test_costs_keep_the_robot_off_walls():
     assert 0 < costs[15, 8] < costs[15, 6] and costs[15, 12] == 0     # inflation falls off to 1 m
 
 
-def test_the_reachable_frontier_is_chosen_and_its_path_is_clear():
+def test_the_reachable_frontier_is_chosen():
     params = ExploreParams(robot_radius=0.3, clearance=0.1, approach_distance=1.0, min_frontier_size=0.5)
     explorer = Explorer(params, RES)
     grid = grid_of(rooms())
@@ -84,8 +88,7 @@ def test_the_reachable_frontier_is_chosen_and_its_path_is_clear():
     assert goal is not None and round(goal.frontier.size_m, 2) == 1.6
     assert np.hypot(*(goal.frontier.xy - goal.xy).T).min() <= 1.0 + 1e-9   # within approach_distance of the gap
     assert np.hypot(goal.xy[0] - 1.0, goal.xy[1] - 1.5) <= goal.path_m < 3.0
-    np.testing.assert_allclose(goal.path[0], (1.0, 1.5))
-    assert not explorer.path_blocked(grid, costs, goal.path)
+    assert costs[goal.cell] < INSCRIBED                                     # the robot fits there
     # the pocket's frontier (a hole in it) is out of reach: only the gap is ever chosen
     data = rooms()
     data[5:7, 44:47] = UNKNOWN
@@ -112,27 +115,76 @@ def test_the_nearer_frontier_wins_unless_the_farther_is_much_larger():
         assert ("east" if goal.xy[0] > 4.0 else "west") == side
 
 
-def test_a_robot_too_close_to_a_wall_can_still_leave_and_blocked_paths_are_seen():
+def test_a_robot_too_close_to_a_wall_can_still_leave():
     params = ExploreParams(robot_radius=0.3, clearance=0.1)
     explorer = Explorer(params, RES)
     grid = grid_of(rooms())
     costs = explorer.costs(grid)
     assert costs[15, 2] >= INSCRIBED
     goal = explorer.choose(grid, costs, (0.25, 1.55, 0.0))     # 0.15 m from the west wall
-    assert goal is not None and not explorer.path_blocked(grid, costs, goal.path)
-    through_wall = np.array([[1.0, 1.5], [1.0, 3.5]])           # across the north wall
-    assert explorer.path_blocked(grid, costs, through_wall)
-    off_map = np.array([[1.0, 1.5], [-2.0, 1.5]])
-    assert explorer.path_blocked(grid, costs, off_map)
+    assert goal is not None and round(goal.frontier.size_m, 2) == 1.6
 
 
 def test_bad_parameters_are_named():
-    with pytest.raises(ValueError, match="lookahead"):
-        ExploreParams(lookahead=0.0)
+    with pytest.raises(ValueError, match="progress_timeout"):
+        ExploreParams(progress_timeout=0.0)
+    with pytest.raises(ValueError, match="status_delay_s"):
+        ExploreNodeParams(status_delay_s=-1.0)
     with pytest.raises(ValueError, match="gain_scale"):
         ExploreParams(gain_scale=float("nan"))
     with pytest.raises(ValueError, match="resolution"):
         Explorer(ExploreParams(), 0.05).costs(grid_of(rooms()))
+
+
+class ExploreProbe:
+    """An explore node fed by hand, recording the goals and cancels it sends."""
+
+    def __init__(self):
+        self.node = ExploreNode(ExploreNodeParams(robot_radius=0.3, clearance=0.1, approach_distance=1.0))
+        self.goals, self.cancels = [], []
+        self.node.goal_pub.sink = lambda pub, payload, stamp: self.goals.append(decode(payload, Goal))
+        self.node.cancel_pub.sink = lambda pub, payload, stamp: self.cancels.append(decode(payload, CancelGoal))
+        self.index = {inp.key.rsplit("/", 1)[-1]: i for i, inp in enumerate(self.node.inputs)}
+
+    def pose(self, t: float, x: float, y: float) -> None:
+        header = Header(stamp_ns=round(t * NS_PER_S), frame_id="map")
+        self.node.process(self.index["pose"], PoseWithCovariance(header=header, pose=Pose2D(x, y, 0.0)))
+
+    def map(self, t: float, data) -> None:
+        self.node.process(self.index["map"], grid_of(data, t))
+
+    def status(self, t: float, goal_id: str, status: str) -> None:
+        header = Header(stamp_ns=round(t * NS_PER_S), frame_id="map")
+        self.node.process(self.index["nav_status"], NavStatus(header=header, goal_id=goal_id, status=status))
+
+
+def test_the_explore_node_sends_frontiers_as_goals_and_gives_up_the_aborted_ones():
+    probe = ExploreProbe()
+    probe.pose(0.5, 1.0, 1.5)
+    probe.map(1.0, rooms())
+    assert [g.goal_id for g in probe.goals] == ["explore-1"]
+    goal = probe.goals[0]
+    assert goal.header.frame_id == "map" and 2.0 <= goal.pose.x <= 3.0     # before the gap at x = 3 m
+    probe.status(1.8, "explore-1", "aborted")       # takes effect 0.3 s later: not on the map at 2.0 s
+    probe.map(2.0, rooms())
+    assert len(probe.goals) == 1 and not probe.node.finished
+    probe.map(3.0, rooms())                         # given up: the gap was the only frontier
+    assert len(probe.goals) == 1 and not probe.node.finished and not probe.cancels
+    probe.map(4.0, rooms())                         # a second map without one: done
+    assert probe.node.finished and not probe.cancels
+
+
+def test_a_goal_whose_frontier_went_away_is_canceled_when_no_other_is_left():
+    probe = ExploreProbe()
+    probe.pose(0.5, 1.0, 1.5)
+    probe.map(1.0, rooms())
+    probe.status(1.1, "explore-1", "active")
+    closed = rooms()
+    closed[7:23, 30] = OCC                          # the gap turns out to be a wall
+    probe.map(2.0, closed)
+    assert [c.goal_id for c in probe.cancels] == ["explore-1"]    # nothing left to preempt it with
+    probe.map(3.0, closed)
+    assert probe.node.finished and len(probe.goals) == 1
 
 
 def test_exploring_the_room_maps_its_reachable_free_space_without_collision():

@@ -33,7 +33,6 @@ from ..costmap.layers import InflationLayer
 from ..costmap.params import InflationLayerParams
 from ..global_planner.astar import NO_INFORMATION, search
 from ..global_planner.params import GlobalPlannerParams
-from ..global_planner.smoother import smooth
 from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
 
 LETHAL, INSCRIBED = 254, 253
@@ -49,20 +48,15 @@ class ExploreParams:
     min_frontier_size: float = 0.5      # m (explore_lite's name and default)
     gain_scale: float = 0.3             # score per metre of frontier against a metre of path
     approach_distance: float = 1.0      # m: a frontier is approached to within this
-    speed: float = 0.4                  # m/s while following a path
-    turn: float = 0.8                   # rad/s at most
-    lookahead: float = 0.2              # m along the path ahead of the robot it steers at (a corner is cut by ≤ half)
-    goal_tolerance: float = 0.15        # m: the approach cell counts as reached this close
-    progress_timeout: float = 15.0      # sim s without getting 0.1 m closer to the goal: give up the frontier
+    progress_timeout: float = 30.0      # sim s without getting 0.1 m closer to the goal: give it up (explore_lite's)
 
     def __post_init__(self) -> None:
         for name in ("robot_radius", "clearance", "inflation_radius", "cost_scaling_factor", "min_frontier_size",
-                     "gain_scale", "approach_distance", "speed", "turn", "lookahead", "goal_tolerance",
-                     "progress_timeout"):
+                     "gain_scale", "approach_distance", "progress_timeout"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a number ≥ 0, got {value}")
-        for name in ("robot_radius", "speed", "turn", "lookahead", "goal_tolerance", "progress_timeout"):
+        for name in ("robot_radius", "progress_timeout"):
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
 
@@ -79,7 +73,6 @@ class ExploreGoal:
     frontier: Frontier
     cell: tuple[int, int]       # the approach cell
     xy: tuple[float, float]     # its centre
-    path: np.ndarray            # (N, 2) world points from the robot to the approach cell
     path_m: float               # the path's cost as metres of free travel
     score: float
     frontiers: int              # frontiers large enough to be considered
@@ -157,7 +150,7 @@ class Explorer:
         return costs
 
     def choose(self, grid: OccupancyGrid, costs: np.ndarray, pose, given_up_xy=()) -> ExploreGoal | None:
-        """The best frontier to drive to from pose, with its path; None when no frontier is reachable."""
+        """The best frontier to drive to from pose; None when no frontier is reachable."""
         p, info = self.params, grid.info
         start = tuple(int(v) for v in np.ravel(world_to_cell(info, pose[0], pose[1])))
         if not in_grid(info, *start):
@@ -191,8 +184,7 @@ class Explorer:
             return None
         score, frontier, cell = best
         return ExploreGoal(frontier=frontier, cell=cell, xy=tuple(float(v) for v in cell_to_world(info, *cell)),
-                           path=self._path(result, cell, costs, info, pose), path_m=float(metres[cell]),
-                           score=score, frontiers=len(frontiers))
+                           path_m=float(metres[cell]), score=score, frontiers=len(frontiers))
 
     def _with_escape(self, costs: np.ndarray, info: MapMetaData, start: tuple[int, int]) -> np.ndarray:
         """Inscribed (not lethal) cells within the robot's radius of its cell made passable."""
@@ -206,33 +198,3 @@ class Explorer:
         window = costs[r0:r1, c0:c1]
         window[window == INSCRIBED] = INSCRIBED - 1
         return costs
-
-    @staticmethod
-    def _path(result, cell, costs, info: MapMetaData, pose) -> np.ndarray:
-        cells = result.path(cell)
-        points = np.column_stack([cells[:, 1] + 0.5, cells[:, 0] + 0.5])
-        points = smooth(points, costs, SEARCH.smooth_weight_data, SEARCH.smooth_weight_smooth,
-                        SEARCH.smooth_max_iterations, SEARCH.smooth_tolerance)
-        xy = np.column_stack(cell_to_world(info, points[:, 1] - 0.5, points[:, 0] - 0.5))
-        xy[0] = pose[0], pose[1]
-        return xy
-
-    def path_blocked(self, grid: OccupancyGrid, costs: np.ndarray, path: np.ndarray) -> bool:
-        """Whether any point of the path (world, from the robot) lies off the map or in a cell the
-        search could not enter from the path's first point (lethal, or inscribed beyond the
-        escape window). Points are checked every half cell along each segment."""
-        if len(path) < 2:
-            return False
-        start = tuple(int(v) for v in np.ravel(world_to_cell(grid.info, path[0, 0], path[0, 1])))
-        if not in_grid(grid.info, *start):
-            return True
-        costs = self._with_escape(costs, grid.info, start)
-        seg = np.diff(path, axis=0)
-        steps = np.maximum(1, np.ceil(np.hypot(seg[:, 0], seg[:, 1]) / (0.5 * grid.info.resolution))).astype(int)
-        points = np.vstack([path[i] + seg[i] * np.linspace(0.0, 1.0, n, endpoint=False)[:, None]
-                            for i, n in enumerate(steps)] + [path[-1:]])
-        rows, cols = world_to_cell(grid.info, points[:, 0], points[:, 1])
-        inside = in_grid(grid.info, rows, cols)
-        if not inside.all():
-            return True
-        return bool((costs[rows, cols] >= INSCRIBED).any())

@@ -1,41 +1,53 @@
-"""The explore service: drives the robot to frontiers of the slam map until none is left.
+"""The explore service: explore_lite for omninav. It sends frontiers of the slam map as goals to
+the navigator (move_base's part), which plans them on the global costmap (slam's map plus the
+live scans) and drives them with the local planner, the velocity smoother and the collision
+monitor, until no reachable frontier is left.
 
-Inputs, synced: `map` (slam's, every map_update_interval) and `pose` (slam's pose in the map
-frame, at every scan). Output: `cmd_vel`. It is explore_lite with its own simple path following
-(the core, explore.py, chooses the frontier and plans the path on the map):
+Inputs: `map` and `pose` (slam's, synced); `nav_status` (the navigator's, sporadic). Outputs:
+`goal` (Goal, map frame, goal_id "explore-<n>": the core's approach cell, heading along the
+bearing from the robot to it) and `cancel`. Decisions are made on maps (every map_update_interval of sim time):
 
-- On a map: its costs are made; the path being followed is kept while it is clear of the
-  robot's reach of every occupied cell on the new map and its goal still lies within
-  approach_distance of a frontier; otherwise a new goal is chosen.
-- On a pose: steer at the path point `lookahead` ahead of the robot's nearest one (localize-eval's
-  route_command: holonomic robots move straight at it and turn to face their way, a differential
-  drive turns on the spot first when far off). Within goal_tolerance of the goal the robot stops
-  and waits for a map made after it stopped; the frontier cells that map still holds were seen
-  from close by and stay unknown (shadows), so they are given up. A goal not 0.1 m closer after
-  progress_timeout is given up the same way.
-- With no reachable frontier on two maps in a row (the second made while the robot stood still),
-  the exploration is finished: the robot stands, `finished` is set.
+- No goal out: the core (explore.py) chooses one on this map from the latest pose; it is sent.
+- The goal's status succeeded: this map was made after the robot stopped there, so the cells of
+  the goal's frontier it still holds were seen from close by and stay unknown (shadows behind
+  furniture): they are given up, and the next goal is chosen.
+- aborted or canceled (no plan to it, or the robot stuck after the navigator's recoveries): the
+  frontier is given up (explore_lite blacklists it), the next goal is chosen.
+- A goal out whose frontier has gone (no frontier cell within approach_distance of it), or that
+  came no PROGRESS_M closer within progress_timeout: given up the same way and the next chosen,
+  which preempts it in the navigator.
+- No reachable frontier: a goal given up but not ended is canceled (the robot stops); on two
+  maps in a row: finished.
 
-Every decision depends only on the inputs' contents and stamps, so a replay reproduces it.
+A nav_status stamped t takes effect at the first map stamped after t + status_delay_s (as the
+navigator defers its sporadic inputs): whether it arrives before or after the maps in
+(t, t + delay], the goals are the same, and a live run replays exactly.
 """
 from __future__ import annotations
 
+import bisect
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ...schemas.messages import OccupancyGrid, PoseWithCovariance, Twist
-from ..localizer.evaluate import route_command
+from ...schemas.messages import CancelGoal, Goal, NavStatus, OccupancyGrid, Pose2D, PoseWithCovariance
 from ..runtime.node import NS_PER_S, Node
 from .explore import ExploreGoal, Explorer, ExploreParams, find_frontiers, still_frontier
 
 PROGRESS_M = 0.1
+GOAL_PREFIX = "explore-"
+ENDED = ("succeeded", "aborted", "canceled")
 
 
 @dataclass(frozen=True)
 class ExploreNodeParams(ExploreParams):
-    holonomic: bool = True      # false: a differential drive (turns on the spot, never strafes)
+    status_delay_s: float = 0.3     # sim s from a nav_status stamp to its effect
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not (math.isfinite(self.status_delay_s) and self.status_delay_s >= 0):
+            raise ValueError(f"status_delay_s must be zero or positive, got {self.status_delay_s}")
 
 
 class ExploreNode(Node):
@@ -43,110 +55,100 @@ class ExploreNode(Node):
     Params = ExploreNodeParams
 
     def setup(self) -> None:
-        self.cmd_pub = self.publisher("cmd_vel")
+        self.goal_pub = self.publisher("goal")
+        self.cancel_pub = self.publisher("cancel")
         self.subscribe("map", self.on_map)
         self.subscribe("pose", self.on_pose)
+        self.subscribe("nav_status", self.on_status, synced=False, max_delay_s=self.params.status_delay_s)
+        self.delay_ns = round(self.params.status_delay_s * NS_PER_S)
         self.explorer: Explorer | None = None
-        self.grid: OccupancyGrid | None = None
-        self.costs: np.ndarray | None = None
         self.goal: ExploreGoal | None = None
+        self.goal_id = ""                       # the last goal sent
+        self.goal_open = False                  # … and the navigator has not ended it
+        self.statuses: list[tuple[int, int, NavStatus]] = []   # (stamp, seq, status) not yet in effect
         self.given_up = np.zeros((0, 2))        # world points of frontier cells given up
         self.pose: tuple[float, float, float] | None = None
-        self.stopped_at_ns: int | None = None   # reached a goal; waiting for a map made since
         self.empty_maps = 0                     # maps in a row without a reachable frontier
         self.finished = False
-        self._along = 0                         # index of the path point nearest the robot
         self._progress: tuple[float, int] = (math.inf, 0)   # (best distance to the goal, when)
 
-    # ------------------------------------------------------------ inputs
+    def on_pose(self, msg: PoseWithCovariance) -> None:
+        self.pose = (msg.pose.x, msg.pose.y, msg.pose.theta)
+        if self.goal is not None:
+            distance = math.dist(self.pose[:2], self.goal.xy)
+            if distance < self._progress[0] - PROGRESS_M:
+                self._progress = (distance, msg.header.stamp_ns)
+
+    def on_status(self, msg: NavStatus) -> None:
+        # sorted as replay feeds them, whatever order they arrived in
+        bisect.insort(self.statuses, (msg.header.stamp_ns, msg.header.seq, msg), key=lambda item: item[:2])
 
     def on_map(self, msg: OccupancyGrid) -> None:
         if self.explorer is None:
             self.explorer = Explorer(self.params, msg.info.resolution)
-        self.grid, self.costs = msg, self.explorer.costs(msg)
         if self.finished or self.pose is None:
             return
-        if self.stopped_at_ns is not None:
-            if msg.header.stamp_ns <= self.stopped_at_ns:
-                return
-            self._give_up()
-            self.stopped_at_ns = None
-        if self.goal is None or not self._goal_still_good():
-            self._choose()
-
-    def on_pose(self, msg: PoseWithCovariance) -> None:
-        self.pose = (msg.pose.x, msg.pose.y, msg.pose.theta)
-        goal = self.goal
-        if goal is None or self.finished or self.stopped_at_ns is not None:
-            self._command(0.0, 0.0, 0.0)
-            return
-        now = msg.header.stamp_ns
-        distance = math.dist(self.pose[:2], goal.xy)
-        if distance < self.params.goal_tolerance:
-            self.counters["goals_reached"] += 1
-            self.stopped_at_ns = now
-            self._command(0.0, 0.0, 0.0)
-            return
-        best, since = self._progress
-        if distance < best - PROGRESS_M:
-            self._progress = (distance, now)
-        elif now - since > round(self.params.progress_timeout * NS_PER_S):
-            self.counters["goals_without_progress"] += 1
-            self._give_up()
-            self._choose()
-            self._command(0.0, 0.0, 0.0)
-            return
-        p = self.params
-        self._command(*route_command(self.pose, self._lookahead_point(), p.holonomic, p.speed, p.turn))
+        ended = self._ended_status(msg.header.stamp_ns)
+        if self.goal is not None:
+            if ended is not None:
+                self.counters[f"goals_{ended}"] += 1
+                self._give_up(msg)
+            elif not self._near_a_frontier(msg):
+                self.counters["goals_frontier_gone"] += 1
+                self._give_up(msg)
+            elif msg.header.stamp_ns - self._progress[1] > round(self.params.progress_timeout * NS_PER_S):
+                self.counters["goals_without_progress"] += 1
+                self._give_up(msg)
+        if self.goal is None:
+            self._choose(msg)
 
     # ------------------------------------------------------------ decisions
 
-    def _goal_still_good(self) -> bool:
-        goal, grid = self.goal, self.grid
-        remaining = np.vstack([np.asarray(self.pose[:2])[None], goal.path[self._along + 1:]])
-        if self.explorer.path_blocked(grid, self.costs, remaining):
-            self.counters["paths_blocked"] += 1
-            return False
+    def _ended_status(self, now_ns: int) -> str | None:
+        """Put into effect the statuses stamped before now − status_delay_s; the last end of the
+        goal out among them, or None."""
+        ended = None
+        while self.statuses and self.statuses[0][0] + self.delay_ns < now_ns:
+            status = self.statuses.pop(0)[2]
+            if status.goal_id == self.goal_id and status.status in ENDED:
+                self.goal_open = False
+                ended = status.status if self.goal is not None else ended
+        return ended
+
+    def _near_a_frontier(self, grid: OccupancyGrid) -> bool:
         frontiers = find_frontiers(grid, self.params.min_frontier_size, self.given_up)
         if not frontiers:
             return False
         points = np.vstack([f.xy for f in frontiers])
-        return float(np.min(np.hypot(*(points - goal.xy).T))) <= self.params.approach_distance
+        return float(np.min(np.hypot(*(points - self.goal.xy).T))) <= self.params.approach_distance
 
-    def _choose(self) -> None:
-        self.goal = self.explorer.choose(self.grid, self.costs, self.pose, self.given_up)
-        self._along = 0
-        self._progress = (math.inf, self.now_ns)
-        if self.goal is None:
+    def _choose(self, grid: OccupancyGrid) -> None:
+        goal = self.explorer.choose(grid, self.explorer.costs(grid), self.pose, self.given_up)
+        if goal is None:
             self.empty_maps += 1
             self.finished = self.empty_maps >= 2
+            if self.goal_open:      # given up, and nothing to preempt it with
+                self.cancel_pub.publish(CancelGoal(header=self.header("map"), goal_id=self.goal_id))
+                self.goal_open = False
             return
         self.empty_maps = 0
+        self.goal = goal
         self.counters["goals"] += 1
+        self.goal_id, self.goal_open = f"{GOAL_PREFIX}{self.counters['goals']}", True
+        self._progress = (math.inf, grid.header.stamp_ns)
+        self.goal_pub.publish(Goal(header=self.header("map"), goal_id=self.goal_id,
+                                   pose=Pose2D(*goal.xy, self._arrival_heading(goal))))
 
-    def _give_up(self) -> None:
-        """Give up the cells of the goal's frontier that the current map still holds as frontier."""
-        goal, grid = self.goal, self.grid
-        if goal is None:
-            return
-        cells = goal.frontier.xy
+    def _arrival_heading(self, goal: ExploreGoal) -> float:
+        """The bearing from the robot to the goal (the lidar sees all round: any heading will do, and
+        this one needs no turning on the spot at the end of a straight drive); the robot's heading
+        when the goal is within PROGRESS_M."""
+        dx, dy = goal.xy[0] - self.pose[0], goal.xy[1] - self.pose[1]
+        return math.atan2(dy, dx) if math.hypot(dx, dy) > PROGRESS_M else self.pose[2]
+
+    def _give_up(self, grid: OccupancyGrid) -> None:
+        """Give up the cells of the goal's frontier that the map still holds as frontier."""
+        cells = self.goal.frontier.xy
         self.given_up = np.vstack([self.given_up, cells[still_frontier(grid, cells)]])
         self.counters["frontiers_given_up"] += 1
         self.goal = None
-
-    def _lookahead_point(self) -> tuple[float, float]:
-        """The path point lookahead ahead of the nearest one; the next point instead when the straight
-        line to it would cut a corner into the robot's reach of an obstacle on the current map."""
-        path, here = self.goal.path, np.asarray(self.pose[:2])
-        window = path[self._along:]
-        self._along += int(np.argmin(np.hypot(*(window - here).T)))
-        ahead = np.flatnonzero(np.hypot(*(path[self._along:] - here).T) >= self.params.lookahead)
-        target = path[self._along + ahead[0]] if len(ahead) else path[-1]
-        if self.explorer.path_blocked(self.grid, self.costs, np.vstack([here, target])):
-            self.counters["corners_not_cut"] += 1
-            target = path[min(self._along + 1, len(path) - 1)]
-        return tuple(target)
-
-    def _command(self, vx: float, vy: float, wz: float) -> None:
-        self.cmd_pub.publish(Twist(header=self.header("base_link"), linear_x=vx, linear_y=vy, angular_z=wz))
-

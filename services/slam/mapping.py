@@ -1,11 +1,14 @@
 """Mapping in the simulator (`omninav map --world W`) and the comparison of a map with the truth.
 
 build_map runs, in one process and in lockstep (InProcessRunner), the sim, chassis, lidar and slam
-services and a driver: by default the explore service (frontier exploration on slam's map and
-pose, explore_node.py) until no reachable frontier is left; with a route, localize-eval's harness,
-which drives cmd_vel along the waypoints on the TRUE pose (a test rig, not navigation), here
-without its map and start request. The map is the slam node's map at the end, in the world frame
-(slam starts at the world's start pose, see node.py).
+services and a driver. By default the driver is the navigation stack with the explore service
+(explore_lite + move_base): explore (explore_node.py) sends frontiers of slam's map as goals to the
+navigator, which plans them on the global costmap (slam's map as its static layer, the scans as
+its obstacle layer, map → odom from slam) and drives them through the local planner, the velocity
+smoother and the collision monitor, with slam's pose as the robot's; until no reachable frontier
+is left. With a route, localize-eval's harness drives cmd_vel along the waypoints on the TRUE pose
+(a test rig, not navigation), here without its map and start request. The map is the slam node's
+map at the end, in the world frame (slam starts at the world's start pose, see node.py).
 
 compare_with_truth scores a map against World.rasterize at the map's resolution: the share of
 cells that agree among the cells both call known, and how far each occupied map cell lies from the
@@ -15,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy import ndimage
@@ -23,10 +27,16 @@ from ...schemas.messages import OccupancyGrid
 from ...sim.node import SimNode, SimNodeParams
 from ...sim.world import GRID_OBSTACLE, World
 from ..chassis.node import ChassisNode, ChassisNodeParams
+from ..costmap.node import CostmapNode, CostmapNodeParams
+from ..global_planner.node import PlannerNode, PlannerNodeParams
 from ..lidar.node import LidarNode, LidarNodeParams
+from ..local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
+from ..local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from ..localizer.evaluate import ROUTES, Harness, HarnessParams, Route, circumscribed_radius, route_problems
 from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
+from ..navigator.node import NavigatorNode, NavigatorNodeParams
 from ..runtime.inprocess import InProcessRunner
+from ..runtime.node import Node
 from ..runtime.params import load_params
 from .explore_node import ExploreNode, ExploreNodeParams
 from .node import SlamNode, SlamNodeParams
@@ -36,6 +46,7 @@ from .node import SlamNode, SlamNodeParams
 # decides on the map, so it comes every second.
 MAPPING_DEFAULTS = dict(linearUpdate=0.25, angularUpdate=0.25, particles=30, map_update_interval=1.0)
 MARGIN_M = 2.0      # the map's extent beyond the world's bounds
+COSTMAP_PARAMS = Path(__file__).resolve().parents[2] / "compose" / "params"
 # localize-eval's routes, except where mapping must see more than localizing needs: every aisle of
 # the warehouse (a mover may cross; slam keeps it out of the map as it moves on)
 MAPPING_ROUTES: dict[str, Route] = {
@@ -96,10 +107,26 @@ def parse_waypoints(text: str) -> tuple[tuple[float, float], ...]:
     return points
 
 
+def navigation_stack(world: World, drive: str) -> list[Node]:
+    """costmap, global_planner, local_planner, velocity_smoother, collision_monitor and navigator, as
+    `omninav navigate` runs them (compose/params' costmaps), fed by slam: the map frame is the world's,
+    odometry starts at the world's start pose."""
+    start = dict(zip(("initial_pose_x", "initial_pose_y", "initial_pose_a"), map(float, world.robot.start)))
+    costmap_files = {f"{which}_costmap_files": (str(COSTMAP_PARAMS / "costmap_common_params.yaml"),
+                                                str(COSTMAP_PARAMS / f"costmap_{which}_params.yaml"))
+                     for which in ("global", "local")}
+    strafing = {} if drive != "diff" else dict(holonomic_robot=False, max_vel_y=0.0, min_vel_y=0.0, y_vels=())
+    return [CostmapNode(CostmapNodeParams(**costmap_files, **start)),
+            PlannerNode(PlannerNodeParams(goal_topic="plan_request", planner_frequency=0.0, use_dijkstra=False,
+                                          **start)),
+            LocalPlannerNode(LocalPlannerNodeParams(**strafing, **start)),
+            VelocitySmootherNode(), CollisionMonitorNode(), NavigatorNode(NavigatorNodeParams(**start))]
+
+
 def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, params: SlamNodeParams | None = None,
               laps: int = 1, max_sim_s: float = 1800.0, speed: float = 0.4) -> BuildResult:
-    """Explore (no route) or drive the route (a Route or waypoints) `laps` times, at most max_sim_s of sim
-    time, while slam maps."""
+    """Explore (no route) or drive the route (a Route or waypoints) `laps` times at `speed`, at most
+    max_sim_s of sim time, while slam maps."""
     sim = SimNode(SimNodeParams(world=world_name, drive=drive, seed=seed))
     world, drive = sim.world, sim.sim.drive
     if route is not None:
@@ -108,14 +135,15 @@ def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, param
         if problems:
             raise ValueError("the route is not clear: " + "; ".join(problems))
         driver = RouteDriver(HarnessParams(route=route, holonomic=drive != "diff", speed=speed))
+        drivers = [driver]
         done = lambda: driver.laps >= laps   # noqa: E731
     else:
-        driver = ExploreNode(ExploreNodeParams(robot_radius=circumscribed_radius(world), holonomic=drive != "diff",
-                                               speed=speed))
+        driver = ExploreNode(ExploreNodeParams(robot_radius=circumscribed_radius(world)))
+        drivers = [*navigation_stack(world, drive), driver]
         done = lambda: driver.finished   # noqa: E731
     slam = SlamNode(params or slam_params_for(world, seed=seed))
     runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams(drive=drive)),
-                              LidarNode(LidarNodeParams(world=world_name, seed=seed + 1)), slam, driver])
+                              LidarNode(LidarNodeParams(world=world_name, seed=seed + 1)), slam, *drivers])
     runner.run_until(done, math.ceil(max_sim_s / sim.params.dt))
     runner.close()
     exploring = isinstance(driver, ExploreNode)
