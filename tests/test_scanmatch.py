@@ -10,6 +10,7 @@ from omninav.sim.world import load_world, world_path
 DELTA = 0.05
 ANGLES = np.linspace(-np.pi, np.pi, 360, endpoint=False)
 L_OCC = 0.85
+SIGMA = 0.05
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +33,7 @@ def setup(room, true_pose):
     world, grids = room
     x, y, hit = beams(world, true_pose)
     geo = np.array([grids.geometry.xmin, grids.geometry.ymin, 1.0 / DELTA])
-    kernel = sm.gaussian_kernel(1, DELTA, 0.05)
+    kernel = sm.gaussian_kernel(1, DELTA, SIGMA)
     return grids, geo, np.ascontiguousarray(x[hit]), np.ascontiguousarray(y[hit]), kernel
 
 
@@ -43,21 +44,59 @@ TRUE = np.array([4.3, 3.6, 0.4])
 def test_refinement_recovers_a_small_offset(room, offset):
     grids, geo, px, py, kernel = setup(room, TRUE)
     guess = TRUE + offset
-    x, y, th, score = sm.refine(grids.pool, grids.tables[0], geo, px, py, *guess, kernel, 1 / L_OCC, 20)
+    x, y, th, score = sm.refine(grids.pool, grids.hits, grids.tables[0], geo, px, py, *guess, kernel, SIGMA,
+                                1 / L_OCC, 20, False)
     # the map quantises walls to 5 cm cells: a pose within a fifth of a cell is a recovered one
     assert np.hypot(x - TRUE[0], y - TRUE[1]) < 0.01
     assert abs(th - TRUE[2]) < 0.003
     assert score > 0.8
 
 
+BOX = (0.013, 0.013, 4.013, 3.013)   # walls 13 mm into their cells: the cell centres are 12 mm off
+
+
+def box_beams(pose):
+    """Exact beams from inside the rectangle BOX."""
+    dx, dy = np.cos(pose[2] + ANGLES), np.sin(pose[2] + ANGLES)
+    with np.errstate(divide="ignore"):
+        tx = np.where(dx > 0, (BOX[2] - pose[0]) / dx, np.where(dx < 0, (BOX[0] - pose[0]) / dx, np.inf))
+        ty = np.where(dy > 0, (BOX[3] - pose[1]) / dy, np.where(dy < 0, (BOX[1] - pose[1]) / dy, np.inf))
+    return cut_beams(np.minimum(tx, ty), ANGLES, 0.0, 12.0, 11.0)
+
+
+def test_the_hit_point_field_places_walls_inside_their_cells():
+    grids = TiledGrids(GridGeometry.from_extent(-1.0, -1.0, 5.0, 4.0, DELTA))
+    rng = np.random.default_rng(0)
+    for x in np.linspace(0.8, 3.2, 5):
+        for y in np.linspace(0.8, 2.2, 3):
+            pose = (x, y, rng.uniform(-np.pi, np.pi))
+            bx, by, hit = box_beams(pose)
+            c, s = np.cos(pose[2]), np.sin(pose[2])
+            grids.integrate(0, pose[:2], x + c * bx - s * by, y + s * bx + c * by, hit, L_OCC, -0.4, 5.0)
+    geo = np.array([grids.geometry.xmin, grids.geometry.ymin, 1.0 / DELTA])
+    kernel = sm.gaussian_kernel(1, DELTA, SIGMA)
+    true = np.array([2.1, 1.3, 0.3])
+    px, py, _ = box_beams(true)
+    args = (grids.pool, grids.hits, grids.tables[0], geo, px, py)
+    on_cells = sm.refine(*args, *(true + (0.02, -0.015, 0.0)), kernel, SIGMA, 1 / L_OCC, 20, False)
+    assert np.hypot(on_cells[0] - true[0], on_cells[1] - true[1]) > 0.01, "the cell field puts walls at cell centres"
+    on_points = sm.refine(*args, *on_cells[:3], kernel, SIGMA, 1 / L_OCC, sm.POLISH_ITERATIONS, True)
+    assert np.hypot(on_points[0] - true[0], on_points[1] - true[1]) < 0.005
+    matched = sm.match_one(*args, *(true + (0.02, -0.015, 0.0)), kernel, kernel, SIGMA, 1 / L_OCC, 20,
+                           0.5, 0.2, 0.1, 0.2, 0.02)
+    assert np.allclose(matched[:3], on_points[:3]), "a match is polished on the hit point field"
+    assert matched[3] == pytest.approx(on_cells[3]), "its score is the cell field's"
+
+
 def test_the_correlative_search_recovers_a_large_offset(room):
     grids, geo, px, py, kernel = setup(room, TRUE)
     guess = TRUE + (0.5, -0.4, 0.3)
-    plain = sm.refine(grids.pool, grids.tables[0], geo, px, py, *guess, kernel, 1 / L_OCC, 20)
+    plain = sm.refine(grids.pool, grids.hits, grids.tables[0], geo, px, py, *guess, kernel, SIGMA, 1 / L_OCC, 20,
+                                False)
     assert np.hypot(plain[0] - TRUE[0], plain[1] - TRUE[1]) > 0.05, "too far for refinement alone"
     coarse = sm.gaussian_kernel(2, DELTA, 0.1)
-    x, y, th, score = sm.match_one(grids.pool, grids.tables[0], geo, px, py, *guess, kernel, coarse, 1 / L_OCC, 20,
-                                   0.9, 0.6, 0.1, 0.4, 0.02)
+    x, y, th, score = sm.match_one(grids.pool, grids.hits, grids.tables[0], geo, px, py, *guess, kernel, coarse, SIGMA,
+                                   1 / L_OCC, 20, 0.9, 0.6, 0.1, 0.4, 0.02)
     assert np.hypot(x - TRUE[0], y - TRUE[1]) < 0.01 and abs(th - TRUE[2]) < 0.003
     assert score > plain[3]
 
@@ -73,11 +112,12 @@ def test_the_likelihood_is_highest_at_the_true_pose(room):
 def test_match_all_matches_each_particle_against_its_own_map(room):
     grids, geo, px, py, kernel = setup(room, TRUE)
     two = TiledGrids(grids.geometry, 2)
-    two.pool, two.refs, two.free, two.free_top = grids.pool, grids.refs.copy(), grids.free, grids.free_top
+    two.pool, two.hits, two.refs, two.free, two.free_top = (grids.pool, grids.hits, grids.refs.copy(), grids.free,
+                                                           grids.free_top)
     two.tables = np.stack([grids.tables[0], np.full_like(grids.tables[0], -1)])  # map 1 is empty
     guesses = np.array([TRUE + (0.05, 0.03, 0.02), TRUE + (0.05, 0.03, 0.02)])
-    poses, scores, loglik = sm.match_all(two.pool, two.tables, geo, px, py, guesses, kernel, kernel, 1 / L_OCC,
-                                         20, 0.0, 0.5, 0.3, 0.1, 0.2, 0.02, 2, 0.075)
+    poses, scores, loglik = sm.match_all(two.pool, two.hits, two.tables, geo, px, py, guesses, kernel, kernel, SIGMA,
+                                         1 / L_OCC, 20, 0.0, 0.5, 0.3, 0.1, 0.2, 0.02, 2, 0.075)
     assert np.hypot(*(poses[0, :2] - TRUE[:2])) < 0.01
     assert np.allclose(poses[1], guesses[1]), "an empty map keeps the guess"
     assert scores[1] == 0.0 and scores[0] > 0.8
@@ -87,7 +127,7 @@ def test_match_all_matches_each_particle_against_its_own_map(room):
 def test_a_match_below_the_minimum_score_keeps_the_guess(room):
     grids, geo, px, py, kernel = setup(room, TRUE)
     guess = np.array([TRUE + (0.05, 0.03, 0.02)])
-    args = (grids.pool, grids.tables[:1], geo, px, py, guess, kernel, kernel, 1 / L_OCC, 20)
+    args = (grids.pool, grids.hits, grids.tables[:1], geo, px, py, guess, kernel, kernel, SIGMA, 1 / L_OCC, 20)
     kept, scores, loglik = sm.match_all(*args, 0.99, 0.0, 0.0, 0.1, 0.0, 0.02, 2, 0.075)
     assert scores[0] < 0.99 and np.array_equal(kept, guess)
     matched, _, better = sm.match_all(*args, 0.0, 0.0, 0.0, 0.1, 0.0, 0.02, 2, 0.075)

@@ -33,6 +33,18 @@ def test_a_beam_clears_the_cells_it_crosses_and_marks_its_end():
     assert not l[~touched].any(), "nothing but the beam's cells may change"
 
 
+def test_a_cell_keeps_the_mean_of_the_end_points_that_hit_it():
+    g = grids()
+    ends_x, ends_y = np.array([0.72, 0.78, 0.74]), np.array([0.01, 0.09, 0.02])   # all in one 0.1 m cell
+    g.integrate(0, (0.05, 0.05), ends_x, ends_y, np.array([True, True, True]), L_OCC, L_FREE, L_MAX)
+    g.integrate(0, (0.05, 0.05), np.array([0.76]), np.array([0.05]), np.array([False]), L_OCC, L_FREE, L_MAX)
+    x, y, n = g.mean_hit(0, *cell(g, 0.75, 0.05))
+    assert n == 3, "a beam that is cut there (no hit) does not count"
+    assert x == pytest.approx(ends_x.mean(), abs=1e-5) and y == pytest.approx(ends_y.mean(), abs=1e-5)
+    x, y, n = g.mean_hit(0, *cell(g, 0.45, 0.05))
+    assert (x, y, n) == (pytest.approx(0.45, abs=1e-5), pytest.approx(0.05, abs=1e-5), 0), "a cell only crossed"
+
+
 def test_a_beam_without_a_hit_only_clears():
     g = grids()
     g.integrate(0, (0.05, 0.05), np.array([0.05]), np.array([-0.95]), np.array([False]), L_OCC, L_FREE, L_MAX)
@@ -96,7 +108,7 @@ def test_resampled_maps_share_tiles_until_one_writes():
     g.resample([1, 1, 1])  # map 0's own tiles are referenced by no one now
     assert g.tiles_in_use() < 2 * alone
     assert all(np.array_equal(g.logodds(i), g.logodds(1)) for i in range(3))
-    assert g.bytes_in_use() == g.tiles_in_use() * TILE * TILE * 4 + g.tables.nbytes
+    assert g.bytes_in_use() == g.tiles_in_use() * TILE * TILE * (4 + 3 * 2) + g.tables.nbytes
 
 
 def test_the_tile_pool_grows_without_changing_the_result():

@@ -13,6 +13,13 @@ x in [xmin + col·delta, xmin + (col+1)·delta), y likewise from ymin, so the ma
 
 A beam updates the cells it crosses (Amanatides & Woo traversal) with l_free and the cell holding
 its end with l_occ; a beam longer than maxUrange is cut there and only clears.
+
+Each cell also keeps the mean of the end points that hit it (gmapping's PointAccumulator), so the
+scan matcher sees where in the cell the surface lies, not only which cell it is in: a wall whose
+surface runs along a cell border is hit in two cells, and their cell centres alone would leave
+its position undetermined by half a cell. Stored beside the log-odds in `hits`, tile for tile:
+the mean's offset in the cell along u and v in 1/HIT_SCALE of a cell, and the number of hits
+(saturating), three uint16 per cell.
 """
 from __future__ import annotations
 
@@ -27,7 +34,10 @@ from ...schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
 TILE_BITS = 5
 TILE = 1 << TILE_BITS
 TILE_MASK = TILE - 1
-TILE_BYTES = TILE * TILE * 4
+HIT_SCALE = 65535           # a mean hit point's offset in its cell, in 1/HIT_SCALE of a cell
+HIT_CENTRE = 32768          # the offset of a cell never hit: its centre
+MAX_HITS = 65535
+TILE_BYTES = TILE * TILE * (4 + 3 * 2)   # log-odds float32 + the mean hit point, 3 × uint16
 
 
 @dataclass(frozen=True)
@@ -120,7 +130,18 @@ def _take_tile(refs, free, free_top):
 
 
 @njit(cache=True)
-def _update(pool, refs, free, free_top, table, u0, v0, u_end, v_end, hit, l_occ, l_free, l_max):
+def _add_hit(cell, u_offset, v_offset):
+    """Fold a hit at (u_offset, v_offset) (cells, in [0, 1)) into a cell's mean hit point."""
+    n = min(int(cell[2]) + 1, MAX_HITS)
+    for axis, offset in ((0, u_offset), (1, v_offset)):
+        mean = int(cell[axis])
+        target = min(max(offset, 0.0), 1.0) * HIT_SCALE
+        cell[axis] = min(max(mean + int(math.floor((target - mean) / n + 0.5)), 0), HIT_SCALE)
+    cell[2] = n
+
+
+@njit(cache=True)
+def _update(pool, hits, refs, free, free_top, table, u0, v0, u_end, v_end, hit, l_occ, l_free, l_max):
     """Integrate one scan into one map. Returns 0, or the number of free tiles it needs when the
     pool has fewer (then nothing was changed: grow the pool and call again)."""
     marked = np.zeros(table.shape, np.bool_)
@@ -144,10 +165,13 @@ def _update(pool, refs, free, free_top, table, u0, v0, u_end, v_end, hit, l_occ,
         if tile < 0:
             fresh = _take_tile(refs, free, free_top)
             pool[fresh] = 0.0
+            hits[fresh, :, :, :2] = HIT_CENTRE
+            hits[fresh, :, :, 2] = 0
             table[tr, tc] = fresh
         elif refs[tile] > 1:
             fresh = _take_tile(refs, free, free_top)
             pool[fresh] = pool[tile]
+            hits[fresh] = hits[tile]
             refs[tile] -= 1
             table[tr, tc] = fresh
     th, tw = table.shape
@@ -157,19 +181,21 @@ def _update(pool, refs, free, free_top, table, u0, v0, u_end, v_end, hit, l_occ,
             r, c = rows[i], cols[i]
             if r < 0 or c < 0 or (r >> TILE_BITS) >= th or (c >> TILE_BITS) >= tw:
                 continue
-            change = l_occ if (hit[b] and i == n - 1) else l_free
+            end = hit[b] and i == n - 1
             tile = table[r >> TILE_BITS, c >> TILE_BITS]
-            value = pool[tile, r & TILE_MASK, c & TILE_MASK] + change
+            value = pool[tile, r & TILE_MASK, c & TILE_MASK] + (l_occ if end else l_free)
             pool[tile, r & TILE_MASK, c & TILE_MASK] = min(max(value, -l_max), l_max)
+            if end:
+                _add_hit(hits[tile, r & TILE_MASK, c & TILE_MASK], u_end[b] - c, v_end[b] - r)
     return 0
 
 
 @njit(cache=True)
-def _update_maps(pool, refs, free, free_top, tables, first, u0, v0, u_end, v_end, hit, l_occ, l_free, l_max):
+def _update_maps(pool, hits, refs, free, free_top, tables, first, u0, v0, u_end, v_end, hit, l_occ, l_free, l_max):
     """Integrate scan k into map k for k = first, first + 1, ...; returns (k, tiles needed) at the
     first map the pool has too few free tiles for, or (number of maps, 0) when all are done."""
     for k in range(first, tables.shape[0]):
-        need = _update(pool, refs, free, free_top, tables[k], u0[k], v0[k], u_end[k], v_end[k], hit,
+        need = _update(pool, hits, refs, free, free_top, tables[k], u0[k], v0[k], u_end[k], v_end[k], hit,
                        l_occ, l_free, l_max)
         if need:
             return k, need
@@ -216,6 +242,7 @@ class TiledGrids:
         self.geometry = geometry
         self.tables = np.full((n_maps, *geometry.tiles_shape), -1, np.int32)
         self.pool = np.zeros((capacity, TILE, TILE), np.float32)
+        self.hits = np.zeros((capacity, TILE, TILE, 3), np.uint16)
         self.refs = np.zeros(capacity, np.int32)
         self.free = np.arange(capacity - 1, -1, -1, dtype=np.int32)  # a stack; pops low ids first
         self.free_top = np.array([capacity], np.int64)
@@ -229,6 +256,8 @@ class TiledGrids:
         new = max(2 * old, old + need)
         pool = np.zeros((new, TILE, TILE), np.float32)
         pool[:old] = self.pool
+        hits = np.zeros((new, TILE, TILE, 3), np.uint16)
+        hits[:old] = self.hits
         refs = np.zeros(new, np.int32)
         refs[:old] = self.refs
         free = np.empty(new, np.int32)
@@ -236,7 +265,7 @@ class TiledGrids:
         free[:top] = self.free[:top]
         added = np.arange(new - 1, old - 1, -1, dtype=np.int32)
         free[top:top + len(added)] = added
-        self.pool, self.refs, self.free = pool, refs, free
+        self.pool, self.hits, self.refs, self.free = pool, hits, refs, free
         self.free_top[0] = top + len(added)
 
     def grid_coords(self, x, y) -> tuple[np.ndarray, np.ndarray]:
@@ -263,7 +292,7 @@ class TiledGrids:
                 np.float32(l_occ), np.float32(l_free), np.float32(l_max))
         done = 0
         while done < len(maps):
-            done, need = _update_maps(self.pool, self.refs, self.free, self.free_top, tables, done, *args)
+            done, need = _update_maps(self.pool, self.hits, self.refs, self.free, self.free_top, tables, done, *args)
             if need:
                 self._grow(need)
         self.tables[maps] = tables
@@ -281,6 +310,17 @@ class TiledGrids:
         view = padded.reshape(table.shape[0], TILE, table.shape[1], TILE)
         view[tr, :, tc, :] = self.pool[table[tr, tc]]
         return padded[:g.height, :g.width]
+
+    def mean_hit(self, index: int, row: int, col: int) -> tuple[float, float, int]:
+        """The mean of the end points that hit cell (row, col) of map `index` (world coordinates; the
+        cell's centre if none did) and how many did."""
+        g = self.geometry
+        tile = self.tables[index, row >> TILE_BITS, col >> TILE_BITS]
+        if tile < 0:
+            u_off, v_off, n = HIT_CENTRE, HIT_CENTRE, 0
+        else:
+            u_off, v_off, n = self.hits[tile, row & TILE_MASK, col & TILE_MASK]
+        return (g.xmin + (col + u_off / HIT_SCALE) * g.delta, g.ymin + (row + v_off / HIT_SCALE) * g.delta, int(n))
 
     def known_box(self, index: int) -> tuple[int, int, int, int] | None:
         """(row0, row1, col0, col1) cell bounds of the tiles written in map `index` (None: none)."""
@@ -308,5 +348,6 @@ class TiledGrids:
         return int(np.count_nonzero(self.refs > 0))
 
     def bytes_in_use(self) -> int:
-        """Memory the maps hold: tiles referenced by any map, plus the tile tables."""
+        """Memory the maps hold: tiles referenced by any map (log-odds and mean hit points), plus the
+        tile tables."""
         return self.tiles_in_use() * TILE_BYTES + self.tables.nbytes

@@ -233,8 +233,8 @@ class Rbpf:
         window = max(p.search_window, p.search_sigmas * trans_std) if p.search_window > 0 else 0.0
         angle = max(p.search_angle, p.search_sigmas * rot_std) if p.search_angle > 0 else 0.0
         poses, scores, loglik = match_all(
-            self.grids.pool, self.grids.tables, self._geo, px, py, guesses, self._kernel, self._coarse_kernel,
-            1.0 / p.l_occ, p.iterations, p.minimumScore, p.search_below, window, p.lstep,
+            self.grids.pool, self.grids.hits, self.grids.tables, self._geo, px, py, guesses, self._kernel,
+            self._coarse_kernel, p.sigma, 1.0 / p.l_occ, p.iterations, p.minimumScore, p.search_below, window, p.lstep,
             angle, p.astep, p.kernelSize + 1, p.lsigma)
         poses[:, 2] = wrap_angle(poses[:, 2])
         self.poses = poses

@@ -17,8 +17,23 @@ exhaustive correlative search picks a new start — coarse first (steps lstep, a
 normal field, every end point), the field read at the nearest cell centre — and the refinement
 runs again from there; the better result wins.
 
+That field knows obstacles only as cell centres: a wall 1 cm into its cell is put 1.5 cm off,
+and a wall on a cell border, hit in both cells, leaves a flat stretch between their centres
+along which a match slides at no cost; on a route such slips add up to drift. So the result is
+polished (a few Gauss-Newton steps) on the hit point field: around an end point p, the best over
+the cells within kernelSize + 1½ cells of o · exp(−|p − m|² / 2σ²), m the cell's mean hit point
+(grid.py), cut and shifted to zero at that distance so it stays continuous. That field peaks on
+the surfaces themselves, but it ripples along a wall whose cells were hit only a few times (the
+mean points are spaced a cell apart), and its basin is narrow: it only polishes a good match.
+A pose that needed the search (a loop closing, where the map may hold an old and a new copy of
+a wall) is not polished. The score returned is the cell field's, so minimumScore and
+search_below keep their meaning.
+
 The particle weight uses a separate, sharper likelihood: each end point's squared distance to
 the nearest obstacle cell centre within kernelSize + 1 cells (capped there), over 2·lsigma².
+It stays on cell centres: on mean hit points the likelihood no longer told the particles apart
+(polished onto the same surfaces), the filter never resampled on MIT CSAIL and every particle
+kept a map of its own (7.9 MB per particle instead of 1.7 MB, both polishing `iterations` steps).
 """
 from __future__ import annotations
 
@@ -27,7 +42,9 @@ import math
 import numpy as np
 from numba import njit
 
-from .grid import TILE_BITS, TILE_MASK
+from .grid import HIT_SCALE, TILE_BITS, TILE_MASK
+
+INV_HIT_SCALE = 1.0 / HIT_SCALE
 
 
 @njit(cache=True, inline="always")
@@ -96,8 +113,8 @@ def _block_node(block, i0, j0, kernel):
 
 
 @njit(cache=True, inline="always")
-def _field(pool, table, u, v, kernel, inv_l_occ, block):
-    """Bilinearly interpolated field at grid coordinates (u, v), and its gradient (per cell).
+def _cell_field(pool, table, u, v, kernel, inv_l_occ, block):
+    """The field of cell centres interpolated bilinearly at grid coordinates (u, v), and its gradient (per cell).
     `block` is scratch space of (2·kernelSize + 2)² cells."""
     k = (kernel.shape[0] - 1) // 2
     a, b = u - 0.5, v - 0.5
@@ -115,18 +132,86 @@ def _field(pool, table, u, v, kernel, inv_l_occ, block):
     return s, ds_du, ds_dv
 
 
+@njit(cache=True, inline="always")
+def _load_points(pool, hits, table, row0, col0, inv_l_occ, block, mean_u, mean_v):
+    """Evidence and mean hit point (grid coordinates) of the block.shape cells from (row0, col0)
+    on; False if no cell has evidence. Most blocks lie inside one tile: then the tile is looked
+    up once."""
+    m = block.shape[0]
+    last_r, last_c = row0 + m - 1, col0 + m - 1
+    one_tile = (row0 >= 0 and col0 >= 0 and row0 >> TILE_BITS == last_r >> TILE_BITS
+                and col0 >> TILE_BITS == last_c >> TILE_BITS
+                and last_r >> TILE_BITS < table.shape[0] and last_c >> TILE_BITS < table.shape[1])
+    if one_tile and table[row0 >> TILE_BITS, col0 >> TILE_BITS] < 0:
+        return False
+    any_evidence = False
+    for i in range(m):
+        for j in range(m):
+            row, col = row0 + i, col0 + j
+            if one_tile:
+                tile = table[row >> TILE_BITS, col >> TILE_BITS]
+                o = min(max(pool[tile, row & TILE_MASK, col & TILE_MASK] * inv_l_occ, 0.0), 1.0)
+            else:
+                o = _evidence(pool, table, row, col, inv_l_occ)
+                tile = table[row >> TILE_BITS, col >> TILE_BITS] if o > 0.0 else -1
+            block[i, j] = o
+            if o > 0.0:
+                any_evidence = True
+                cell = hits[tile, row & TILE_MASK, col & TILE_MASK]
+                mean_u[i, j] = col + cell[0] * INV_HIT_SCALE
+                mean_v[i, j] = row + cell[1] * INV_HIT_SCALE
+    return any_evidence
+
+
+@njit(cache=True, inline="always")
+def _point_field(pool, hits, table, u, v, reach, inv_two_sigma2, floor, inv_l_occ, block, mean_u, mean_v):
+    """The field at grid coordinates (u, v) and its gradient (per cell): the best over the cells
+    around of evidence × a Gaussian of the distance to the cell's mean hit point, cut (and shifted
+    to zero) at reach + ½ cells — the block of (2·reach + 2)² cells read holds every hit point that
+    close. `block`, `mean_u`, `mean_v` are scratch space of that size."""
+    c0, r0 = int(math.floor(u - 0.5)), int(math.floor(v - 0.5))
+    if not _load_points(pool, hits, table, r0 - reach, c0 - reach, inv_l_occ, block, mean_u, mean_v):
+        return 0.0, 0.0, 0.0
+    cut2 = (reach + 0.5) * (reach + 0.5)
+    best, best_du, best_dv = 0.0, 0.0, 0.0
+    m = block.shape[0]
+    for i in range(m):
+        for j in range(m):
+            o = block[i, j]
+            if o <= 0.0:
+                continue
+            du, dv = u - mean_u[i, j], v - mean_v[i, j]
+            d2 = du * du + dv * dv
+            if d2 >= cut2:
+                continue
+            g = math.exp(-d2 * inv_two_sigma2)
+            value = o * (g - floor) / (1.0 - floor)
+            if value > best:
+                slope = -2.0 * inv_two_sigma2 * o * g / (1.0 - floor)
+                best, best_du, best_dv = value, slope * du, slope * dv
+    return best, best_du, best_dv
+
+
 @njit(cache=True)
-def _linearize(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, block, h, g):
-    """Cost Σ (1 − S)² and score (mean S) at a pose; fills in the Gauss-Newton system h, g."""
+def _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor, inv_l_occ, scratch,
+               h, g):
+    """Cost Σ (1 − S)² and score (mean S) at a pose on the cell field, or with `points` on the hit
+    point field; fills in the Gauss-Newton system h, g."""
     xmin, ymin, inv_delta = geo[0], geo[1], geo[2]
+    reach = (kernel.shape[0] - 1) // 2
+    cell_block = scratch[0, :2 * reach + 2, :2 * reach + 2]
     c, s = math.cos(th), math.sin(th)
     h[:] = 0.0
     g[:] = 0.0
     cost, total = 0.0, 0.0
     for i in range(px.shape[0]):
         wx, wy = c * px[i] - s * py[i], s * px[i] + c * py[i]
-        f, du, dv = _field(pool, table, (x + wx - xmin) * inv_delta, (y + wy - ymin) * inv_delta,
-                           kernel, inv_l_occ, block)
+        u, v = (x + wx - xmin) * inv_delta, (y + wy - ymin) * inv_delta
+        if points:
+            f, du, dv = _point_field(pool, hits, table, u, v, reach + 1, inv_two_sigma2, floor, inv_l_occ,
+                                     scratch[0], scratch[1], scratch[2])
+        else:
+            f, du, dv = _cell_field(pool, table, u, v, kernel, inv_l_occ, cell_block)
         r = 1.0 - f
         cost += r * r
         total += f
@@ -149,13 +234,19 @@ def _linearize(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, block, h, 
 
 
 @njit(cache=True)
-def refine(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, iterations):
-    """Gauss-Newton with Levenberg damping from (x, y, th); returns (x, y, th, score)."""
-    m = kernel.shape[0] + 1
-    block = np.empty((m, m))
+def refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations, points):
+    """Gauss-Newton with Levenberg damping from (x, y, th) on the cell field (kernel), or with
+    `points` on the hit point field (a Gaussian of width sigma, m, cut at kernelSize + 1½ cells);
+    returns (x, y, th, score)."""
+    reach = (kernel.shape[0] - 1) // 2
+    m = 2 * reach + 4
+    scratch = np.empty((3, m, m))
+    inv_two_sigma2 = 1.0 / (2.0 * (sigma * geo[2]) ** 2)
+    floor = math.exp(-(reach + 1.5) ** 2 * inv_two_sigma2)
     h, g = np.zeros((3, 3)), np.zeros(3)
     h_new, g_new = np.zeros((3, 3)), np.zeros(3)
-    cost, score = _linearize(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, block, h, g)
+    cost, score = _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor,
+                             inv_l_occ, scratch, h, g)
     damping = 1e-3
     for _ in range(iterations):
         if h[0, 0] + h[1, 1] + h[2, 2] == 0.0:
@@ -168,8 +259,8 @@ def refine(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, iterations):
                 a[d, d] += damping * h[d, d] + 1e-9
             step = np.linalg.solve(a, -g)
             nx, ny, nth = x + step[0], y + step[1], th + step[2]
-            new_cost, new_score = _linearize(pool, table, geo, px, py, nx, ny, nth, kernel, inv_l_occ,
-                                             block, h_new, g_new)
+            new_cost, new_score = _linearize(pool, hits, table, geo, px, py, nx, ny, nth, kernel, points,
+                                             inv_two_sigma2, floor, inv_l_occ, scratch, h_new, g_new)
             if new_cost < cost:
                 x, y, th, cost, score = nx, ny, nth, new_cost, new_score
                 h[:, :] = h_new
@@ -229,15 +320,17 @@ def search(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, window, lstep,
 
 
 SEARCH_POINTS = 60  # end points the coarse search scores (evenly spread over the scan)
+# Gauss-Newton steps on the hit point field: they start at the cell field's optimum, a fraction of
+# a cell from its own (all `iterations`: 0.0304 m instead of 0.0309 m on MIT CSAIL, at 1.3× the time)
+POLISH_ITERATIONS = 3
 
 
 @njit(cache=True)
-def match_one(pool, table, geo, px, py, x, y, th, kernel, coarse_kernel, inv_l_occ, iterations,
-              search_below, window, lstep, angle, astep):
-    """Refine from the guess; if that scores below search_below, search coarse to fine (steps
-    lstep, astep over ±window, ±angle on a wider field, then half steps around the best) and
-    refine from there too. Returns the better (x, y, th, score)."""
-    rx, ry, rth, score = refine(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, iterations)
+def _match_cells(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma, inv_l_occ, iterations,
+                 search_below, window, lstep, angle, astep):
+    """The match on the cell field: refinement, and the search when that scores below search_below."""
+    rx, ry, rth, score = refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations,
+                                False)
     if score >= search_below or (window <= 0.0 and angle <= 0.0):
         return rx, ry, rth, score
     stride = max(1, px.shape[0] // SEARCH_POINTS)
@@ -245,10 +338,26 @@ def match_one(pool, table, geo, px, py, x, y, th, kernel, coarse_kernel, inv_l_o
                             window, lstep, angle, astep)
     cx, cy, cth, _ = search(pool, table, geo, px, py, cx, cy, cth, kernel, inv_l_occ,
                             lstep / 2, lstep / 2, astep / 2, astep / 4)
-    sx, sy, sth, s_score = refine(pool, table, geo, px, py, cx, cy, cth, kernel, inv_l_occ, iterations)
+    sx, sy, sth, s_score = refine(pool, hits, table, geo, px, py, cx, cy, cth, kernel, sigma, inv_l_occ,
+                                  iterations, False)
     if s_score > score:
         return sx, sy, sth, s_score
     return rx, ry, rth, score
+
+
+@njit(cache=True)
+def match_one(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma, inv_l_occ, iterations,
+              search_below, window, lstep, angle, astep):
+    """Refine from the guess on the cell field; if that scores below search_below, search coarse to
+    fine (steps lstep, astep over ±window, ±angle on a wider field, then half steps around the
+    best) and refine from there too; the better result is then refined on the hit point field.
+    Returns (x, y, th, the cell field's score)."""
+    x, y, th, score = _match_cells(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma,
+                                   inv_l_occ, iterations, search_below, window, lstep, angle, astep)
+    if score >= search_below:
+        x, y, th, _ = refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ,
+                             min(iterations, POLISH_ITERATIONS), True)
+    return x, y, th, score
 
 
 @njit(cache=True)
@@ -276,8 +385,8 @@ def log_likelihood(pool, table, geo, px, py, x, y, th, radius, lsigma, inv_l_occ
 
 
 @njit(cache=True)
-def match_all(pool, tables, geo, px, py, poses, kernel, coarse_kernel, inv_l_occ, iterations, minimum_score,
-              search_below, window, lstep, angle, astep, radius, lsigma):
+def match_all(pool, hits, tables, geo, px, py, poses, kernel, coarse_kernel, sigma, inv_l_occ, iterations,
+              minimum_score, search_below, window, lstep, angle, astep, radius, lsigma):
     """match_one for every particle, each against its own map (a match scoring below
     minimum_score keeps the guess), then the scan's log-likelihood at the pose kept."""
     n = poses.shape[0]
@@ -285,8 +394,8 @@ def match_all(pool, tables, geo, px, py, poses, kernel, coarse_kernel, inv_l_occ
     scores = np.empty(n)
     loglik = np.empty(n)
     for i in range(n):
-        x, y, th, score = match_one(pool, tables[i], geo, px, py, poses[i, 0], poses[i, 1], poses[i, 2],
-                                    kernel, coarse_kernel, inv_l_occ, iterations, search_below, window,
+        x, y, th, score = match_one(pool, hits, tables[i], geo, px, py, poses[i, 0], poses[i, 1], poses[i, 2],
+                                    kernel, coarse_kernel, sigma, inv_l_occ, iterations, search_below, window,
                                     lstep, angle, astep)
         scores[i] = score
         if score >= minimum_score:
