@@ -343,14 +343,15 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     realdata.add_arguments(parser)
 
 
-def _parse_route(text: str) -> Route:
+def parse_waypoints(text: str, option: str = "waypoints") -> tuple[tuple[float, float], ...]:
+    """'x,y;x,y;…' into waypoints (ValueError naming `option` if it is not at least two finite pairs)."""
     try:
         points = tuple(tuple(float(v) for v in part.split(",")) for part in text.split(";") if part.strip())
     except ValueError:
         points = ()
     if len(points) < 2 or any(len(p) != 2 or not all(map(math.isfinite, p)) for p in points):
-        raise ValueError(f"--route {text!r}: expected at least two waypoints 'x,y;x,y;…'")
-    return Route(points)
+        raise ValueError(f"{option} {text!r}: expected at least two waypoints 'x,y;x,y;…'")
+    return points
 
 
 def main(args: argparse.Namespace) -> int:
@@ -364,7 +365,7 @@ def main(args: argparse.Namespace) -> int:
         print("omninav localize-eval: --duration must be positive", file=sys.stderr)
         return 2
     try:
-        route = _parse_route(args.route) if args.route else None
+        route = Route(parse_waypoints(args.route, "--route")) if args.route else None
         params = localizer_params(args.params, parse_overrides(args.set), args.seed)
         result = evaluate(args.world, args.drive, args.mode, args.seed, params, args.duration, args.kidnap_at, route)
     except (ParamError, WorldError, ValueError) as exc:

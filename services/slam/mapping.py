@@ -96,17 +96,6 @@ def slam_params_for(world: World, overrides: dict | None = None, seed: int = 0) 
     return load_params(SlamNodeParams, values, "slam parameters")
 
 
-def parse_waypoints(text: str) -> tuple[tuple[float, float], ...]:
-    """'x,y;x,y;…' into waypoints (ValueError if it is not at least two finite pairs)."""
-    try:
-        points = tuple(tuple(float(v) for v in part.split(",")) for part in text.split(";") if part.strip())
-    except ValueError:
-        points = ()
-    if len(points) < 2 or any(len(p) != 2 or not all(map(math.isfinite, p)) for p in points):
-        raise ValueError(f"waypoints {text!r}: expected at least two 'x,y' pairs separated by ';'")
-    return points
-
-
 def navigation_stack(world: World, drive: str) -> list[Node]:
     """costmap, global_planner, local_planner, velocity_smoother, collision_monitor and navigator, as
     `omninav navigate` runs them (compose/params' costmaps), fed by slam: the map frame is the world's,
