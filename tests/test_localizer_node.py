@@ -167,7 +167,7 @@ def test_an_initial_pose_in_another_frame_or_with_a_bad_covariance_is_rejected(r
     node, _ = make_node(room_map)
     feed(node, "initialpose", PoseWithCovariance(header=Header(frame_id="odom")))
     feed(node, "initialpose", PoseWithCovariance(header=Header(frame_id="map"), covariance=-np.eye(3)))
-    assert node.counters["malformed/omninav/r1/initialpose"] == 2 and node.requests == []
+    assert node.counters["malformed/omninav/r1/initialpose"] == 2 and len(node.requests) == 0
 
 
 def test_global_localization_spreads_the_particles_over_the_map(room, room_map):

@@ -256,7 +256,7 @@ def test_inputs_arriving_up_to_request_delay_s_late_change_no_output():
         i = index[key]
         msg = decode(payload, fresh.inputs[i].msg_type)
         if not fresh.inputs[i].synced:
-            held.append((msg.header.stamp_ns + fresh.delay_ns, i, msg))
+            held.append((msg.header.stamp_ns + fresh.pending.delay_ns, i, msg))
             continue
         for item in [h for h in held if h[0] <= msg.header.stamp_ns]:
             held.remove(item)

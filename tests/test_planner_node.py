@@ -254,7 +254,7 @@ def test_inputs_in_the_wrong_frame_are_rejected_and_counted():
                 (KEYS.robot("tf/map_odom"), Transform(header=Header(frame_id="odom"), child_frame_id="map"))])
     assert {k for k in node.counters if k.startswith("malformed/")} == {
         f"malformed/{KEYS.robot(t)}" for t in ("goal", "pose", "costmap/global", "tf/map_odom")}
-    assert node.pending == [] and node.newest_costmap is None
+    assert len(node.pending) == 0 and node.newest_costmap is None
 
 
 # ---------------------------------------------------------------- over the bus

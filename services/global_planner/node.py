@@ -30,7 +30,6 @@ until a localizer sends one (frames.py).
 """
 from __future__ import annotations
 
-import bisect
 import math
 import statistics
 import time
@@ -43,7 +42,8 @@ from ...schemas import MessageError
 from ...schemas.keys import KeyLayout, type_for_key
 from ...schemas.messages import Costmap, Diagnostic, Goal, Header, Odometry, Path, PoseWithCovariance
 from ..costmap.frames import RobotFrames
-from ..runtime.node import NS_PER_S, Node, QueryError
+from ..runtime.deferred import Deferred
+from ..runtime.node import Node, QueryError
 from .astar import GlobalPlanner, PlanResult, warm_up
 from .params import GlobalPlannerParams
 
@@ -95,8 +95,7 @@ class PlannerNode(Node):
         warm_up()   # compile (or load) the search and smoothing kernels now, never inside a cycle
         self.planner = GlobalPlanner(p)
         self.frames = RobotFrames(p.map_frame, p.odom_frame, (p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
-        self.delay_ns = round(p.request_delay_s * NS_PER_S)
-        self.pending: list[tuple[int, int, int, object]] = []   # (stamp, kind, seq, message) not yet in effect
+        self.pending = Deferred(p.request_delay_s)   # sporadic inputs not yet in effect
         self.costmap: Costmap | None = None          # in effect
         self.newest_costmap: Costmap | None = None   # received (queries are answered now, not replayed)
         self.pose: PoseWithCovariance | None = None
@@ -129,8 +128,7 @@ class PlannerNode(Node):
             return
         if kind == COSTMAP:
             self.newest_costmap = msg
-        # sorted as replay feeds them, whatever order they arrived in
-        bisect.insort(self.pending, (msg.header.stamp_ns, kind, msg.header.seq, msg), key=lambda item: item[:3])
+        self.pending.hold(msg, kind)
 
     def _check_costmap(self, msg: Costmap) -> str:
         if msg.data.shape != (msg.info.height, msg.info.width) or msg.data.size == 0:
@@ -151,8 +149,7 @@ class PlannerNode(Node):
 
     def _apply_due(self, now_ns: int) -> None:
         """Put into effect the sporadic inputs stamped before now − request_delay_s, in stamp order."""
-        while self.pending and self.pending[0][0] + self.delay_ns < now_ns:
-            _, kind, _, msg = self.pending.pop(0)
+        for kind, msg in self.pending.due(now_ns):
             if kind == COSTMAP:
                 self.costmap = msg
             elif kind == MAP_ODOM:

@@ -23,13 +23,13 @@ without its source_timeout shift), so at 0.5 m/s the scan in use is up to 7.5 cm
 """
 from __future__ import annotations
 
-import bisect
 from dataclasses import dataclass
 
 import numpy as np
 
 from ...schemas.messages import Clock, Header, LaserScan, Twist
 from ...sim.raycast import LidarParams
+from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from .collision import CollisionMonitor, robot_frame_points
 from .params import CollisionMonitorParams, VelocitySmootherParams
@@ -73,15 +73,14 @@ class VelocitySmootherNode(Node):
         p = self.params
         self.smoother = VelocitySmoother(p)
         self.period_ns = round(NS_PER_S / p.smoothing_frequency)
-        self.delay_ns = round(p.command_delay_s * NS_PER_S)
         self.next_tick_ns: int | None = None
-        self.pending: list[tuple[int, int, Twist]] = []   # (stamp, seq, command) not yet in effect
+        self.pending = Deferred(p.command_delay_s)   # commands not yet in effect
         self.out_pub = self.publisher("cmd_vel_smoothed")
         self.subscribe("sim/clock", self.on_clock)
         self.subscribe("cmd_vel_nav", self.on_command, synced=False, max_delay_s=p.command_delay_s)
 
     def on_command(self, msg: Twist) -> None:
-        bisect.insort(self.pending, (msg.header.stamp_ns, msg.header.seq, msg), key=lambda item: item[:2])
+        self.pending.hold(msg)
 
     def on_clock(self, msg: Clock) -> None:
         t = msg.header.stamp_ns
@@ -90,9 +89,8 @@ class VelocitySmootherNode(Node):
         if t < self.next_tick_ns:
             return
         self.next_tick_ns = (t // self.period_ns + 1) * self.period_ns
-        while self.pending and self.pending[0][0] + self.delay_ns < t:
-            stamp, _, command = self.pending.pop(0)
-            self.smoother.command(_twist(command), stamp)
+        for _, command in self.pending.due(t):
+            self.smoother.command(_twist(command), command.header.stamp_ns)
             self.counters["commands"] += 1
         out = self.smoother.step(t)
         self.counters["timed_out_ticks" if out.timed_out else "ticks"] += 1
@@ -123,9 +121,8 @@ class CollisionMonitorNode(Node):
         p = self.params
         self.monitor = CollisionMonitor(p)
         self.laser = np.array([p.laser_x, p.laser_y, p.laser_yaw])
-        self.delay_ns = round(p.scan_delay_s * NS_PER_S)
         self.timeout_ns = round(p.source_timeout * NS_PER_S)
-        self.pending: list[tuple[int, int, LaserScan]] = []   # (stamp, seq, scan) not yet in effect
+        self.pending = Deferred(p.scan_delay_s)              # scans not yet in effect
         self.scan_stamp_ns: int | None = None                 # of the scan in effect
         self.points = np.zeros((0, 2))                        # its points, robot frame
         self.out_pub = self.publisher("cmd_vel")
@@ -133,12 +130,12 @@ class CollisionMonitorNode(Node):
         self.subscribe("scan", self.on_scan, synced=False, max_delay_s=p.scan_delay_s)
 
     def on_scan(self, msg: LaserScan) -> None:
-        bisect.insort(self.pending, (msg.header.stamp_ns, msg.header.seq, msg), key=lambda item: item[:2])
+        self.pending.hold(msg)
 
     def on_command(self, msg: Twist) -> None:
         t = msg.header.stamp_ns
-        while self.pending and self.pending[0][0] + self.delay_ns < t:
-            self.scan_stamp_ns, _, scan = self.pending.pop(0)
+        for _, scan in self.pending.due(t):
+            self.scan_stamp_ns = scan.header.stamp_ns
             self.points = robot_frame_points(scan, self.laser)
         twist = _twist(msg)
         if self.scan_stamp_ns is None or t - self.scan_stamp_ns > self.timeout_ns:

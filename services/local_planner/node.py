@@ -28,7 +28,6 @@ within xy_goal_tolerance and yaw_goal_tolerance; the navigator decides success b
 """
 from __future__ import annotations
 
-import bisect
 import math
 import statistics
 import time
@@ -43,6 +42,7 @@ from ...sim.world import DEFAULT_FOOTPRINT
 from ..chassis.odometry import compose, inverse
 from ..costmap.footprint import make_footprint
 from ..costmap.frames import RobotFrames
+from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import ParamError, load_params
 from .approach import FinalApproach
@@ -171,9 +171,8 @@ class LocalPlannerNode(Node):
         self.controller = self._make_controller(fp.points, check_cost)
         self.period_ns = round(NS_PER_S / p.controller_frequency)
         self.dt = self.period_ns / NS_PER_S
-        self.delay_ns = round(p.request_delay_s * NS_PER_S)
         self.next_tick_ns: int | None = None
-        self.pending: list[tuple[int, int, int, object]] = []   # (stamp, kind, seq, message) not yet in effect
+        self.pending = Deferred(p.request_delay_s)   # sporadic inputs not yet in effect
         self.costmap: Costmap | None = None
         self.path: Path | None = None            # followed; None: idle
         self.path_follower: PathFollower | None = None      # controller "follower", on the path in the map frame
@@ -213,8 +212,7 @@ class LocalPlannerNode(Node):
             key = self.in_keys[kind]
             self.reject(key, MessageError(problem, type_name=type(msg).__name__, key=key))
             return
-        # sorted as replay feeds them, whatever order they arrived in
-        bisect.insort(self.pending, (msg.header.stamp_ns, kind, msg.header.seq, msg), key=lambda item: item[:3])
+        self.pending.hold(msg, kind)
 
     def _frame_problem(self, frame: str) -> str:
         if frame not in (self.frames.map_frame, self.frames.odom_frame):
@@ -231,8 +229,7 @@ class LocalPlannerNode(Node):
 
     def _apply_due(self, now_ns: int) -> None:
         """Put into effect the sporadic inputs stamped before now − request_delay_s, in stamp order."""
-        while self.pending and self.pending[0][0] + self.delay_ns < now_ns:
-            _, kind, _, msg = self.pending.pop(0)
+        for kind, msg in self.pending.due(now_ns):
             if kind == COSTMAP:
                 self.costmap = msg
             elif kind == MAP_ODOM:

@@ -38,6 +38,7 @@ from ...schemas.messages import (Diagnostic, Header, LaserScan, OccupancyGrid, O
                                  PoseWithCovariance, Transform)
 from ..chassis.odometry import compose, relative, wrap_angle
 from ..map_server.mapio import MapError, load_map
+from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import ParamError, load_params, read_params_mapping
 from .filter import Amcl, warm_up
@@ -140,8 +141,7 @@ class LocalizerNode(Node):
         self.laser_pose = (p.laser_x, p.laser_y, p.laser_yaw)
         self.odom = OdomHistory(round((p.odom_history_s + p.request_delay_s) * NS_PER_S))
         self.scans: list[tuple[int, ScanBeams]] = []          # waiting for odometry past their stamp
-        self.requests: list[tuple[int, int, int, object]] = []   # (stamp, kind, seq, message) not yet due
-        self.delay_ns = round(p.request_delay_s * NS_PER_S)
+        self.requests = Deferred(p.request_delay_s)   # map, initial pose and global localization requests not yet due
         self.start: tuple | None = self._resume()              # how the next filter starts, if not as params say
         self.last_pose: PoseWithCovariance | None = None
         self.last_cloud_ns: int | None = None
@@ -229,14 +229,13 @@ class LocalizerNode(Node):
         self._request(_INITIALPOSE, msg)
 
     def _request(self, kind: int, msg) -> None:
-        # sorted as replay feeds them, whatever order they arrived in
-        bisect.insort(self.requests, (msg.header.stamp_ns, kind, msg.header.seq, msg), key=lambda r: r[:3])
+        self.requests.hold(msg, kind)
 
     # ------------------------------------------------------------ the filter
 
     def _apply_requests(self, stamp_ns: int, odom: np.ndarray) -> None:
-        while self.requests and self.requests[0][0] + self.delay_ns < stamp_ns:
-            sent, kind, _, msg = self.requests.pop(0)
+        for kind, msg in self.requests.due(stamp_ns):
+            sent = msg.header.stamp_ns
             if kind == _MAP:
                 self._set_map(msg)
             elif kind == _GLOBAL:

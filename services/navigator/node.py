@@ -36,7 +36,6 @@ odometry carried into the map by tf/map_odom (or initial_pose_* until one comes)
 """
 from __future__ import annotations
 
-import bisect
 import math
 from dataclasses import dataclass, replace
 
@@ -46,6 +45,7 @@ from ...schemas import MessageError
 from ...schemas.messages import (CancelGoal, ClearCostmaps, Goal, LocalCommand, NavStatus, Odometry, Path, Pose2D,
                                  Twist)
 from ..costmap.frames import RobotFrames
+from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, QueryError
 from .core import ACTIVE, ControlResult, Navigator, NavActions, NavInputs, PlanResult, State
 from .params import NavigatorParams
@@ -93,10 +93,9 @@ class NavigatorNode(Node):
         p = self.params
         self.core = Navigator(p)
         self.frames = RobotFrames(p.map_frame, p.odom_frame, (p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
-        self.delay_ns = round(p.request_delay_s * NS_PER_S)
         self.stop_ns = round(p.stop_duration_s * NS_PER_S)
         self.status_period_ns = round(p.status_period_s * NS_PER_S)
-        self.pending: list[tuple[int, int, int, object]] = []   # (stamp, kind, seq, message) not yet in effect
+        self.pending = Deferred(p.request_delay_s)   # sporadic inputs not yet in effect
         self.pose = None                      # the latest PoseWithCovariance in effect
         self.velocity = None                  # the body twist of the latest odometry
         self.status: NavStatus | None = None  # the latest published
@@ -132,8 +131,7 @@ class NavigatorNode(Node):
             key = self.in_keys[kind]
             self.reject(key, MessageError(problem, type_name=type(msg).__name__, key=key))
             return
-        # sorted as replay feeds them, whatever order they arrived in
-        bisect.insort(self.pending, (msg.header.stamp_ns, kind, msg.header.seq, msg), key=lambda item: item[:3])
+        self.pending.hold(msg, kind)
 
     def on_odom(self, msg: Odometry) -> None:
         self.frames.set_odom(msg)
@@ -143,8 +141,7 @@ class NavigatorNode(Node):
         """Put into effect the sporadic inputs stamped before now − request_delay_s, in stamp order;
         returns the goals and cancels among them, and the newest plan."""
         events, plan = [], None
-        while self.pending and self.pending[0][0] + self.delay_ns < now_ns:
-            _, kind, _, msg = self.pending.pop(0)
+        for kind, msg in self.pending.due(now_ns):
             if kind == MAP_ODOM:
                 self.frames.set_map_odom(msg)
             elif kind == POSE:

@@ -25,13 +25,13 @@ navigator defers its sporadic inputs): whether it arrives before or after the ma
 """
 from __future__ import annotations
 
-import bisect
 import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ...schemas.messages import CancelGoal, Goal, NavStatus, OccupancyGrid, Pose2D, PoseWithCovariance
+from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from .explore import ExploreGoal, Explorer, ExploreParams, find_frontiers, still_frontier
 
@@ -60,12 +60,11 @@ class ExploreNode(Node):
         self.subscribe("map", self.on_map)
         self.subscribe("pose", self.on_pose)
         self.subscribe("nav_status", self.on_status, synced=False, max_delay_s=self.params.status_delay_s)
-        self.delay_ns = round(self.params.status_delay_s * NS_PER_S)
         self.explorer: Explorer | None = None
         self.goal: ExploreGoal | None = None
         self.goal_id = ""                       # the last goal sent
         self.goal_open = False                  # … and the navigator has not ended it
-        self.statuses: list[tuple[int, int, NavStatus]] = []   # (stamp, seq, status) not yet in effect
+        self.statuses = Deferred(self.params.status_delay_s)   # statuses not yet in effect
         self.given_up = np.zeros((0, 2))        # world points of frontier cells given up
         self.pose: tuple[float, float, float] | None = None
         self.empty_maps = 0                     # maps in a row without a reachable frontier
@@ -80,8 +79,7 @@ class ExploreNode(Node):
                 self._progress = (distance, msg.header.stamp_ns)
 
     def on_status(self, msg: NavStatus) -> None:
-        # sorted as replay feeds them, whatever order they arrived in
-        bisect.insort(self.statuses, (msg.header.stamp_ns, msg.header.seq, msg), key=lambda item: item[:2])
+        self.statuses.hold(msg)
 
     def on_map(self, msg: OccupancyGrid) -> None:
         if self.explorer is None:
@@ -108,8 +106,7 @@ class ExploreNode(Node):
         """Put into effect the statuses stamped before now − status_delay_s; the last end of the
         goal out among them, or None."""
         ended = None
-        while self.statuses and self.statuses[0][0] + self.delay_ns < now_ns:
-            status = self.statuses.pop(0)[2]
+        for _, status in self.statuses.due(now_ns):
             if status.goal_id == self.goal_id and status.status in ENDED:
                 self.goal_open = False
                 ended = status.status if self.goal is not None else ended
