@@ -3,7 +3,7 @@ import pytest
 from omninav.schemas import MessageError, decode
 from omninav.schemas.messages import Chatter, Clock, Header
 from omninav.services.demo.listener import Listener, ListenerParams
-from omninav.services.runtime.node import NS_PER_S
+from omninav.services.runtime.node import NS_PER_S, Ticks
 
 
 def capture(node):
@@ -65,3 +65,9 @@ def test_queryable_answers_the_last_echo():
     assert node.answer("omninav/r1/echo", {}) is None
     node.process(1, chatter(0.1, 1, 4.0))
     assert node.answer("omninav/r1/echo", {}).value == 4.0
+
+
+def test_ticks_fall_on_the_first_stamp_at_or_after_each_multiple_of_the_period():
+    ticks = Ticks(10.0)                                   # every 0.1 s
+    stamps = [int(s * NS_PER_S) for s in (0.05, 0.1, 0.15, 0.26, 0.29, 0.3, 0.52)]
+    assert [s / NS_PER_S for s in stamps if ticks.due(s)] == [0.1, 0.26, 0.3, 0.52]

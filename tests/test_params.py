@@ -2,7 +2,8 @@ from dataclasses import dataclass
 
 import pytest
 
-from omninav.services.runtime.params import ParamError, load_params, load_params_file, parse_overrides
+from omninav.services.runtime.params import (ParamError, load_params, load_params_file, parse_overrides, require_at_least,
+                                             require_nonnegative, require_positive)
 
 
 @dataclass(frozen=True)
@@ -61,3 +62,26 @@ def test_overrides():
     assert parse_overrides(["a=1", "b=x", "c=[1, 2]"]) == {"a": 1, "b": "x", "c": [1, 2]}
     with pytest.raises(ParamError):
         parse_overrides(["novalue"])
+
+
+@dataclass(frozen=True)
+class Ranged:
+    delay_s: float = 0.0
+    rate_hz: float = 1.0
+    samples: int = 1
+
+    def __post_init__(self):
+        require_nonnegative(self, "delay_s")
+        require_positive(self, "rate_hz")
+        require_at_least(self, 1, "samples")
+
+
+@pytest.mark.parametrize("values,needle", [
+    ({"delay_s": -0.1}, "delay_s must be zero or positive, got -0.1"),
+    ({"rate_hz": 0}, "rate_hz must be positive, got 0.0"),
+    ({"samples": 0}, "samples must be ≥ 1, got 0"),
+])
+def test_range_checks_name_the_parameter_and_its_value(values, needle):
+    assert load_params(Ranged, {}) == Ranged()
+    with pytest.raises(ParamError, match=f"^ranged: {needle}$"):
+        load_params(Ranged, values, "ranged")

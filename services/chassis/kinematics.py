@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..runtime.params import require_nonnegative, require_positive
+
 DRIVES = ("mecanum", "omni3", "diff")
 
 WHEEL_NAMES = {
@@ -60,16 +62,10 @@ class ChassisParams:
     def __post_init__(self) -> None:
         if self.drive not in DRIVES:
             raise ValueError(f"drive must be one of {DRIVES}, got {self.drive!r}")
-        for name in ("wheel_radius", "l1", "l2", "omni_wheel_distance", "max_wheel_speed",
-                     "acc_lim_x", "acc_lim_y", "acc_lim_theta", "follower_ka", "follower_kb"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"{name} must be a positive number, got {value}")
-        for name in ("odom_trans_var_per_m", "odom_rot_var_per_rad", "odom_rot_var_per_m",
-                     "odom_encoder_rate_std", "odom_gyro_std"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be zero or positive, got {value}")
+        require_positive(self, "wheel_radius", "l1", "l2", "omni_wheel_distance", "max_wheel_speed", "acc_lim_x",
+                         "acc_lim_y", "acc_lim_theta", "follower_ka", "follower_kb")
+        require_nonnegative(self, "odom_trans_var_per_m", "odom_rot_var_per_rad", "odom_rot_var_per_m",
+                            "odom_encoder_rate_std", "odom_gyro_std")
         if not 0.0 <= self.odom_gyro_weight <= 1.0:
             raise ValueError(f"odom_gyro_weight must be within [0, 1], got {self.odom_gyro_weight}")
         for name in ("omni_main_direction", "follower_alpha", "follower_beta"):

@@ -9,15 +9,15 @@ or after the readings stamped in (t, t + delay] cannot change the outputs (see d
 """
 from __future__ import annotations
 
-import bisect
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
 from ...schemas import MessageError
 from ...schemas.messages import Header, Odometry, Pose2D, Transform, Twist, WheelCommand, WheelState
+from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
+from ..runtime.params import require_nonnegative
 from .follower import follower_odometry
 from .kinematics import ChassisParams, Kinematics
 from .odometry import OdomEstimate, wheel_odometry
@@ -36,10 +36,7 @@ class ChassisNodeParams(ChassisParams):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name in ("cmd_vel_timeout_s", "cmd_vel_delay_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be zero or positive, got {value}")
+        require_nonnegative(self, "cmd_vel_timeout_s", "cmd_vel_delay_s")
         if self.cmd_vel_delay_s >= self.cmd_vel_timeout_s:
             raise ValueError(f"cmd_vel_delay_s ({self.cmd_vel_delay_s}) must be shorter than "
                              f"cmd_vel_timeout_s ({self.cmd_vel_timeout_s}), or no command is ever fresh")
@@ -62,24 +59,17 @@ class ChassisNode(Node):
         self.follower_pub = self.publisher("odom_follower") if p.follower_odometry else None
         self.wheel_cmd_pub = self.publisher("wheel_cmd")
         self.wheel_state_key = self.keys.resolve("wheel_state")
-        self.delay_ns = round(p.cmd_vel_delay_s * NS_PER_S)
         self.timeout_ns = round(p.cmd_vel_timeout_s * NS_PER_S)
+        self.pending = Deferred(p.cmd_vel_delay_s)             # cmd_vel not yet in effect
         self.subscribe("wheel_state", self.on_wheel_state)
-        self.subscribe("cmd_vel", self.on_cmd_vel, synced=False, max_delay_s=p.cmd_vel_delay_s)
+        self.subscribe_deferred("cmd_vel", self.pending)
         self.queryable("odom", lambda _params: self.last_odom)
         self.last_odom: Odometry | None = None
-        self.pending: list[tuple[int, int, np.ndarray]] = []   # (stamp, seq, twist) not yet in effect
         self.command: tuple[int, np.ndarray] | None = None     # (stamp, twist) in effect
         self.previous = np.zeros(3)                            # the twist last commanded
         self.last_stamp: int | None = None                     # of the last accepted wheel_state
 
     # ------------------------------------------------------------ inputs
-
-    def on_cmd_vel(self, msg: Twist) -> None:
-        # sorted by (stamp, seq): the order replay feeds them in, whatever order they arrived in
-        bisect.insort(self.pending, (msg.header.stamp_ns, msg.header.seq,
-                                     np.array([msg.linear_x, msg.linear_y, msg.angular_z])),
-                      key=lambda item: item[:2])
 
     def on_wheel_state(self, msg: WheelState) -> None:
         problem = self._check(msg)
@@ -129,11 +119,10 @@ class ChassisNode(Node):
 
     def _target(self, t: int) -> np.ndarray:
         """The latest command in effect at t (stamped before t - delay), or zero if it is stale."""
-        while self.pending and self.pending[0][0] + self.delay_ns < t:
-            stamp, _, twist = self.pending.pop(0)
+        for _, msg in self.pending.due(t):
             # a command that arrived after a newer one took effect is already superseded
-            if self.command is None or stamp >= self.command[0]:
-                self.command = (stamp, twist)
+            if self.command is None or msg.header.stamp_ns >= self.command[0]:
+                self.command = (msg.header.stamp_ns, np.array([msg.linear_x, msg.linear_y, msg.angular_z]))
         if self.command is None or t - self.command[0] > self.timeout_ns:
             return np.zeros(3)
         return self.command[1]

@@ -7,6 +7,8 @@ as if odometry were exact. In the sim that is the world's robot start; a localiz
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from ...schemas.messages import Odometry, Pose2D, PoseWithCovariance, Transform
@@ -63,3 +65,17 @@ class RobotFrames:
             return None
         x, y, theta = (float(v) for v in self.map_odom)
         return Pose2D(x, y, theta)
+
+
+@dataclass(frozen=True)
+class FrameParams:
+    """The frame parameters of a node that places the robot with RobotFrames (a mixin of its Params)."""
+    initial_pose_x: float = 0.0   # the odom frame's pose in the map (where odometry started) until tf/map_odom
+    initial_pose_y: float = 0.0
+    initial_pose_a: float = 0.0
+    map_frame: str = "map"
+    odom_frame: str = "odom"
+
+    def robot_frames(self) -> RobotFrames:
+        return RobotFrames(self.map_frame, self.odom_frame, (self.initial_pose_x, self.initial_pose_y,
+                                                             self.initial_pose_a))

@@ -34,8 +34,6 @@ The Diagnostic carries, per costmap and layer, the median wall time of its last 
 """
 from __future__ import annotations
 
-import bisect
-import math
 import statistics
 from collections import deque
 from dataclasses import dataclass, replace
@@ -49,9 +47,11 @@ from ...schemas.messages import ClearCostmaps, Diagnostic, Header, LaserScan, Oc
 from ...sim.raycast import LidarParams
 from ..chassis.odometry import compose
 from ..map_server.mapio import MapError, load_map
-from ..runtime.node import NS_PER_S, Node, QueryError
+from ..runtime.deferred import Deferred
+from ..runtime.node import Node, QueryError
+from ..runtime.params import require_nonnegative
 from .costmap import Costmap
-from .frames import RobotFrames
+from .frames import FrameParams
 from .layers import same_geometry, warm_up
 from .params import CostmapParams, ObstacleLayerParams, StaticLayerParams, load_costmap_params
 
@@ -60,7 +60,7 @@ TIMES_KEPT = 10_000     # update times per layer kept for the diagnostic's media
 
 
 @dataclass(frozen=True)
-class CostmapNodeParams:
+class CostmapNodeParams(FrameParams):
     # ROS costmap parameter files, later ones overriding earlier ones (relative to the working directory)
     global_costmap_files: tuple[str, ...] = (SAMPLES + "costmap_common_params.yaml",
                                              SAMPLES + "costmap_global_params.yaml")
@@ -70,23 +70,18 @@ class CostmapNodeParams:
     laser_x: float = LidarParams.mount_x     # m: the laser in base_link (the simulated lidar's mount)
     laser_y: float = LidarParams.mount_y
     laser_yaw: float = LidarParams.mount_yaw
-    initial_pose_x: float = 0.0  # the odom frame's pose in the map (where odometry started) until tf/map_odom
-    initial_pose_y: float = 0.0
-    initial_pose_a: float = 0.0
-    map_frame: str = "map"
-    odom_frame: str = "odom"
     request_delay_s: float = 0.3  # sim s from a costmap/clear stamp to its effect
 
     def __post_init__(self) -> None:
-        if not (math.isfinite(self.request_delay_s) and self.request_delay_s >= 0):
-            raise ValueError(f"request_delay_s must be zero or positive, got {self.request_delay_s}")
+        require_nonnegative(self, "request_delay_s")
 
 
 class ServedCostmap:
     """One costmap as the node runs it: the core, its publisher, when it last updated, how long its
     layers took."""
 
-    def __init__(self, name: str, params: CostmapParams, static_map: OccupancyGrid | None, publisher):
+    def __init__(self, name: str, params: CostmapParams, static_map: OccupancyGrid | None, publisher,
+                 clear_delay_s: float):
         self.name = name
         self.core = Costmap(params, static_map)
         self.frame = params.global_frame
@@ -96,7 +91,7 @@ class ServedCostmap:
         self.cycles = 0                         # update cycles run (by the timer)
         self.updated_ns: int | None = None      # sim time of the last update
         self.times: dict[str, deque[float]] = {}
-        self.clears: list[tuple[int, int, ClearCostmaps]] = []   # (stamp, seq, request) not yet in effect
+        self.clears = Deferred(clear_delay_s)   # ClearCostmaps requests not yet in effect
 
     def waiting_for(self, robot) -> str:
         """What keeps this costmap from updating, or ''."""
@@ -126,7 +121,7 @@ class CostmapNode(Node):
     def setup(self) -> None:
         p = self.params
         warm_up()   # compile (or load) the raytracing and inflation kernels now, never inside a cycle
-        self.frames = RobotFrames(p.map_frame, p.odom_frame, (p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
+        self.frames = p.robot_frames()
         self.laser = np.array([p.laser_x, p.laser_y, p.laser_yaw])
         static_map = self._read_map_file()
         self.map: OccupancyGrid | None = static_map
@@ -135,7 +130,7 @@ class CostmapNode(Node):
             params = load_costmap_params(files, f"{name}_costmap")      # ParamError names the file and key
             self.frames.check_frame(params.global_frame, f"{name}_costmap: global_frame")
             try:
-                served = ServedCostmap(name, params, static_map, self.publisher(f"costmap/{name}"))
+                served = ServedCostmap(name, params, static_map, self.publisher(f"costmap/{name}"), p.request_delay_s)
             except ValueError as exc:     # a keepout mask that cannot be read, a map it cannot take
                 raise ValueError(f"{name}_costmap: {exc}") from None
             self.costmaps[name] = served
@@ -149,7 +144,6 @@ class CostmapNode(Node):
             self.subscribe("map", self.on_map, synced=False)
         self.subscribe("tf/map_odom", self.on_map_odom, synced=False)
         self.clear_key = self.keys.resolve("costmap/clear")
-        self.clear_delay_ns = round(p.request_delay_s * NS_PER_S)
         self.subscribe("costmap/clear", self.on_clear, synced=False, max_delay_s=p.request_delay_s)
         # updates before publishes: a publish due at the same instant sends that update
         for served in self.costmaps.values():
@@ -224,8 +218,7 @@ class CostmapNode(Node):
                                                      type_name="ClearCostmaps", key=self.clear_key))
             return
         for served in self.costmaps.values():
-            # sorted as replay feeds them, whatever order they arrived in
-            bisect.insort(served.clears, (msg.header.stamp_ns, msg.header.seq, msg), key=lambda item: item[:2])
+            served.clears.hold(msg)
 
     # ------------------------------------------------------------ cycles
 
@@ -236,8 +229,7 @@ class CostmapNode(Node):
 
     def _apply_clears(self, served: ServedCostmap) -> None:
         """The clears stamped before now − request_delay_s, around the robot where it is now."""
-        while served.clears and served.clears[0][0] + self.clear_delay_ns < self.now_ns:
-            request = served.clears.pop(0)[2]
+        for _, request in served.clears.due(self.now_ns):
             robot = self.frames.robot(served.frame)
             if robot is None:
                 self.counters[f"clears_before_odometry/{served.name}"] += 1

@@ -24,11 +24,13 @@ import numpy as np
 from scipy import ndimage, sparse
 from scipy.sparse import csgraph
 
+from ...schemas.messages import OccupancyGrid
 from ...sim.world import DEFAULT_FOOTPRINT, shared_data_dir
 from ..costmap import layers as costmap_layers
 from ..costmap.costmap import Costmap
 from ..costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
 from ..map_server.mapio import MapError, cell_to_world, load_map
+from ..runtime.errors import UserError, exits_2_on_user_error
 from .astar import SQRT2, GlobalPlanner, passable, warm_up
 from .params import GlobalPlannerParams
 
@@ -82,7 +84,25 @@ def graph(costs: np.ndarray, params: GlobalPlannerParams) -> sparse.csr_matrix:
                              shape=(costs.size, costs.size))
 
 
-def _timed(fn, runs: int = 1):
+def load_bench_map(map_arg: str | None) -> tuple[Path, OccupancyGrid]:
+    """The map a bench runs on: --map, or MAP in the shared data folder."""
+    path = Path(map_arg) if map_arg else (shared_data_dir(Path(__file__)) or Path("shared/data")) / MAP
+    try:
+        return path, load_map(path)
+    except MapError as exc:
+        raise UserError(str(exc)) from None
+
+
+def inflated_costmap(grid: OccupancyGrid) -> Costmap:
+    """The global costmap of `grid` for the mecanum footprint: static + inflation layers, ROS defaults."""
+    costmap = Costmap(CostmapParams(footprint=tuple(map(tuple, DEFAULT_FOOTPRINT)),
+                                    layers=(StaticLayerParams(), InflationLayerParams())), grid)
+    costmap.update()
+    return costmap
+
+
+def timed(fn, runs: int = 1):
+    """fn()'s result and the fastest of `runs` calls in wall-clock ms (other load inflates it less)."""
     best, out = np.inf, None
     for _ in range(runs):
         start = time.perf_counter()
@@ -91,22 +111,16 @@ def _timed(fn, runs: int = 1):
     return out, best * 1e3
 
 
+@exits_2_on_user_error("bench planner")
 def main(args: argparse.Namespace) -> int:
-    path = Path(args.map) if args.map else (shared_data_dir(Path(__file__)) or Path("shared/data")) / MAP
-    try:
-        grid = load_map(path)
-    except MapError as exc:
-        print(f"omninav bench planner: {exc}", file=sys.stderr)
-        return 2
+    path, grid = load_bench_map(args.map)
     costmap_layers.warm_up()
     warm_up()
-    params = CostmapParams(footprint=tuple(map(tuple, DEFAULT_FOOTPRINT)),
-                           layers=(StaticLayerParams(), InflationLayerParams()))
-    costmap = Costmap(params, grid)
-    costmap.update()
+    costmap = inflated_costmap(grid)
+    params = costmap.params
     inflate_runs = []
     for _ in range(5):
-        _, ms = _timed(costmap.recompute)
+        _, ms = timed(costmap.recompute)
         inflate_runs.append(ms)
     costs, info = costmap.costs, costmap.info
     planners = {"astar": GlobalPlannerParams(use_dijkstra=False), "dijkstra": GlobalPlannerParams(use_dijkstra=True)}
@@ -118,7 +132,7 @@ def main(args: argparse.Namespace) -> int:
         row = {"start": [float(sx), float(sy)], "goal": [float(gx), float(gy)]}
         for name, p in planners.items():
             planner = GlobalPlanner(p)
-            result, ms = _timed(lambda: planner.plan(costs, info, (sx, sy, 0.0), (gx, gy, 0.0)), RUNS)
+            result, ms = timed(lambda: planner.plan(costs, info, (sx, sy, 0.0), (gx, gy, 0.0)), RUNS)
             if not result.ok:
                 print(f"omninav bench planner: {name} found no path {start} -> {goal}: {result.message}",
                       file=sys.stderr)
@@ -128,10 +142,10 @@ def main(args: argparse.Namespace) -> int:
 
     reference = []
     if args.reference_pairs > 0:
-        matrix, build_ms = _timed(lambda: graph(costs, planners["astar"]))
+        matrix, build_ms = timed(lambda: graph(costs, planners["astar"]))
         for (start, goal), row in list(zip(pairs, rows))[:args.reference_pairs]:
             s = start[0] * info.width + start[1]
-            dist, ms = _timed(lambda: csgraph.dijkstra(matrix, indices=s))
+            dist, ms = timed(lambda: csgraph.dijkstra(matrix, indices=s))
             cost = float(dist[goal[0] * info.width + goal[1]])
             reference.append({"ms": ms, "cost": cost, "diff": abs(cost - row["astar"]["cost"]) / cost})
 

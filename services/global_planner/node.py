@@ -38,12 +38,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...schemas import MessageError
 from ...schemas.keys import KeyLayout, type_for_key
 from ...schemas.messages import Costmap, Diagnostic, Goal, Header, Odometry, Path, PoseWithCovariance
-from ..costmap.frames import RobotFrames
+from ..costmap.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node, QueryError
+from ..runtime.params import require_nonnegative
 from .astar import GlobalPlanner, PlanResult, warm_up
 from .params import GlobalPlannerParams
 
@@ -53,20 +53,14 @@ COSTMAP, MAP_ODOM, POSE, GOAL, CANCEL = range(5)   # sporadic inputs, in input o
 
 
 @dataclass(frozen=True)
-class PlannerNodeParams(GlobalPlannerParams):
+class PlannerNodeParams(FrameParams, GlobalPlannerParams):
     """ROS global_planner's parameters (and move_base's planner_frequency) plus the frames."""
-    initial_pose_x: float = 0.0   # the odom frame's pose in the map (where odometry started) until tf/map_odom
-    initial_pose_y: float = 0.0
-    initial_pose_a: float = 0.0
-    map_frame: str = "map"
-    odom_frame: str = "odom"
     request_delay_s: float = 0.3  # sim s from a costmap / tf / pose / goal / cancel stamp to its effect
     goal_topic: str = "goal"      # where goals come from: "goal" (users) or "plan_request" (the navigator)
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not (math.isfinite(self.request_delay_s) and self.request_delay_s >= 0):
-            raise ValueError(f"request_delay_s must be zero or positive, got {self.request_delay_s}")
+        require_nonnegative(self, "request_delay_s")
         try:
             carries = type_for_key(KeyLayout().resolve(self.goal_topic))
         except KeyError as exc:
@@ -94,10 +88,9 @@ class PlannerNode(Node):
         p = self.params
         warm_up()   # compile (or load) the search and smoothing kernels now, never inside a cycle
         self.planner = GlobalPlanner(p)
-        self.frames = RobotFrames(p.map_frame, p.odom_frame, (p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
+        self.frames = p.robot_frames()
         self.pending = Deferred(p.request_delay_s)   # sporadic inputs not yet in effect
         self.costmap: Costmap | None = None          # in effect
-        self.newest_costmap: Costmap | None = None   # received (queries are answered now, not replayed)
         self.pose: PoseWithCovariance | None = None
         self.goal: Goal | None = None
         self.waiting = False               # the active goal is not planned yet: no costmap or pose
@@ -106,29 +99,22 @@ class PlannerNode(Node):
         self.plan_pub = self.publisher("plan")
         self.plan_key = self.plan_pub.key
         self.subscribe("odom", self.on_odom)
-        self.in_keys: dict[int, str] = {}
         for kind, topic, check in ((COSTMAP, "costmap/global", self._check_costmap),
                                    (MAP_ODOM, "tf/map_odom", self.frames.transform_problem),
                                    (POSE, "pose", self._check_pose), (GOAL, p.goal_topic, self._check_goal),
                                    (CANCEL, "cancel", None)):
-            self.in_keys[kind] = self.keys.resolve(topic)
-            self.subscribe(topic, lambda msg, k=kind, c=check: self._receive(k, c, msg), synced=False,
-                           max_delay_s=p.request_delay_s)
+            self.subscribe_deferred(topic, self.pending, kind, check)
         self.queryable("plan", self.answer_plan)
         if p.planner_frequency > 0:
             self.every(1.0 / p.planner_frequency, self.on_timer)
 
     # ------------------------------------------------------------ inputs
 
-    def _receive(self, kind: int, check, msg) -> None:
-        problem = check(msg) if check is not None else ""
-        if problem:
-            key = self.in_keys[kind]
-            self.reject(key, MessageError(problem, type_name=type(msg).__name__, key=key))
-            return
-        if kind == COSTMAP:
-            self.newest_costmap = msg
-        self.pending.hold(msg, kind)
+    @property
+    def newest_costmap(self) -> Costmap | None:
+        """The newest costmap received, in effect or not (queries are answered now, not replayed)."""
+        held = self.pending.latest(COSTMAP)
+        return held if held is not None else self.costmap
 
     def _check_costmap(self, msg: Costmap) -> str:
         if msg.data.shape != (msg.info.height, msg.info.width) or msg.data.size == 0:
@@ -209,7 +195,7 @@ class PlannerNode(Node):
         start = parse_pose("start", parameters["start"]) if "start" in parameters else None
         costmap = self.newest_costmap
         if costmap is None:
-            raise QueryError(f"{self.plan_key}: no global costmap yet (on {self.in_keys[COSTMAP]})")
+            raise QueryError(f"{self.plan_key}: no global costmap yet (on {self.keys.resolve('costmap/global')})")
         if start is None:
             start = self.frames.robot_with_pose(costmap.header.frame_id, self.pose)
             if start is None:

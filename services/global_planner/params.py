@@ -6,10 +6,9 @@ effect; anything else unknown is an error naming the key.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
-from ..runtime.params import load_params
+from ..runtime.params import load_params, require_at_least, require_nonnegative
 
 ORIENTATION_MODES = {0: "none", 1: "forward", 2: "interpolate", 3: "forward_then_interpolate",
                      4: "backward", 5: "leftward", 6: "rightward"}
@@ -46,15 +45,10 @@ class GlobalPlannerParams:
             raise ValueError(f"neutral_cost must be within 1..255, got {self.neutral_cost}")
         if self.orientation_mode not in ORIENTATION_MODES:
             raise ValueError(f"orientation_mode must be one of {ORIENTATION_MODES}, got {self.orientation_mode}")
-        if self.orientation_window_size < 1:
-            raise ValueError(f"orientation_window_size must be ≥ 1, got {self.orientation_window_size}")
-        if self.smooth_max_iterations < 0:
-            raise ValueError(f"smooth_max_iterations must be ≥ 0, got {self.smooth_max_iterations}")
-        for name in ("default_tolerance", "cost_factor", "planner_frequency", "smooth_weight_data",
-                     "smooth_weight_smooth", "smooth_tolerance"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a number ≥ 0, got {value}")
+        require_at_least(self, 1, "orientation_window_size")
+        require_nonnegative(self, "smooth_max_iterations")
+        require_nonnegative(self, "default_tolerance", "cost_factor", "planner_frequency", "smooth_weight_data",
+                            "smooth_weight_smooth", "smooth_tolerance")
 
     @classmethod
     def from_mapping(cls, values: dict | None, source: str = "global_planner") -> GlobalPlannerParams:

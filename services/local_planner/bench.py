@@ -26,21 +26,18 @@ import json
 import statistics
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
 
 from ...schemas.messages import MapMetaData, Pose2D
-from ...sim.world import DEFAULT_FOOTPRINT, shared_data_dir
 from ..chassis.odometry import integrate
 from ..costmap import layers as costmap_layers
-from ..costmap.costmap import Costmap
 from ..costmap.footprint import transform
-from ..costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
 from ..global_planner import astar
-from ..global_planner.bench import MAP, pick_pairs
+from ..global_planner.bench import MAP, inflated_costmap, load_bench_map, pick_pairs, timed
 from ..global_planner.params import GlobalPlannerParams
-from ..map_server.mapio import MapError, cell_to_world, in_grid, load_map, world_to_cell
+from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
+from ..runtime.errors import UserError, exits_2_on_user_error
 from . import eband
 from .dwa import DwaPlanner, footprint_check_cost, warm_up
 from .params import DwaParams, ElasticBandParams
@@ -102,26 +99,18 @@ def _percentile(values, q):
     return float(np.percentile(np.asarray(values), q))
 
 
+@exits_2_on_user_error("bench local")
 def main(args: argparse.Namespace) -> int:
-    path = Path(args.map) if args.map else (shared_data_dir(Path(__file__)) or Path("shared/data")) / MAP
-    try:
-        grid = load_map(path)
-    except MapError as exc:
-        print(f"omninav bench local: {exc}", file=sys.stderr)
-        return 2
+    path, grid = load_bench_map(args.map)
     if grid.info.origin.theta != 0.0:
-        print(f"omninav bench local: {path} has a yawed origin; the bench crops axis-aligned windows", file=sys.stderr)
-        return 2
+        raise UserError(f"{path} has a yawed origin; the bench crops axis-aligned windows")
     costmap_layers.warm_up()
     astar.warm_up()
     eband.warm_up()
     start = time.perf_counter()
     warm_up()
     warm_ms = (time.perf_counter() - start) * 1e3
-    inflation = InflationLayerParams()
-    costmap = Costmap(CostmapParams(footprint=tuple(map(tuple, DEFAULT_FOOTPRINT)),
-                                    layers=(StaticLayerParams(), inflation)), grid)
-    costmap.update()
+    costmap = inflated_costmap(grid)
     costs, info = costmap.costs, costmap.info
     planner_params = GlobalPlannerParams(use_dijkstra=False)
     (s, g), = pick_pairs(costs, info.resolution, planner_params)[:1]
@@ -133,21 +122,18 @@ def main(args: argparse.Namespace) -> int:
     along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(plan.poses[:, :2], axis=0).T))])
     picks = np.searchsorted(along, np.arange(CYCLES) * SPACING_M).clip(0, len(along) - 1)
 
-    fp = costmap.footprint
+    # the robot at each pose, moving along the path, in its local window
+    windows = [(plan.poses[index], *crop(costs, info, *plan.poses[index][:2])) for index in picks]
+    velocity = np.array([SPEED, 0.0, 0.0])
+
+    fp, inflation = costmap.footprint, costmap.params.layers[1]
     planner = DwaPlanner(PARAMS, fp.points, footprint_check_cost(fp.inscribed_radius, fp.circumscribed_radius,
                                                                  inflation.inflation_radius,
                                                                  inflation.cost_scaling_factor))
     cycle_ms, samples, legal, statuses, reference_ms, mismatches = [], [], [], {}, [], 0
-    for i, index in enumerate(picks):
-        pose = plan.poses[index]
-        local_costs, local_info = crop(costs, info, pose[0], pose[1])
-        velocity = np.array([SPEED, 0.0, 0.0])
-        fastest = np.inf
-        for _ in range(REPEATS):
-            begin = time.perf_counter()
-            result = planner.compute(pose, velocity, local_costs, local_info, plan.poses)
-            fastest = min(fastest, time.perf_counter() - begin)
-        cycle_ms.append(fastest * 1e3)
+    for i, (pose, local_costs, local_info) in enumerate(windows):
+        result, ms = timed(lambda: planner.compute(pose, velocity, local_costs, local_info, plan.poses), REPEATS)
+        cycle_ms.append(ms)
         samples.append(len(result.samples))
         legal.append(int(result.legal.sum()))
         statuses[result.status] = statuses.get(result.status, 0) + 1
@@ -164,25 +150,18 @@ def main(args: argparse.Namespace) -> int:
 
     band = eband.ElasticBandPlanner(EBAND_PARAMS, fp.points, planner.check_cost)
     band_ms, band_cold_ms, band_poses, band_statuses = [], [], [], {}
-    for index in picks:
-        pose = plan.poses[index]
-        local_costs, local_info = crop(costs, info, pose[0], pose[1])
-        velocity = np.array([SPEED, 0.0, 0.0])
+    for pose, local_costs, local_info in windows:
         band.reset()
-        begin = time.perf_counter()
-        band.compute(pose, velocity, local_costs, local_info, plan.poses)
-        band_cold_ms.append((time.perf_counter() - begin) * 1e3)
-        fastest = np.inf
-        for _ in range(REPEATS):
-            begin = time.perf_counter()
-            band_result = band.compute(pose, velocity, local_costs, local_info, plan.poses)
-            fastest = min(fastest, time.perf_counter() - begin)
-        band_ms.append(fastest * 1e3)
+        _, cold_ms = timed(lambda: band.compute(pose, velocity, local_costs, local_info, plan.poses))
+        band_result, warm_ms = timed(lambda: band.compute(pose, velocity, local_costs, local_info, plan.poses), REPEATS)
+        band_cold_ms.append(cold_ms)
+        band_ms.append(warm_ms)
         band_poses.append(len(band_result.trajectory))
         band_statuses[band_result.status] = band_statuses.get(band_result.status, 0) + 1
 
     figures = {
-        "map": str(path), "cycles": len(picks), "repeats": REPEATS, "window_cells": [local_info.width, local_info.height],
+        "map": str(path), "cycles": len(windows), "repeats": REPEATS,
+        "window_cells": [local_info.width, local_info.height],
         "samples": int(min(samples)), "samples_median": float(statistics.median(samples)),
         "steps": planner.n_steps(result.samples),
         "legal_median": float(statistics.median(legal)), "statuses": statuses,
@@ -199,7 +178,7 @@ def main(args: argparse.Namespace) -> int:
         print(json.dumps(figures))
         return 0
     print(f"map {path}; mecanum footprint 0.832 x 0.636 m; {WINDOW_M:.0f} x {WINDOW_M:.0f} m local windows "
-          f"({local_info.width} x {local_info.height} cells) at {len(picks)} poses along a "
+          f"({local_info.width} x {local_info.height} cells) at {len(windows)} poses along a "
           f"{plan.length:.1f} m global path, moving at {SPEED} m/s; fastest of {REPEATS} cycles per pose")
     print(f"DWA cycle (distance maps + sampling + rollout + scoring) over {figures['samples']}–{max(samples)} "
           f"trajectories x {figures['steps']} steps: median {figures['cycle_median_ms']:.2f} ms, p99 "

@@ -27,10 +27,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...schemas.messages import Clock, Header, LaserScan, Twist
+from ...schemas.messages import Clock, Header, Twist
 from ...sim.raycast import LidarParams
 from ..runtime.deferred import Deferred
-from ..runtime.node import NS_PER_S, Node
+from ..runtime.node import NS_PER_S, Node, Ticks
+from ..runtime.params import require_nonnegative
 from .collision import CollisionMonitor, robot_frame_points
 from .params import CollisionMonitorParams, VelocitySmootherParams
 from .smoother import VelocitySmoother
@@ -45,11 +46,6 @@ def _message(twist: np.ndarray, stamp_ns: int) -> Twist:
     return Twist(header=Header(stamp_ns=stamp_ns, frame_id="base_link"), linear_x=vx, linear_y=vy, angular_z=wz)
 
 
-def _check_delay(name: str, value: float) -> None:
-    if not (np.isfinite(value) and value >= 0):
-        raise ValueError(f"{name} must be zero or positive, got {value}")
-
-
 @dataclass(frozen=True)
 class VelocitySmootherNodeParams(VelocitySmootherParams):
     """Nav2's velocity_smoother names; the limits default to what the chassis allows on every axis
@@ -62,7 +58,7 @@ class VelocitySmootherNodeParams(VelocitySmootherParams):
 
     def __post_init__(self):
         super().__post_init__()
-        _check_delay("command_delay_s", self.command_delay_s)
+        require_nonnegative(self, "command_delay_s")
 
 
 class VelocitySmootherNode(Node):
@@ -72,23 +68,16 @@ class VelocitySmootherNode(Node):
     def setup(self) -> None:
         p = self.params
         self.smoother = VelocitySmoother(p)
-        self.period_ns = round(NS_PER_S / p.smoothing_frequency)
-        self.next_tick_ns: int | None = None
+        self.ticks = Ticks(p.smoothing_frequency)
         self.pending = Deferred(p.command_delay_s)   # commands not yet in effect
         self.out_pub = self.publisher("cmd_vel_smoothed")
         self.subscribe("sim/clock", self.on_clock)
-        self.subscribe("cmd_vel_nav", self.on_command, synced=False, max_delay_s=p.command_delay_s)
-
-    def on_command(self, msg: Twist) -> None:
-        self.pending.hold(msg)
+        self.subscribe_deferred("cmd_vel_nav", self.pending)
 
     def on_clock(self, msg: Clock) -> None:
         t = msg.header.stamp_ns
-        if self.next_tick_ns is None:
-            self.next_tick_ns = -(-t // self.period_ns) * self.period_ns
-        if t < self.next_tick_ns:
+        if not self.ticks.due(t):
             return
-        self.next_tick_ns = (t // self.period_ns + 1) * self.period_ns
         for _, command in self.pending.due(t):
             self.smoother.command(_twist(command), command.header.stamp_ns)
             self.counters["commands"] += 1
@@ -107,7 +96,7 @@ class CollisionMonitorNodeParams(CollisionMonitorParams):
 
     def __post_init__(self):
         super().__post_init__()
-        _check_delay("scan_delay_s", self.scan_delay_s)
+        require_nonnegative(self, "scan_delay_s")
         if not (np.isfinite(self.source_timeout) and self.source_timeout > self.scan_delay_s):
             raise ValueError(f"source_timeout must exceed scan_delay_s ({self.scan_delay_s}), "
                              f"got {self.source_timeout}")
@@ -127,10 +116,7 @@ class CollisionMonitorNode(Node):
         self.points = np.zeros((0, 2))                        # its points, robot frame
         self.out_pub = self.publisher("cmd_vel")
         self.subscribe("cmd_vel_smoothed", self.on_command)
-        self.subscribe("scan", self.on_scan, synced=False, max_delay_s=p.scan_delay_s)
-
-    def on_scan(self, msg: LaserScan) -> None:
-        self.pending.hold(msg)
+        self.subscribe_deferred("scan", self.pending)
 
     def on_command(self, msg: Twist) -> None:
         t = msg.header.stamp_ns

@@ -36,15 +36,14 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ...schemas import MessageError
 from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Path
 from ...sim.world import DEFAULT_FOOTPRINT
 from ..chassis.odometry import compose, inverse
 from ..costmap.footprint import make_footprint
-from ..costmap.frames import RobotFrames
+from ..costmap.frames import FrameParams
 from ..runtime.deferred import Deferred
-from ..runtime.node import NS_PER_S, Node
-from ..runtime.params import ParamError, load_params
+from ..runtime.node import NS_PER_S, Node, Ticks
+from ..runtime.params import ParamError, load_params, require_nonnegative
 from .approach import FinalApproach
 from .dwa import DwaPlanner, footprint_check_cost, reachable, warm_up
 from .follower import PathFollower, segments_from_poses
@@ -76,9 +75,9 @@ ROS_WITHOUT_EFFECT = {
 
 
 @dataclass(frozen=True)
-class LocalPlannerNodeParams(DwaParams):
-    """DwaParams (TrajectoryPlannerROS / DWAPlannerROS names) plus the node's own; the tolerances
-    are the final approach's, tighter than ROS's."""
+class LocalPlannerNodeParams(FrameParams, DwaParams):
+    """DwaParams (TrajectoryPlannerROS / DWAPlannerROS names) plus the frames and the node's own;
+    the tolerances are the final approach's, tighter than ROS's."""
     xy_goal_tolerance: float = 0.02      # m: the controller stops here (the navigator judges success)
     yaw_goal_tolerance: float = 0.02     # rad
     controller: str = "dwa"              # dwa | eband | follower
@@ -91,22 +90,14 @@ class LocalPlannerNodeParams(DwaParams):
     footprint_padding: float = 0.01      # m
     inflation_radius: float = 0.55       # m: with cost_scaling_factor, where the footprint check starts
     cost_scaling_factor: float = 10.0    # 1/m
-    initial_pose_x: float = 0.0          # the odom frame's pose in the map until tf/map_odom
-    initial_pose_y: float = 0.0
-    initial_pose_a: float = 0.0
-    map_frame: str = "map"
-    odom_frame: str = "odom"
     request_delay_s: float = 0.5         # sim s from a costmap / tf / path stamp to its effect
 
     def __post_init__(self):
         super().__post_init__()
         if self.controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
-        for name in ("final_approach_distance", "request_delay_s", "robot_radius", "footprint_padding",
-                     "inflation_radius", "cost_scaling_factor"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be zero or positive, got {value}")
+        require_nonnegative(self, "final_approach_distance", "request_delay_s", "robot_radius", "footprint_padding",
+                            "inflation_radius", "cost_scaling_factor")
         if self.footprint and len(self.footprint) < 3:
             raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
         for name in ("path_follower", "elastic_band"):
@@ -120,7 +111,7 @@ class LocalPlannerNodeParams(DwaParams):
         if values.setdefault("drive", drive) != drive:
             raise ValueError(f"path_follower: drive {values['drive']!r} contradicts holonomic_robot "
                              f"{self.holonomic_robot}")
-        return FollowerParams.from_mapping(values, "path_follower")
+        return load_params(FollowerParams, values, "path_follower")
 
     @classmethod
     def from_mapping(cls, values: dict | None, source: str = "local_planner") -> LocalPlannerNodeParams:
@@ -161,7 +152,7 @@ class LocalPlannerNode(Node):
     def setup(self) -> None:
         p = self.params
         warm_up()   # compile (or load) the rollout kernels now, never inside a cycle
-        self.frames = RobotFrames(p.map_frame, p.odom_frame, (p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
+        self.frames = p.robot_frames()
         fp = make_footprint(p.footprint, p.robot_radius, p.footprint_padding)
         check_cost = footprint_check_cost(fp.inscribed_radius, fp.circumscribed_radius, p.inflation_radius,
                                           p.cost_scaling_factor)
@@ -169,9 +160,8 @@ class LocalPlannerNode(Node):
                               check_cost)
         self.follower_params = p.follower_params()
         self.controller = self._make_controller(fp.points, check_cost)
-        self.period_ns = round(NS_PER_S / p.controller_frequency)
-        self.dt = self.period_ns / NS_PER_S
-        self.next_tick_ns: int | None = None
+        self.ticks = Ticks(p.controller_frequency)
+        self.dt = self.ticks.period_ns / NS_PER_S
         self.pending = Deferred(p.request_delay_s)   # sporadic inputs not yet in effect
         self.costmap: Costmap | None = None
         self.path: Path | None = None            # followed; None: idle
@@ -182,13 +172,10 @@ class LocalPlannerNode(Node):
         self.cmd_pub = self.publisher("local_cmd")
         self.plan_pub = self.publisher("local_plan")
         self.subscribe("odom", self.on_odom)
-        self.in_keys: dict[int, str] = {}
         for kind, topic, check in ((COSTMAP, "costmap/local", self._check_costmap),
                                    (MAP_ODOM, "tf/map_odom", self.frames.transform_problem),
                                    (PATH, "follow_path", self._check_path)):
-            self.in_keys[kind] = self.keys.resolve(topic)
-            self.subscribe(topic, lambda msg, k=kind, c=check: self._receive(k, c, msg), synced=False,
-                           max_delay_s=p.request_delay_s)
+            self.subscribe_deferred(topic, self.pending, kind, check)
 
     def _make_controller(self, footprint: np.ndarray, check_cost: int):
         p = self.params
@@ -205,14 +192,6 @@ class LocalPlannerNode(Node):
         return None     # follower: built per path
 
     # ------------------------------------------------------------ inputs
-
-    def _receive(self, kind: int, check, msg) -> None:
-        problem = check(msg)
-        if problem:
-            key = self.in_keys[kind]
-            self.reject(key, MessageError(problem, type_name=type(msg).__name__, key=key))
-            return
-        self.pending.hold(msg, kind)
 
     def _frame_problem(self, frame: str) -> str:
         if frame not in (self.frames.map_frame, self.frames.odom_frame):
@@ -250,11 +229,8 @@ class LocalPlannerNode(Node):
     def on_odom(self, msg: Odometry) -> None:
         self.frames.set_odom(msg)
         t = msg.header.stamp_ns
-        if self.next_tick_ns is None:
-            self.next_tick_ns = -(-t // self.period_ns) * self.period_ns    # the first due time ≥ t
-        if t < self.next_tick_ns:
+        if not self.ticks.due(t):
             return
-        self.next_tick_ns = (t // self.period_ns + 1) * self.period_ns
         self._apply_due(t)
         velocity = np.array([msg.twist.linear_x, msg.twist.linear_y, msg.twist.angular_z])
         began = time.perf_counter()     # instrumentation only

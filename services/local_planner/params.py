@@ -16,17 +16,9 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..runtime.params import load_params
+from ..runtime.params import require_at_least, require_nonnegative, require_positive
 
 DRIVE_MODES = ("holonomic", "diff")
-
-
-def _check(obj, names, minimum=0.0, strict=False):
-    for name in names:
-        value = getattr(obj, name)
-        ok = math.isfinite(value) and (value > minimum if strict else value >= minimum)
-        if not ok:
-            raise ValueError(f"{name} must be a number {'>' if strict else '≥'} {minimum}, got {value}")
 
 
 @dataclass(frozen=True)
@@ -63,23 +55,17 @@ class DwaParams:
     yaw_goal_tolerance: float = 0.05     # rad
 
     def __post_init__(self):
-        _check(self, ("acc_lim_x", "acc_lim_theta", "max_vel_theta", "min_in_place_vel_theta",
-                      "sim_time", "sim_granularity", "controller_frequency"), strict=True)
-        _check(self, ("acc_lim_y", "path_distance_bias", "goal_distance_bias", "occdist_scale",
-                      "forward_point_distance", "xy_goal_tolerance", "yaw_goal_tolerance"))
+        require_positive(self, "acc_lim_x", "acc_lim_theta", "max_vel_theta", "min_in_place_vel_theta", "sim_time",
+                         "sim_granularity", "controller_frequency")
+        require_nonnegative(self, "acc_lim_y", "path_distance_bias", "goal_distance_bias", "occdist_scale",
+                            "forward_point_distance", "xy_goal_tolerance", "yaw_goal_tolerance")
+        require_at_least(self, 1, "vx_samples", "vy_samples", "vtheta_samples")
         for low, high in (("min_vel_x", "max_vel_x"), ("min_vel_y", "max_vel_y"),
                           ("min_vel_theta", "max_vel_theta")):
             if not getattr(self, low) <= getattr(self, high):
                 raise ValueError(f"{low} ({getattr(self, low)}) must not exceed {high} ({getattr(self, high)})")
-        for name in ("vx_samples", "vy_samples", "vtheta_samples"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be ≥ 1, got {getattr(self, name)}")
         if not all(math.isfinite(v) for v in self.y_vels):
             raise ValueError(f"y_vels must be finite numbers, got {self.y_vels}")
-
-    @classmethod
-    def from_mapping(cls, values: dict | None, source: str = "local_planner") -> DwaParams:
-        return load_params(cls, values, source)
 
 
 @dataclass(frozen=True)
@@ -105,13 +91,9 @@ class FollowerParams:
     def __post_init__(self):
         if self.drive not in DRIVE_MODES:
             raise ValueError(f"drive must be one of {DRIVE_MODES}, got {self.drive!r}")
-        _check(self, ("cruise_speed", "acc_lim", "decel_distance", "decel_exponent", "max_vel_theta"), strict=True)
-        _check(self, ("kp_cross", "ki_cross", "kd_cross", "kp_heading", "ki_heading", "kd_heading",
-                      "integral_limit", "goal_tolerance"))
-
-    @classmethod
-    def from_mapping(cls, values: dict | None, source: str = "path_follower") -> FollowerParams:
-        return load_params(cls, values, source)
+        require_positive(self, "cruise_speed", "acc_lim", "decel_distance", "decel_exponent", "max_vel_theta")
+        require_nonnegative(self, "kp_cross", "ki_cross", "kd_cross", "kp_heading", "ki_heading", "kd_heading",
+                            "integral_limit", "goal_tolerance")
 
 
 @dataclass(frozen=True)
@@ -126,7 +108,7 @@ class VelocitySmootherParams:
     velocity_timeout: float = 1.0                       # s without a command → decelerate to a stop
 
     def __post_init__(self):
-        _check(self, ("smoothing_frequency", "velocity_timeout"), strict=True)
+        require_positive(self, "smoothing_frequency", "velocity_timeout")
         for name in ("max_velocity", "min_velocity", "max_accel", "max_decel", "deadband_velocity"):
             value = getattr(self, name)
             if len(value) != 3 or not all(math.isfinite(v) for v in value):
@@ -137,10 +119,6 @@ class VelocitySmootherParams:
             if self.max_accel[i] < 0 or self.max_decel[i] > 0:
                 raise ValueError("max_accel must be ≥ 0 and max_decel ≤ 0 on every axis "
                                  f"(got {self.max_accel}, {self.max_decel})")
-
-    @classmethod
-    def from_mapping(cls, values: dict | None, source: str = "velocity_smoother") -> VelocitySmootherParams:
-        return load_params(cls, values, source)
 
 
 @dataclass(frozen=True)
@@ -157,18 +135,13 @@ class CollisionMonitorParams:
     def __post_init__(self):
         if len(self.footprint) < 3:
             raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
-        _check(self, ("stop_padding", "slowdown_padding"))
-        _check(self, ("approach_check_s",), strict=True)
+        require_nonnegative(self, "stop_padding", "slowdown_padding")
+        require_positive(self, "approach_check_s")
+        require_at_least(self, 1, "min_points")
         if self.slowdown_padding < self.stop_padding:
             raise ValueError("slowdown_padding must be at least stop_padding")
         if not 0.0 <= self.slowdown_ratio <= 1.0:
             raise ValueError(f"slowdown_ratio must be within [0, 1], got {self.slowdown_ratio}")
-        if self.min_points < 1:
-            raise ValueError(f"min_points must be ≥ 1, got {self.min_points}")
-
-    @classmethod
-    def from_mapping(cls, values: dict | None, source: str = "collision_monitor") -> CollisionMonitorParams:
-        return load_params(cls, values, source)
 
 
 @dataclass(frozen=True)
@@ -216,14 +189,16 @@ class ElasticBandParams:
     weight_adapt_factor: float = 2.0        # weight_obstacle grows by this factor every outer iteration
 
     def __post_init__(self):
-        _check(self, ("max_vel_x", "max_vel_theta", "acc_lim_x", "acc_lim_theta", "controller_frequency",
-                      "dt_ref", "max_global_plan_lookahead_dist"), strict=True)
-        _check(self, ("max_vel_x_backwards", "max_vel_y", "acc_lim_y", "dt_hysteresis", "force_reinit_new_goal_dist",
-                      "force_reinit_new_goal_angular", "min_obstacle_dist", "inflation_dist", "penalty_epsilon",
-                      "weight_max_vel_x", "weight_max_vel_y", "weight_max_vel_theta", "weight_acc_lim_x",
-                      "weight_acc_lim_y", "weight_acc_lim_theta", "weight_kinematics_nh",
-                      "weight_kinematics_forward_drive", "weight_optimaltime", "weight_obstacle", "weight_inflation"))
-        _check(self, ("weight_adapt_factor",), minimum=1.0)
+        require_positive(self, "max_vel_x", "max_vel_theta", "acc_lim_x", "acc_lim_theta", "controller_frequency",
+                         "dt_ref", "max_global_plan_lookahead_dist")
+        require_nonnegative(self, "max_vel_x_backwards", "max_vel_y", "acc_lim_y", "dt_hysteresis",
+                            "force_reinit_new_goal_dist", "force_reinit_new_goal_angular", "min_obstacle_dist",
+                            "inflation_dist", "penalty_epsilon", "weight_max_vel_x", "weight_max_vel_y",
+                            "weight_max_vel_theta", "weight_acc_lim_x", "weight_acc_lim_y", "weight_acc_lim_theta",
+                            "weight_kinematics_nh", "weight_kinematics_forward_drive", "weight_optimaltime",
+                            "weight_obstacle", "weight_inflation")
+        require_at_least(self, 1.0, "weight_adapt_factor")
+        require_at_least(self, 1, "no_inner_iterations", "no_outer_iterations", "feasibility_check_no_poses")
         if self.holonomic_robot and not (self.max_vel_y > 0 and self.acc_lim_y > 0):
             raise ValueError("holonomic_robot needs max_vel_y and acc_lim_y > 0 "
                              f"(got {self.max_vel_y}, {self.acc_lim_y})")
@@ -234,10 +209,3 @@ class ElasticBandParams:
                              f"({self.min_obstacle_dist})")
         if not 3 <= self.min_samples <= self.max_samples:
             raise ValueError(f"need 3 ≤ min_samples ≤ max_samples, got {self.min_samples} and {self.max_samples}")
-        for name in ("no_inner_iterations", "no_outer_iterations", "feasibility_check_no_poses"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"{name} must be ≥ 1, got {getattr(self, name)}")
-
-    @classmethod
-    def from_mapping(cls, values: dict | None, source: str = "local_planner") -> ElasticBandParams:
-        return load_params(cls, values, source)

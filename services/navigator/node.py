@@ -36,17 +36,16 @@ odometry carried into the map by tf/map_odom (or initial_pose_* until one comes)
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ...schemas import MessageError
 from ...schemas.messages import (CancelGoal, ClearCostmaps, Goal, LocalCommand, NavStatus, Odometry, Path, Pose2D,
                                  Twist)
-from ..costmap.frames import RobotFrames
+from ..costmap.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, QueryError
+from ..runtime.params import require_nonnegative, require_positive
 from .core import ACTIVE, ControlResult, Navigator, NavActions, NavInputs, PlanResult, State
 from .params import NavigatorParams
 from .recovery import ZERO
@@ -57,13 +56,8 @@ FOLLOWING = (State.PLANNING, State.CONTROLLING)   # states in which the local pl
 
 
 @dataclass(frozen=True)
-class NavigatorNodeParams(NavigatorParams):
-    """move_base's parameters (params.py) plus what the node needs around the core."""
-    initial_pose_x: float = 0.0   # the odom frame's pose in the map (where odometry started) until tf/map_odom
-    initial_pose_y: float = 0.0
-    initial_pose_a: float = 0.0
-    map_frame: str = "map"
-    odom_frame: str = "odom"
+class NavigatorNodeParams(FrameParams, NavigatorParams):
+    """move_base's parameters (params.py) plus the frames and what the node needs around the core."""
     base_frame: str = "base_link"
     request_delay_s: float = 0.3  # sim s from a tf / pose / plan / goal / cancel stamp to its effect
     stop_duration_s: float = 0.5  # sim s of zero commands after a goal ends
@@ -71,12 +65,8 @@ class NavigatorNodeParams(NavigatorParams):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        for name in ("request_delay_s", "stop_duration_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be zero or positive, got {value}")
-        if not (math.isfinite(self.status_period_s) and self.status_period_s > 0):
-            raise ValueError(f"status_period_s must be positive, got {self.status_period_s}")
+        require_nonnegative(self, "request_delay_s", "stop_duration_s")
+        require_positive(self, "status_period_s")
 
 
 def plan_result(plan: Path, request_id: int) -> PlanResult:
@@ -92,7 +82,7 @@ class NavigatorNode(Node):
     def setup(self) -> None:
         p = self.params
         self.core = Navigator(p)
-        self.frames = RobotFrames(p.map_frame, p.odom_frame, (p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
+        self.frames = p.robot_frames()
         self.stop_ns = round(p.stop_duration_s * NS_PER_S)
         self.status_period_ns = round(p.status_period_s * NS_PER_S)
         self.pending = Deferred(p.request_delay_s)   # sporadic inputs not yet in effect
@@ -109,13 +99,10 @@ class NavigatorNode(Node):
         self.status_pub = self.publisher("nav_status")
         self.subscribe("local_cmd", self.on_local_cmd)
         self.subscribe("odom", self.on_odom)
-        self.in_keys: dict[int, str] = {}
         for kind, topic, check in ((MAP_ODOM, "tf/map_odom", self.frames.transform_problem),
                                    (POSE, "pose", self._check_map_frame), (PLAN, "plan", self._check_map_frame),
                                    (GOAL, "goal", None), (CANCEL, "cancel", None)):
-            self.in_keys[kind] = self.keys.resolve(topic)
-            self.subscribe(topic, lambda msg, k=kind, c=check: self._receive(k, c, msg), synced=False,
-                           max_delay_s=p.request_delay_s)
+            self.subscribe_deferred(topic, self.pending, kind, check)
         self.queryable("nav_status", self.answer_status)
 
     # ------------------------------------------------------------ inputs
@@ -124,14 +111,6 @@ class NavigatorNode(Node):
         if msg.header.frame_id != self.frames.map_frame:
             return f"frame {msg.header.frame_id!r}, expected the map frame {self.frames.map_frame!r}"
         return ""
-
-    def _receive(self, kind: int, check, msg) -> None:
-        problem = check(msg) if check is not None else ""
-        if problem:
-            key = self.in_keys[kind]
-            self.reject(key, MessageError(problem, type_name=type(msg).__name__, key=key))
-            return
-        self.pending.hold(msg, kind)
 
     def on_odom(self, msg: Odometry) -> None:
         self.frames.set_odom(msg)
@@ -234,5 +213,5 @@ class NavigatorNode(Node):
         if parameters:
             raise QueryError(f"{self.status_pub.key}: takes no parameters, got {sorted(parameters)}")
         if self.status is None:
-            raise QueryError(f"{self.status_pub.key}: no goal yet (send one on {self.in_keys[GOAL]})")
+            raise QueryError(f"{self.status_pub.key}: no goal yet (send one on {self.keys.resolve('goal')})")
         return self.status

@@ -17,7 +17,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..runtime.params import ParamError, load_params, unwrap_ros
+from ..runtime.params import (ParamError, load_params, require_at_least, require_nonnegative, require_positive,
+                              unwrap_ros)
 
 RECOVERY_NAMES = ("clear_costmaps", "rotate", "back_up", "wait")
 # move_base recovery plugin types -> the behaviour here
@@ -56,20 +57,14 @@ class NavigatorParams:
         unknown = [name for name in self.recovery_behaviors if name not in RECOVERY_NAMES]
         if unknown:
             raise ValueError(f"recovery_behaviors: unknown {unknown}; known: {list(RECOVERY_NAMES)}")
-        if self.controller_frequency <= 0:
-            raise ValueError(f"controller_frequency must be > 0, got {self.controller_frequency}")
-        if self.max_rotational_vel <= 0:
-            raise ValueError(f"max_rotational_vel must be > 0, got {self.max_rotational_vel}")
+        require_positive(self, "controller_frequency", "max_rotational_vel")
         if self.escape_vel == 0 and self.backup_dist > 0 and "back_up" in self.recovery_behaviors:
             raise ValueError("escape_vel must be non-zero when back_up is a recovery behaviour")
-        if self.max_planning_retries < -1:
-            raise ValueError(f"max_planning_retries must be ≥ -1, got {self.max_planning_retries}")
-        for name in ("planner_frequency", "planner_patience", "controller_patience", "oscillation_timeout",
-                     "oscillation_distance", "conservative_reset_dist", "xy_goal_tolerance",
-                     "yaw_goal_tolerance", "trans_stopped_vel", "rot_stopped_vel", "backup_dist", "wait_duration"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a number ≥ 0, got {value}")
+        require_at_least(self, -1, "max_planning_retries")
+        require_nonnegative(self, "planner_frequency", "planner_patience", "controller_patience",
+                            "oscillation_timeout", "oscillation_distance", "conservative_reset_dist",
+                            "xy_goal_tolerance", "yaw_goal_tolerance", "trans_stopped_vel", "rot_stopped_vel",
+                            "backup_dist", "wait_duration")
 
     @property
     def recovery_order(self) -> tuple[str, ...]:

@@ -13,7 +13,6 @@ odometry without a truth at its stamp is skipped and counted (odom_without_truth
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -21,6 +20,7 @@ import numpy as np
 from ...schemas.messages import Header, Odometry, Pose2D, PoseWithCovariance, Transform
 from ..chassis.odometry import compose, inverse
 from ..runtime.node import NS_PER_S, Node
+from ..runtime.params import require_nonnegative
 
 
 @dataclass(frozen=True)
@@ -32,10 +32,7 @@ class TruthPoseParams:
     odom_frame: str = "odom"
 
     def __post_init__(self) -> None:
-        for name in ("publish_rate_hz", "position_std", "yaw_std"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be zero or positive, got {value}")
+        require_nonnegative(self, "publish_rate_hz", "position_std", "yaw_std")
         for name in ("map_frame", "odom_frame"):
             if not getattr(self, name):
                 raise ValueError(f"{name} must not be empty")

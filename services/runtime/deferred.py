@@ -17,6 +17,7 @@ from .node import NS_PER_S
 
 class Deferred:
     def __init__(self, delay_s: float):
+        self.delay_s = delay_s
         self.delay_ns = round(delay_s * NS_PER_S)
         self._held: list[tuple[int, int, int, Any]] = []    # (stamp, kind, seq, message)
 
@@ -28,6 +29,10 @@ class Deferred:
         while self._held and self._held[0][0] + self.delay_ns < now_ns:
             _, kind, _, msg = self._held.pop(0)
             yield kind, msg
+
+    def latest(self, kind: int = 0) -> Any | None:
+        """The held message of this kind stamped last, or None."""
+        return next((msg for _, held_kind, _, msg in reversed(self._held) if held_kind == kind), None)
 
     def __len__(self) -> int:
         return len(self._held)

@@ -11,13 +11,16 @@ import json
 import logging
 from collections import Counter
 from dataclasses import dataclass
-from typing import Any, Callable, ClassVar
+from typing import TYPE_CHECKING, Any, Callable, ClassVar
 
 from ...schemas import MessageError
 from ...schemas.codec import encode
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ...schemas.messages import Clock, Diagnostic, Header
 from ...schemas.registry import type_info
+
+if TYPE_CHECKING:
+    from .deferred import Deferred
 
 CLOCK_TOPIC = "sim/clock"
 NS_PER_S = 1_000_000_000
@@ -77,6 +80,24 @@ class _Timer:
     next_ns: int | None = None
 
 
+class Ticks:
+    """A rate on a synced input's stamps rather than on the clock: a tick at each multiple of the
+    period, falling on the first stamp at or after it (stamps in between are not ticks)."""
+
+    def __init__(self, frequency_hz: float):
+        self.period_ns = round(NS_PER_S / frequency_hz)
+        self.next_ns: int | None = None
+
+    def due(self, stamp_ns: int) -> bool:
+        """Whether the message stamped stamp_ns is a tick (stamps come in order)."""
+        if self.next_ns is None:
+            self.next_ns = -(-stamp_ns // self.period_ns) * self.period_ns    # the first multiple ≥ the stamp
+        if stamp_ns < self.next_ns:
+            return False
+        self.next_ns = (stamp_ns // self.period_ns + 1) * self.period_ns
+        return True
+
+
 class QueryError(Exception):
     """A query that cannot be answered; the text goes back to the caller."""
 
@@ -121,6 +142,21 @@ class Node:
         if max_delay_s < 0:
             raise ValueError(f"{self.name}: max_delay_s must not be negative, got {max_delay_s}")
         self.inputs.append(Input(key, type_for_key(key), handler, synced, round(max_delay_s * NS_PER_S)))
+
+    def subscribe_deferred(self, topic: str, pending: Deferred, kind: int = 0,
+                           check: Callable[[Any], str] | None = None) -> None:
+        """A sporadic input whose messages wait in `pending` until they are due (deferred.py), as
+        `kind`; one that `check` finds a problem with (its reason, or '') is rejected instead."""
+        key = self.keys.resolve(topic)
+
+        def receive(msg: Any) -> None:
+            problem = check(msg) if check is not None else ""
+            if problem:
+                self.reject(key, MessageError(problem, type_name=type(msg).__name__, key=key))
+            else:
+                pending.hold(msg, kind)
+
+        self.subscribe(topic, receive, synced=False, max_delay_s=pending.delay_s)
 
     def publisher(self, topic: str) -> Publisher:
         key = self.keys.resolve(topic)

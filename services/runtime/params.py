@@ -9,7 +9,7 @@ import dataclasses
 import math
 import typing
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import yaml
 
@@ -102,6 +102,29 @@ def load_params(cls: type, values: dict | None, source: str = "parameters") -> A
         return cls(**kwargs)
     except (ValueError, TypeError) as exc:  # __post_init__ range checks
         raise ParamError(f"{source}: {exc}") from None
+
+
+def require_nonnegative(params: Any, *names: str) -> None:
+    """For a dataclass's __post_init__: ValueError naming the first of its fields `names` that is
+    not a finite number ≥ 0 (load_params turns it into a ParamError naming the source)."""
+    _require(params, names, lambda value: value >= 0, "zero or positive")
+
+
+def require_positive(params: Any, *names: str) -> None:
+    """As require_nonnegative, for fields that must be finite and > 0."""
+    _require(params, names, lambda value: value > 0, "positive")
+
+
+def require_at_least(params: Any, minimum: float, *names: str) -> None:
+    """As require_nonnegative, for fields that must be finite and ≥ minimum (counts: 1)."""
+    _require(params, names, lambda value: value >= minimum, f"≥ {minimum}")
+
+
+def _require(params: Any, names: tuple[str, ...], within: Callable[[float], bool], what: str) -> None:
+    for name in names:
+        value = getattr(params, name)
+        if not (math.isfinite(value) and within(value)):
+            raise ValueError(f"{name} must be {what}, got {value}")
 
 
 def read_params_mapping(path: str | Path, node_name: str = "") -> dict:
