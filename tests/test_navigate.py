@@ -4,9 +4,13 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
+import signal
 import subprocess
 import sys
+import threading
+import time
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +20,7 @@ import yaml
 from omninav.cli.main import main as cli_main
 from omninav.cli.navigate import REPO, compose_for, map_for
 from omninav.schemas import decode
+from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Clock, Goal, Header, NavStatus, Odometry, Pose2D, Twist
 from omninav.schemas.messages import Path as PathMsg
 from omninav.services.chassis.node import ChassisNode
@@ -24,14 +29,15 @@ from omninav.services.navigator.mission import (MissionError, MissionRecord, loa
                                                 summary_lines)
 from omninav.services.navigator.truth_pose import TruthPoseNode, TruthPoseParams
 from omninav.services.map_server.mapio import load_map
-from omninav.services.recorder.mcap_io import read_records
+from omninav.services.recorder.mcap_io import read_records, recording_summary
 from omninav.services.runtime.compose import load_compose
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
+from omninav.services.runtime.zenoh_config import open_client
 from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.world import load_world, world_path
 
-from launching import processes_using
+from launching import children, processes_using, service_pids
 
 
 class Driver(Node):
@@ -295,3 +301,57 @@ def test_the_live_mission_replays_byte_for_byte_into_the_local_planner_and_the_n
     printed = capsys.readouterr().out
     assert "parameters: the live run's, from its Diagnostic" in printed
     assert "replay reproduces the recorded outputs byte for byte" in printed and "not exactly replayable" not in printed
+
+
+# ---------------------------------------------------------------- a service dying mid-mission
+
+def _router_of(log: Path) -> str | None:
+    found = re.search(r"router listening on (\S+)", log.read_text(errors="replace")) if log.exists() else None
+    return found.group(1) if found else None
+
+
+def _wait_for(condition, process: subprocess.Popen, what: str, seconds: float = 300.0):
+    """condition()'s first true value; fails if the process ends first (a liveness bound, not a timing)."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        assert process.poll() is None, f"navigate ended (exit {process.returncode}) before {what}"
+        time.sleep(0.2)
+    raise AssertionError(f"no {what} within {seconds:g} s")
+
+
+def test_navigate_stops_everything_and_names_a_service_that_dies_mid_mission(tmp_path):
+    """The local planner is killed while it steers towards the goal: the command exits 2 with an error
+    naming it, leaves no process running, and the recording up to then is a finished MCAP file."""
+    out = tmp_path / "run"
+    navigate = subprocess.Popen([sys.executable, "-m", "omninav.cli.main", "navigate", "--world", "room",
+                                 "--goal", "3.2", "0.9", "30", "--localization", "truth", "--rate", "2",
+                                 "-o", str(out), "--json"], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    try:
+        router = _wait_for(lambda: _router_of(out / "services.log"), navigate, "router")
+        steering = threading.Event()
+        with open_client(router) as session:
+            local_cmd = session.declare_subscriber(
+                KeyLayout().resolve("local_cmd"),
+                lambda sample: decode(sample.payload.to_bytes()).goal_id == "g1" and steering.set())
+            _wait_for(steering.is_set, navigate, "local planner command for the goal")
+            local_cmd.undeclare()
+        killed = next(pids["local_planner"] for pids in map(service_pids, children(navigate.pid))
+                      if "local_planner" in pids)
+        os.kill(killed, signal.SIGKILL)
+        _, stderr = navigate.communicate(timeout=300)
+    finally:
+        if navigate.poll() is None:     # a failure above: let navigate stop what it started
+            navigate.send_signal(signal.SIGINT)
+            navigate.communicate(timeout=300)
+    error = stderr.decode().strip().splitlines()[-1]
+    assert navigate.returncode == 2, stderr.decode()
+    assert error.startswith("omninav navigate: error: service(s) local_planner stopped"), error
+    assert processes_using(router) == []
+    recording = out / "run.mcap"
+    assert recording_summary(recording).statistics.message_count > 0       # finished: summary and statistics
+    commands = [decode(rec.payload) for rec in read_records(recording, ["omninav/r1/local_cmd"])]
+    assert any(cmd.goal_id == "g1" for cmd in commands)                     # what it sent before it died
+    assert [rec.key for rec in read_records(recording, ["omninav/r1/goal"])] == ["omninav/r1/goal"]
