@@ -2,7 +2,9 @@
 
 One `Simulation` holds a pymunk Space with the world's static geometry (walls, boxes, circles and,
 for a map world, its occupied cells merged into rectangles), the movers as kinematic bodies that
-follow `world.movers` exactly, and the robot as a dynamic body with the footprint polygon.
+follow their paths in `world.movers`, and the robot as a dynamic body with the footprint polygon.
+Each mover's state is how long it has moved: a step adds dt unless it yields to the robot (a mover
+with a yield distance whose way ahead the footprint is in, decided at the step's start).
 
 A step of dt, in this order:
   1. motors: each wheel approaches its commanded speed, at most `wheel_acc_limit` rad/s^2, and
@@ -41,7 +43,7 @@ from ..services.chassis.follower import follower_readings
 from ..services.chassis.kinematics import DRIVES, ChassisParams, Kinematics
 from ..services.chassis.odometry import relative, se2_exp, wrap_angle
 from ..services.map_server.mapio import cell_to_world
-from .world import World, polygon_area
+from .world import World, polygon_area, transform_points
 
 ROBOT_MASS = 40.0            # kg; with pymunk's moment it only decides how a contact splits turn and push
 CONTACT_SLOP = 1e-3          # m of overlap pymunk tolerates before pushing bodies apart
@@ -181,7 +183,8 @@ class Simulation:
         self.space.collision_slop = CONTACT_SLOP
         self._add_static_geometry()
         self._movers = self._add_movers()
-        self._mover_xy = world.movers.pose_at(0.0)
+        self._mover_steps = np.zeros(len(world.movers), np.int64)   # steps each mover has moved
+        self._mover_xy = world.movers.pose_after(0.0)
         self.robot = self._add_robot()
         self.space.on_collision(_ROBOT, None, begin=self._on_begin, separate=self._on_separate)
 
@@ -213,7 +216,7 @@ class Simulation:
 
     def _add_movers(self) -> list[pymunk.Body]:
         bodies = []
-        for radius, (x, y) in zip(self.world.movers.radius, self.world.movers.pose_at(0.0)):
+        for radius, (x, y) in zip(self.world.movers.radius, self.world.movers.pose_after(0.0)):
             body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
             body.position = (float(x), float(y))
             body.position_func = _hold
@@ -261,6 +264,11 @@ class Simulation:
         return np.array([x, y, float(wrap_angle(angle))])
 
     @property
+    def footprint_outline(self) -> np.ndarray:
+        """The robot's footprint polygon (P, 2) at its true pose, in the world frame."""
+        return transform_points(self.world.robot.footprint, self.pose)[0]
+
+    @property
     def mover_circles(self) -> np.ndarray:
         return np.column_stack([self._mover_xy, self.world.movers.radius]).reshape(-1, 3)
 
@@ -301,7 +309,11 @@ class Simulation:
         self.robot.velocity = ((c * chord[0] - s * chord[1]) / dt, (s * chord[0] + c * chord[1]) / dt)
         self.robot.angular_velocity = float(twist[2])
         # movers stay where they are during space.step; the solver sees their velocity
-        next_xy = self.world.movers.pose_at((self.steps + 1) * dt) if self._movers else self._mover_xy
+        next_xy = self._mover_xy
+        if self._movers:
+            yielding = self.world.movers.yielding(self._mover_steps * dt, self.footprint_outline)
+            self._mover_steps += ~yielding
+            next_xy = self.world.movers.pose_after(self._mover_steps * dt)
         for body, xy, xy_next in zip(self._movers, self._mover_xy, next_xy):
             body.velocity = (float(xy_next[0] - xy[0]) / dt, float(xy_next[1] - xy[1]) / dt)
 

@@ -5,7 +5,8 @@ The format is described in docs/worlds.md. A World holds its static geometry in 
     outside the bounds), counter-clockwise; `segments` (4K, 4) are their edges, for ray casting;
   - `circles` (M, 3): static cylinders (x, y, r);
 and optionally an occupancy grid from a ROS map (`map:`), whose occupied cells are obstacles.
-Movers are circles moving at constant speed along a closed polyline (`Movers.pose_at(t)`).
+Movers are circles moving at constant speed along a closed polyline; one with a yield distance
+stops while the robot is in its way, so where it is depends on the robot (`Movers.pose_after`).
 """
 from __future__ import annotations
 
@@ -115,42 +116,99 @@ def polygon_area(polygon: np.ndarray) -> float:
 
 # ---------------------------------------------------------------- movers
 
+YIELD_MARGIN = 0.1   # m beyond its radius that a yielding mover keeps clear ahead of it (personal space)
+
+
 @dataclass(frozen=True, eq=False)
 class Movers:
     """Circular obstacles moving at constant speed along closed polylines, looping forever.
 
     A mover whose path is not a loop (`loop: false`) goes back and forth: its closed polyline is
-    the path followed by the path reversed.
+    the path followed by the path reversed. Where a mover is depends on how long it has moved:
+    `pose_after(moving_s)`. One that never stops has moved for the whole sim time (`pose_at(t)`);
+    one with a yield distance stops while the robot is in its way (`yielding`), so the simulation
+    keeps each mover's moving time as its state (`Simulation.mover_circles`, the sim/movers key).
     """
 
     radius: np.ndarray = field(default_factory=lambda: np.zeros(0))   # (K,)
     speed: np.ndarray = field(default_factory=lambda: np.zeros(0))    # (K,) m/s
     loops: tuple[np.ndarray, ...] = ()                                # closed polylines, first == last
+    yield_distance: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K,) m; 0: never yields
 
     def __len__(self) -> int:
         return len(self.loops)
 
-    def _where(self, t: float):
-        for loop, speed in zip(self.loops, self.speed):
-            steps = np.diff(loop, axis=0)
-            lengths = np.hypot(steps[:, 0], steps[:, 1])
-            ends = np.cumsum(lengths)
-            s = (speed * t) % ends[-1]
-            i = min(int(np.searchsorted(ends, s, side="right")), len(lengths) - 1)
-            into = s - (ends[i] - lengths[i])
-            yield loop[i] + steps[i] * (into / lengths[i]), steps[i] / lengths[i] * speed
+    @cached_property
+    def _segments(self) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
+        """Per loop, its segments' lengths and the arc length at the end of each."""
+        lengths = [np.hypot(*np.diff(loop, axis=0).T) for loop in self.loops]
+        return tuple((length, np.cumsum(length)) for length in lengths)
+
+    def _point(self, k: int, s: float) -> tuple[np.ndarray, np.ndarray, int]:
+        """Mover k's path at arc length s (taken around the loop): point, unit direction, segment."""
+        loop, (lengths, ends) = self.loops[k], self._segments[k]
+        s %= ends[-1]
+        i = min(int(np.searchsorted(ends, s, side="right")), len(ends) - 1)
+        step = loop[i + 1] - loop[i]
+        return loop[i] + step * ((s - (ends[i] - lengths[i])) / lengths[i]), step / lengths[i], i
+
+    def _where(self, moving_s: np.ndarray):
+        for k, speed in enumerate(self.speed):
+            point, direction, _ = self._point(k, speed * moving_s[k])
+            yield point, direction * speed
+
+    def pose_after(self, moving_s) -> np.ndarray:
+        """Every mover's position (K, 2) after moving for moving_s[k] seconds from its path's start."""
+        moving_s = np.broadcast_to(np.asarray(moving_s, np.float64), (len(self),))
+        return np.array([p for p, _ in self._where(moving_s)]).reshape(-1, 2)
 
     def pose_at(self, t: float) -> np.ndarray:
-        """Every mover's position (K, 2) at sim time t seconds (all start at their path's first point)."""
-        return np.array([p for p, _ in self._where(t)]).reshape(-1, 2)
+        """Every mover's position (K, 2) at sim time t had none of them stopped (all start at their
+        path's first point): the truth for movers without a yield distance."""
+        return self.pose_after(t)
 
     def velocity_at(self, t: float) -> np.ndarray:
-        """Every mover's velocity (K, 2) at sim time t."""
-        return np.array([v for _, v in self._where(t)]).reshape(-1, 2)
+        """Every mover's velocity (K, 2) at sim time t had none of them stopped."""
+        return np.array([v for _, v in self._where(np.full(len(self), t))]).reshape(-1, 2)
 
     def circles_at(self, t: float) -> np.ndarray:
-        """Movers as circles (K, 3) of (x, y, r) at time t, as the ray caster takes them."""
+        """Movers as circles (K, 3) of (x, y, r) at time t had none of them stopped, as the ray
+        caster takes them."""
         return np.column_stack([self.pose_at(t), self.radius]).reshape(-1, 3)
+
+    def way_ahead(self, k: int, moving_s: float) -> np.ndarray:
+        """The polyline (N, 2) mover k's centre follows next, turns and reversals included: from
+        a radius ahead of where it is (so what is beside or behind its circle is not ahead of it)
+        to `yield_distance` ahead."""
+        ends = self._segments[k][1]
+        s = self.speed[k] * moving_s
+        s0, s1 = s + min(self.radius[k], self.yield_distance[k]), s + self.yield_distance[k]
+        start, _, first = self._point(k, s0)
+        end, _, last = self._point(k, s1)
+        laps = int((s1 % ends[-1] < s0 % ends[-1]) or (s1 - s0 >= ends[-1]))
+        corners = [self.loops[k][i % len(ends) + 1] for i in range(first, last + laps * len(ends))]
+        return np.array([start, *corners, end])
+
+    def yielding(self, moving_s: np.ndarray, outline: np.ndarray) -> np.ndarray:
+        """Which movers (K,) stop for a robot whose footprint is the polygon `outline` (P, 2, world
+        frame): those with a yield distance whose way ahead, swept by their radius plus
+        YIELD_MARGIN, the footprint meets — straight ahead, a robot within yield_distance +
+        YIELD_MARGIN of the mover's circle. A robot beside or behind a mover does not stop it."""
+        stop = np.zeros(len(self), bool)
+        centre = outline.mean(axis=0)
+        reach = float(np.hypot(*(outline - centre).T).max())
+        edges_a, edges_b = outline, np.roll(outline, -1, axis=0)
+        for k in np.flatnonzero(self.yield_distance > 0):
+            position = self._point(k, self.speed[k] * moving_s[k])[0]
+            sweep = self.radius[k] + YIELD_MARGIN
+            if np.hypot(*(position - centre)) > reach + self.radius[k] + self.yield_distance[k] + sweep:
+                continue                                      # far away: skip the exact tests
+            way = self.way_ahead(k, moving_s[k])
+            if point_segment_distance(centre, way[:-1], way[1:]).min() > reach + sweep:
+                continue                                      # the circle around the footprint is clear
+            gap = segment_distance(edges_a[:, None], edges_b[:, None], way[None, :-1], way[None, 1:]).min()
+            stop[k] = gap <= sweep or bool(points_in_polygons(way, outline[None]).any())
+        return stop
 
 
 # ---------------------------------------------------------------- the world
@@ -468,12 +526,15 @@ def load_world(path: str | Path) -> World:
         center = keys.numbers(circle["center"], f"circles[{i}].center", 2, "a point [x, y]")
         circles.append([*center, keys.number(circle["radius"], f"circles[{i}].radius", positive=True)])
 
-    radii, speeds, loops = [], [], []
+    radii, speeds, loops, yields = [], [], [], []
     for i, mover in enumerate(keys.items(doc.get("movers"), "movers")):
         where = f"movers[{i}]"
         mover = keys.mapping(mover, where, required=("radius", "speed", "path"))
         radii.append(keys.number(mover["radius"], f"{where}.radius", positive=True))
         speeds.append(keys.number(mover["speed"], f"{where}.speed", nonnegative=True))
+        yield_distance = mover.get("yield_distance")
+        yields.append(0.0 if yield_distance is None else
+                      keys.number(yield_distance, f"{where}.yield_distance", positive=True))
         path_points = keys.points(mover["path"], f"{where}.path", 2)
         loop = mover.get("loop", True)
         if not isinstance(loop, bool):
@@ -505,7 +566,7 @@ def load_world(path: str | Path) -> World:
 
     world = World(name=name, origin=(float(x0), float(y0)), bounds=(float(w), float(h)),
                   solids=np.array(solids).reshape(-1, 4, 2), circles=np.array(circles).reshape(-1, 3),
-                  movers=Movers(np.array(radii), np.array(speeds), tuple(loops)),
+                  movers=Movers(np.array(radii), np.array(speeds), tuple(loops), np.array(yields)),
                   robot=Robot(start=start, drive=drive, footprint=footprint), grid=grid,
                   goals=np.array(goals).reshape(-1, 3), source=str(path))
     for where, point in [("robot.start", start), *((f"goals[{i}]", g) for i, g in enumerate(goals))]:

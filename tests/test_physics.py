@@ -11,7 +11,8 @@ from omninav.services.chassis.follower import follower_odometry
 from omninav.services.chassis.kinematics import ChassisParams
 from omninav.services.chassis.odometry import relative, wheel_odometry
 from omninav.sim.physics import CONTACT_SLOP, SimParams, Simulation, occupied_rectangles, se2_log
-from omninav.sim.world import load_world, point_segment_distance, points_in_polygons, transform_points, world_path
+from omninav.sim.world import (YIELD_MARGIN, load_world, point_segment_distance, points_in_polygons,
+                               transform_points, world_path)
 
 from conftest import SHARED_DATA
 
@@ -277,6 +278,65 @@ def test_movers_follow_their_paths_and_push_the_robot(tmp_path):
         deepest = max(deepest, 0.4 - to_edges)
     assert 0 < deepest <= 0.8 * sim.params.dt + CONTACT_SLOP + 1e-3
     assert sim.collisions >= 1 and r.pose[1] < 3.5 - 0.4 - 0.318 + 0.01   # pushed out of its way
+
+
+LANE_WORLD = ("bounds: [12.0, 6.0]\nrobot: {start: [5.0, 3.0, 0.0]}\n"
+              "movers: [{radius: 0.4, speed: 0.8, path: [[1.0, 3.5], [11.0, 3.5]], loop: false%s}]\n")
+
+
+def gap_to_mover(world, r):
+    """Distance between the robot's footprint and mover 0's circle (negative: overlapping)."""
+    outline = transform_points(world.robot.footprint, r.pose)[0]
+    centre, radius = r.mover_circles[0, :2], r.mover_circles[0, 2]
+    return point_segment_distance(centre, outline, np.roll(outline, -1, axis=0)).min() - radius
+
+
+def test_a_yielding_mover_waits_before_a_robot_in_its_lane_and_goes_on_when_it_has_left(tmp_path):
+    world = make_world(tmp_path, LANE_WORLD % ", yield_distance: 1.0")
+    sim = Simulation(world, NO_NOISE)
+    parked = drive(sim, [(900, (0.0, 0.0, 0.0))])
+    assert sim.collisions == 0
+    stopped = parked[-1]
+    assert stopped.mover_velocities == pytest.approx(np.zeros((1, 2)))
+    assert parked[-300].mover_circles == pytest.approx(stopped.mover_circles)     # waiting, not creeping
+    # it stopped as the robot came within yield_distance + YIELD_MARGIN ahead of it, not earlier
+    assert 1.0 < gap_to_mover(world, stopped) <= 1.0 + YIELD_MARGIN
+    assert stopped.mover_circles[0, 0] + 0.4 < stopped.pose[0] - 0.416
+
+    left = drive(sim, [(400, (0.0, -0.5, 0.0)), (700, (0.0, 0.0, 0.0))])        # strafe out of the lane
+    assert left[-1].pose[1] < 3.5 - 0.4 - 0.318 - YIELD_MARGIN
+    assert left[-1].mover_circles[0, 0] > stopped.pose[0] + 1.0                # it went on past the robot
+    assert sim.collisions == 0
+
+
+def test_yielding_depends_only_on_the_seed_and_the_commands(tmp_path):
+    world = make_world(tmp_path, LANE_WORLD % ", yield_distance: 1.0")
+    schedule = [(500, (0.0, 0.0, 0.0)), (300, (0.1, -0.4, 0.0)), (300, (0.0, 0.0, 0.0))]
+    runs = [np.array([r.mover_circles for r in drive(Simulation(world, SimParams(seed=3)), schedule)])
+            for _ in range(2)]
+    assert np.array_equal(runs[0], runs[1])
+    assert np.ptp(runs[0][300:500, 0, 0]) == 0.0 and runs[0][-1, 0, 0] > runs[0][500, 0, 0] + 1.0   # waited, went on
+
+
+def test_a_mover_without_yield_distance_drives_into_the_robot(tmp_path):
+    world = make_world(tmp_path, LANE_WORLD % "")
+    sim = Simulation(world, NO_NOISE)
+    readings = drive(sim, [(900, (0.0, 0.0, 0.0))])
+    assert sim.collisions >= 1 and min(gap_to_mover(world, r) for r in readings) < 0.01
+
+
+def test_a_robot_behind_or_beside_a_yielding_mover_does_not_stop_it(tmp_path):
+    # both start touching the robot (front x = 2.416, left side y = 3.318) and walk away along +x:
+    # one from right ahead of it, the other from beside its front corner, 6 cm to its left
+    world = make_world(tmp_path, "bounds: [12.0, 6.0]\nrobot: {start: [2.0, 3.0, 0.0]}\n"
+                                 "movers: [{radius: 0.3, speed: 0.5, path: [[2.716, 3.0], [11.0, 3.0]],"
+                                 " loop: false, yield_distance: 1.0},\n"
+                                 "         {radius: 0.3, speed: 0.5, path: [[2.416, 3.68], [11.0, 3.68]],"
+                                 " loop: false, yield_distance: 1.0}]\n")
+    sim = Simulation(world, NO_NOISE)
+    readings = drive(sim, [(400, (0.0, 0.0, 0.0))])
+    assert readings[-1].mover_circles[:, 0] == pytest.approx([2.716 + 2.0, 2.416 + 2.0])   # never stopped
+    assert sim.collisions == 0
 
 
 # ---------------------------------------------------------------- teleport, determinism, maps

@@ -116,6 +116,12 @@ GOOD = {"name": "t", "bounds": [10.0, 8.0], "robot": {"start": [1.0, 1.0, 0.0]}}
     ({"movers": [{"radius": 0.3, "speed": -1, "path": [[1, 1], [2, 1]]}]}, r"movers\[0\]\.speed: expected a number ≥ 0"),
     ({"movers": [{"radius": 0.3, "speed": 1, "path": [[1, 1], [2, 1]], "loop": "yes"}]}, r"movers\[0\]\.loop"),
     ({"movers": [{"radius": 0.3, "speed": 1, "path": [[1, 1], ["a", 1]]}]}, r"movers\[0\]\.path\[1\]: expected a point"),
+    ({"movers": [{"radius": 0.3, "speed": 1, "path": [[1, 1], [2, 1]], "yield_distance": 0}]},
+     r"movers\[0\]\.yield_distance: expected a positive number, got 0"),
+    ({"movers": [{"radius": 0.3, "speed": 1, "path": [[1, 1], [2, 1]], "yield_distance": -1.5}]},
+     r"movers\[0\]\.yield_distance: expected a positive number"),
+    ({"movers": [{"radius": 0.3, "speed": 1, "path": [[1, 1], [2, 1]], "yield_distance": "near"}]},
+     r"movers\[0\]\.yield_distance: expected a number, got 'near'"),
     ({"robot": None}, r"robot: missing"),
     ({"robot": {"drive": "mecanum"}}, r"robot\.start: missing"),
     ({"robot": {"start": [1.0, 1.0]}}, r"robot\.start: expected \[x, y, yaw\]"),
@@ -298,6 +304,24 @@ def test_movers_loop_at_constant_speed(tmp_path):
     np.testing.assert_allclose(world.movers.velocity_at(3.0), [[0, 1], [0.5, 0], [0, 0]])
     np.testing.assert_allclose(world.movers.velocity_at(5.0), [[-1, 0], [-0.5, 0], [0, 0]])
     np.testing.assert_allclose(world.movers.circles_at(3.0)[:, 2], [0.2, 0.3, 0.3])
+
+
+def test_a_movers_way_ahead_follows_its_turns_and_reversals(tmp_path):
+    world = box_world(tmp_path, movers=[
+        {"radius": 0.2, "speed": 1.0, "path": [[1, 1], [3, 1], [3, 3], [1, 3]], "yield_distance": 1.5},
+        {"radius": 0.3, "speed": 0.5, "path": [[5, 5], [7, 5]], "loop": False, "yield_distance": 1.0},
+        {"radius": 0.3, "speed": 0.5, "path": [[5, 6], [7, 6]]}])
+    np.testing.assert_allclose(world.movers.yield_distance, [1.5, 1.0, 0.0])          # absent: never yields
+    np.testing.assert_allclose(world.movers.way_ahead(0, 0.0), [[1.2, 1], [2.5, 1]])   # from a radius ahead
+    np.testing.assert_allclose(world.movers.way_ahead(0, 1.5), [[2.7, 1], [3, 1], [3, 2]])         # a corner
+    np.testing.assert_allclose(world.movers.way_ahead(0, 7.5), [[1, 1.3], [1, 1], [2, 1]])         # the loop's end
+    np.testing.assert_allclose(world.movers.way_ahead(1, 3.0), [[6.8, 5], [7, 5], [6.5, 5]])       # turning back
+    np.testing.assert_allclose(world.movers.pose_after([1.0, 3.0, 0.0]), [[2, 1], [6.5, 5], [5, 6]])
+
+
+def test_shipped_warehouse_movers_yield_and_the_crossing_people_do_not():
+    assert np.all(shipped("warehouse").movers.yield_distance > 0)
+    assert np.all(shipped("crossing").movers.yield_distance == 0)   # the dynamic-obstacle avoidance test
 
 
 def test_no_movers(tmp_path):
