@@ -81,10 +81,9 @@ def test_a_mover_in_front_is_seen():
     out = capture(node)
     index = {inp.key: i for i, inp in enumerate(node.inputs)}
     x, y = 2.0, 4.0                          # free space, nothing within 2.7 m ahead
-    for circles in ([], [[x + 1.5, y, 0.25]]):
-        node.next_scan_ns = None
-        node.process(index["omninav/sim/movers"], movers(0, circles))
-        node.process(index["omninav/sim/r1/truth"], truth(0, x, y, 0.0))
+    for stamp_ns, circles in ((0, []), (100_000_000, [[x + 1.5, y, 0.25]])):     # one scan period apart
+        node.process(index["omninav/sim/movers"], movers(stamp_ns, circles))
+        node.process(index["omninav/sim/r1/truth"], truth(stamp_ns, x, y, 0.0))
     forward = int(round(-params.angle_min / params.angle_increment))      # the beam at angle 0
     without, with_mover = (decode(p).ranges[forward] for p in out)
     assert with_mover == pytest.approx(1.25, abs=1e-6) and without > 1.5

@@ -15,7 +15,7 @@ import numpy as np
 from ...schemas.messages import LaserScan, Obstacles, Odometry
 from ...sim.raycast import LidarParams, make_scan, scan, warm_up
 from ...sim.world import load_world, world_path
-from ..runtime.node import NS_PER_S, Node
+from ..runtime.node import Node, Ticks
 
 LASER_FRAME = "laser"
 
@@ -34,8 +34,7 @@ class LidarNode(Node):
     def setup(self) -> None:
         self.world = load_world(world_path(self.params.world))   # WorldError names the file and key
         self.rng = np.random.default_rng(self.params.seed)
-        self.period_ns = round(NS_PER_S / self.params.rate_hz)
-        self.next_scan_ns: int | None = None
+        self.scan_ticks = Ticks(self.params.rate_hz)
         self.movers = np.zeros((0, 3))
         self.last_scan: LaserScan | None = None
         self.scan_pub = self.publisher("scan")
@@ -49,11 +48,8 @@ class LidarNode(Node):
 
     def on_truth(self, msg: Odometry) -> None:
         t = msg.header.stamp_ns
-        if self.next_scan_ns is None:
-            self.next_scan_ns = -(-t // self.period_ns) * self.period_ns    # the first due time ≥ t
-        if t < self.next_scan_ns:
+        if not self.scan_ticks.due(t):
             return
-        self.next_scan_ns = (t // self.period_ns + 1) * self.period_ns
         pose = (msg.pose.x, msg.pose.y, msg.pose.theta)
         ranges = scan(self.world, pose, self.movers, self.params, self.rng)
         self.last_scan = make_scan(self.params, ranges, t, LASER_FRAME)

@@ -150,14 +150,13 @@ class LocalizerNode(Node):
         self.pose_pub = self.publisher("pose")
         self.cloud_pub = self.publisher("particlecloud")
         self.tf_pub = self.publisher("tf/map_odom")
-        self.keys_in = {name: self.keys.resolve(name) for name in ("odom", "scan", "map", "initialpose")}
+        self.keys_in = {name: self.keys.resolve(name) for name in ("odom", "scan", "map")}
         self.subscribe("odom", self.on_odom)
         self.subscribe("scan", self.on_scan)
         if not p.map_file or p.use_map_topic:
-            self.subscribe("map", lambda msg: self._request(_MAP, msg), synced=False, max_delay_s=p.request_delay_s)
-        self.subscribe("initialpose", self.on_initialpose, synced=False, max_delay_s=p.request_delay_s)
-        self.subscribe("global_localization", lambda msg: self._request(_GLOBAL, msg), synced=False,
-                       max_delay_s=p.request_delay_s)
+            self.subscribe_deferred("map", self.requests, _MAP)
+        self.subscribe_deferred("initialpose", self.requests, _INITIALPOSE, self._initialpose_problem)
+        self.subscribe_deferred("global_localization", self.requests, _GLOBAL)
         self.queryable("pose", lambda _params: self.last_pose)
         if p.map_file:
             try:
@@ -216,20 +215,12 @@ class LocalizerNode(Node):
             else:
                 self._localize(scan_stamp, beams, odom)
 
-    def on_initialpose(self, msg: PoseWithCovariance) -> None:
-        key = self.keys_in["initialpose"]
-        problem = ""
+    def _initialpose_problem(self, msg: PoseWithCovariance) -> str:
         if msg.header.frame_id not in ("", self.params.global_frame_id):
-            problem = f"frame {msg.header.frame_id!r}, but the localizer works in {self.params.global_frame_id!r}"
-        elif not np.allclose(msg.covariance, msg.covariance.T) or np.linalg.eigvalsh(msg.covariance).min() < -1e-12:
-            problem = "covariance is not symmetric positive semi-definite"
-        if problem:
-            self.reject(key, MessageError(problem, type_name="PoseWithCovariance", key=key))
-            return
-        self._request(_INITIALPOSE, msg)
-
-    def _request(self, kind: int, msg) -> None:
-        self.requests.hold(msg, kind)
+            return f"frame {msg.header.frame_id!r}, but the localizer works in {self.params.global_frame_id!r}"
+        if not np.allclose(msg.covariance, msg.covariance.T) or np.linalg.eigvalsh(msg.covariance).min() < -1e-12:
+            return "covariance is not symmetric positive semi-definite"
+        return ""
 
     # ------------------------------------------------------------ the filter
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...schemas.messages import CancelGoal, Goal, NavStatus, OccupancyGrid, Pose2D, PoseWithCovariance
+from ...schemas.messages import CancelGoal, Goal, OccupancyGrid, Pose2D, PoseWithCovariance
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from .explore import ExploreGoal, Explorer, ExploreParams, find_frontiers, still_frontier
@@ -59,12 +59,12 @@ class ExploreNode(Node):
         self.cancel_pub = self.publisher("cancel")
         self.subscribe("map", self.on_map)
         self.subscribe("pose", self.on_pose)
-        self.subscribe("nav_status", self.on_status, synced=False, max_delay_s=self.params.status_delay_s)
         self.explorer: Explorer | None = None
         self.goal: ExploreGoal | None = None
         self.goal_id = ""                       # the last goal sent
         self.goal_open = False                  # … and the navigator has not ended it
         self.statuses = Deferred(self.params.status_delay_s)   # statuses not yet in effect
+        self.subscribe_deferred("nav_status", self.statuses)
         self.given_up = np.zeros((0, 2))        # world points of frontier cells given up
         self.pose: tuple[float, float, float] | None = None
         self.empty_maps = 0                     # maps in a row without a reachable frontier
@@ -77,9 +77,6 @@ class ExploreNode(Node):
             distance = math.dist(self.pose[:2], self.goal.xy)
             if distance < self._progress[0] - PROGRESS_M:
                 self._progress = (distance, msg.header.stamp_ns)
-
-    def on_status(self, msg: NavStatus) -> None:
-        self.statuses.hold(msg)
 
     def on_map(self, msg: OccupancyGrid) -> None:
         if self.explorer is None:
