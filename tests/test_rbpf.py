@@ -122,6 +122,20 @@ def test_a_seed_gives_one_result_every_time(loop):
     assert not np.array_equal(first.trajectory()[1], other.trajectory()[1])
 
 
+def test_the_odometry_prior_pulls_each_particle_towards_its_odometry_not_its_noisy_sample(loop):
+    _, odom, scans = loop
+    slam = Rbpf(SlamParams(**{**FAST, "translation_weight": 1e3, "rotation_weight": 1e3}), LIDAR.angles(),
+                LIDAR.range_max, LIDAR.range_min)
+    k = 0
+    while slam.updates < 2:
+        slam.process(k * 100_000_000, odom[k], scans[k])
+        k += 1
+    predicted = relative(odom[0], odom[k - 1])
+    assert np.abs(slam.poses - predicted).max() < 1e-3, "every particle at the odometry's pose, noise or not"
+    free, _ = run(loop)
+    assert np.abs(free.trajectory()[1][1] - predicted).max() > 3e-3, "the scan alone would have moved it"
+
+
 def test_scan_matching_mode_tracks_with_one_particle(loop):
     truth, _, _ = loop
     slam, _ = run(loop, mode="scan_matching")

@@ -43,8 +43,11 @@ from .node import SlamNode, SlamNodeParams
 
 # gmapping's defaults process a scan per metre driven; indoors, with a 12 m lidar, updating every
 # 25 cm / 0.25 rad gives the matcher overlapping scans and the map denser evidence. The explorer
-# decides on the map, so it comes every second.
-MAPPING_DEFAULTS = dict(linearUpdate=0.25, angularUpdate=0.25, particles=30, map_update_interval=1.0)
+# decides on the map, so it comes every second. The simulated wheel odometry drifts a few cm over a
+# route, so matches are pulled towards it (Cartographer's default weights): along a corridor the
+# matcher otherwise drifts up to 9 cm (docs/slam.md).
+MAPPING_DEFAULTS = dict(linearUpdate=0.25, angularUpdate=0.25, particles=30, map_update_interval=1.0,
+                        translation_weight=10.0, rotation_weight=40.0)
 MARGIN_M = 2.0      # the map's extent beyond the world's bounds
 COSTMAP_PARAMS = Path(__file__).resolve().parents[2] / "compose" / "params"
 # localize-eval's routes, except where mapping must see more than localizing needs: every aisle of

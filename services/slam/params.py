@@ -48,6 +48,10 @@ class SlamParams:
     search_angle: float = 0.2          # rad: half-width of its angular search
     search_sigmas: float = 3.0         # ... widened to this many std of the odometry error (srr..stt)
     search_below: float = 0.5          # run the search when refinement scores below this
+    # the matcher's pull towards the odometry's pose, per m and per rad (Cartographer's names; 0: none).
+    # For good odometry: the mapping in the simulator uses 10 / 40, MIT CSAIL's odometry fails with them
+    translation_weight: float = 0.0
+    rotation_weight: float = 0.0
     l_occ: float = 0.85                # log-odds added to a hit cell
     l_free: float = -0.4               # log-odds added to a cell a beam passes through
     l_max: float = 5.0                 # log-odds clamp
@@ -73,7 +77,7 @@ class SlamParams:
             if getattr(self, name) <= 0:
                 raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
         for name in ("srr", "srt", "str", "stt", "linearUpdate", "angularUpdate", "search_window", "search_angle",
-                     "search_sigmas"):
+                     "search_sigmas", "translation_weight", "rotation_weight"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be ≥ 0, got {getattr(self, name)}")
         if not 0 <= self.resampleThreshold <= 1:

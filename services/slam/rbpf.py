@@ -110,6 +110,8 @@ class Rbpf:
         # the coarse search steps lstep: a field twice as wide keeps its candidates from falling
         # between obstacles
         self._coarse_kernel = gaussian_kernel(p.kernelSize + 1, p.delta, 2 * p.sigma)
+        # Cartographer's translation / rotation weights, squared: its residuals are weight · (pose − guess)
+        self._prior_weight = np.array([p.translation_weight, p.translation_weight, p.rotation_weight]) ** 2
         self.poses = np.zeros((self.n, 3))
         self.log_weights = np.zeros(self.n)      # since the last resampling
         self.lineage_loglik = np.zeros(self.n)   # over the particle's whole ancestry
@@ -226,6 +228,10 @@ class Rbpf:
         motion = relative(self._last_odom, odom)
         if not self._due(motion, stamp_ns):
             return None
+        # each particle's match is pulled towards its pose moved by the odometry (translation_weight,
+        # rotation_weight), not towards its noisy sample: that pull would make a random walk of the
+        # directions the scan hardly constrains (along a corridor)
+        predicted = compose(self.poses, motion)
         guesses = compose(self.poses, self._sample_motion(motion))
         # the search covers at least search_sigmas standard deviations of the odometry's error,
         # so a long odometry step (after a stall in the odometry stream) gets a wide search
@@ -235,7 +241,7 @@ class Rbpf:
         poses, scores, loglik = match_all(
             self.grids.pool, self.grids.hits, self.grids.tables, self._geo, px, py, guesses, self._kernel,
             self._coarse_kernel, p.sigma, 1.0 / p.l_occ, p.iterations, p.minimumScore, p.search_below, window, p.lstep,
-            angle, p.astep, p.kernelSize + 1, p.lsigma)
+            angle, p.astep, p.kernelSize + 1, p.lsigma, predicted, self._prior_weight)
         poses[:, 2] = wrap_angle(poses[:, 2])
         self.poses = poses
         self.log_weights += loglik

@@ -29,6 +29,12 @@ A pose that needed the search (a loop closing, where the map may hold an old and
 a wall) is not polished. The score returned is the cell field's, so minimumScore and
 search_below keep their meaning.
 
+The odometry prior (translation_weight, rotation_weight; Cartographer's ceres scan matcher):
+each refinement also pulls towards a prior pose — the particle's pose moved by the odometry —
+so a direction the scan hardly constrains (along a corridor) follows the odometry instead of
+small biases of the map that add up from match to match (docs/slam.md: the office route drifted
+9 cm in x without it). After a search that won, the pull is towards the search's best.
+
 The particle weight uses a separate, sharper likelihood: each end point's squared distance to
 the nearest obstacle cell centre within kernelSize + 1 cells (capped there), over 2·lsigma².
 It stays on cell centres: on mean hit points the likelihood no longer told the particles apart
@@ -194,9 +200,10 @@ def _point_field(pool, hits, table, u, v, reach, inv_two_sigma2, floor, inv_l_oc
 
 @njit(cache=True)
 def _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor, inv_l_occ, scratch,
-               h, g):
-    """Cost Σ (1 − S)² and score (mean S) at a pose on the cell field, or with `points` on the hit
-    point field; fills in the Gauss-Newton system h, g."""
+               prior, prior_weight, h, g):
+    """Cost Σ (1 − S)² over the N end points + N · Σ prior_weight · (pose − prior)², and the score (mean
+    S), at a pose on the cell field, or with `points` on the hit point field; fills in the
+    Gauss-Newton system h, g."""
     xmin, ymin, inv_delta = geo[0], geo[1], geo[2]
     reach = (kernel.shape[0] - 1) // 2
     cell_block = scratch[0, :2 * reach + 2, :2 * reach + 2]
@@ -229,14 +236,25 @@ def _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two
         h[1, 1] += j1 * j1
         h[1, 2] += j1 * j2
         h[2, 2] += j2 * j2
+    # the prior's residuals are Cartographer's weight · (pose − prior); squared and times N here, as
+    # the scan's N residuals are summed where Cartographer scales each by 1/√N
+    n = px.shape[0]
+    turn = (th - prior[2] + math.pi) % (2.0 * math.pi) - math.pi
+    for d, value in enumerate((x - prior[0], y - prior[1], turn)):
+        w = n * prior_weight[d]
+        cost += w * value * value
+        g[d] += w * value
+        h[d, d] += w
     h[1, 0], h[2, 0], h[2, 1] = h[0, 1], h[0, 2], h[1, 2]
-    return cost, total / max(px.shape[0], 1)
+    return cost, total / max(n, 1)
 
 
 @njit(cache=True)
-def refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations, points):
+def refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations, points, prior,
+           prior_weight):
     """Gauss-Newton with Levenberg damping from (x, y, th) on the cell field (kernel), or with
-    `points` on the hit point field (a Gaussian of width sigma, m, cut at kernelSize + 1½ cells);
+    `points` on the hit point field (a Gaussian of width sigma, m, cut at kernelSize + 1½ cells),
+    pulled towards the pose `prior` with prior_weight (x, y, θ; per end point, see _linearize);
     returns (x, y, th, score)."""
     reach = (kernel.shape[0] - 1) // 2
     m = 2 * reach + 4
@@ -246,7 +264,7 @@ def refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, i
     h, g = np.zeros((3, 3)), np.zeros(3)
     h_new, g_new = np.zeros((3, 3)), np.zeros(3)
     cost, score = _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor,
-                             inv_l_occ, scratch, h, g)
+                             inv_l_occ, scratch, prior, prior_weight, h, g)
     damping = 1e-3
     for _ in range(iterations):
         if h[0, 0] + h[1, 1] + h[2, 2] == 0.0:
@@ -260,7 +278,8 @@ def refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, i
             step = np.linalg.solve(a, -g)
             nx, ny, nth = x + step[0], y + step[1], th + step[2]
             new_cost, new_score = _linearize(pool, hits, table, geo, px, py, nx, ny, nth, kernel, points,
-                                             inv_two_sigma2, floor, inv_l_occ, scratch, h_new, g_new)
+                                             inv_two_sigma2, floor, inv_l_occ, scratch, prior, prior_weight, h_new,
+                                             g_new)
             if new_cost < cost:
                 x, y, th, cost, score = nx, ny, nth, new_cost, new_score
                 h[:, :] = h_new
@@ -327,36 +346,42 @@ POLISH_ITERATIONS = 3
 
 @njit(cache=True)
 def _match_cells(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma, inv_l_occ, iterations,
-                 search_below, window, lstep, angle, astep):
-    """The match on the cell field: refinement, and the search when that scores below search_below."""
+                 search_below, window, lstep, angle, astep, prior, prior_weight):
+    """The match on the cell field: refinement, and the search when that scores below search_below.
+    Returns (x, y, th, score) and the pose the winning refinement was pulled towards: `prior`, or
+    the search's best (the odometry was off by more than refinement corrects)."""
     rx, ry, rth, score = refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations,
-                                False)
+                                False, prior, prior_weight)
     if score >= search_below or (window <= 0.0 and angle <= 0.0):
-        return rx, ry, rth, score
+        return rx, ry, rth, score, prior
     stride = max(1, px.shape[0] // SEARCH_POINTS)
     cx, cy, cth, _ = search(pool, table, geo, px[::stride], py[::stride], x, y, th, coarse_kernel, inv_l_occ,
                             window, lstep, angle, astep)
     cx, cy, cth, _ = search(pool, table, geo, px, py, cx, cy, cth, kernel, inv_l_occ,
                             lstep / 2, lstep / 2, astep / 2, astep / 4)
+    found = np.array([cx, cy, cth])
     sx, sy, sth, s_score = refine(pool, hits, table, geo, px, py, cx, cy, cth, kernel, sigma, inv_l_occ,
-                                  iterations, False)
+                                  iterations, False, found, prior_weight)
     if s_score > score:
-        return sx, sy, sth, s_score
-    return rx, ry, rth, score
+        return sx, sy, sth, s_score, found
+    return rx, ry, rth, score, prior
 
 
 @njit(cache=True)
 def match_one(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma, inv_l_occ, iterations,
-              search_below, window, lstep, angle, astep):
+              search_below, window, lstep, angle, astep, prior, prior_weight):
     """Refine from the guess on the cell field; if that scores below search_below, search coarse to
     fine (steps lstep, astep over ±window, ±angle on a wider field, then half steps around the
     best) and refine from there too; the better result is then refined on the hit point field.
-    Returns (x, y, th, the cell field's score)."""
-    x, y, th, score = _match_cells(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma,
-                                   inv_l_occ, iterations, search_below, window, lstep, angle, astep)
+    Every refinement is pulled towards `prior` (the odometry's prediction), or, after a search that
+    won, towards the search's best, with prior_weight (x, y, θ; 0: no pull). Returns (x, y, th, the
+    cell field's score)."""
+    x, y, th, score, prior = _match_cells(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma,
+                                          inv_l_occ, iterations, search_below, window, lstep, angle, astep,
+                                          prior, prior_weight)
     if score >= search_below:
         x, y, th, _ = refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ,
-                             min(iterations, POLISH_ITERATIONS), True)
+                             min(iterations, POLISH_ITERATIONS), True, prior, prior_weight)
     return x, y, th, score
 
 
@@ -386,9 +411,10 @@ def log_likelihood(pool, table, geo, px, py, x, y, th, radius, lsigma, inv_l_occ
 
 @njit(cache=True)
 def match_all(pool, hits, tables, geo, px, py, poses, kernel, coarse_kernel, sigma, inv_l_occ, iterations,
-              minimum_score, search_below, window, lstep, angle, astep, radius, lsigma):
-    """match_one for every particle, each against its own map (a match scoring below
-    minimum_score keeps the guess), then the scan's log-likelihood at the pose kept."""
+              minimum_score, search_below, window, lstep, angle, astep, radius, lsigma, priors, prior_weight):
+    """match_one for every particle from poses[i], pulled towards priors[i], each against its own map
+    (a match scoring below minimum_score keeps the guess), then the scan's log-likelihood at the
+    pose kept."""
     n = poses.shape[0]
     out = poses.copy()
     scores = np.empty(n)
@@ -396,7 +422,7 @@ def match_all(pool, hits, tables, geo, px, py, poses, kernel, coarse_kernel, sig
     for i in range(n):
         x, y, th, score = match_one(pool, hits, tables[i], geo, px, py, poses[i, 0], poses[i, 1], poses[i, 2],
                                     kernel, coarse_kernel, sigma, inv_l_occ, iterations, search_below, window,
-                                    lstep, angle, astep)
+                                    lstep, angle, astep, priors[i], prior_weight)
         scores[i] = score
         if score >= minimum_score:
             out[i, 0], out[i, 1], out[i, 2] = x, y, th
