@@ -32,7 +32,8 @@ import numpy as np
 
 from ..services.chassis.follower import follower_odometry
 from ..services.chassis.kinematics import ChassisParams, Kinematics
-from ..services.chassis.odometry import wheel_odometry, wrap_angle
+from ..services.chassis.odometry import wheel_odometry
+from ..services.se2 import wrap_angle
 from .physics import SimParams, Simulation
 from .world import World, WorldError, load_world, world_path
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
-from omninav.services.chassis.odometry import compose, wrap_angle
+from omninav.services.se2 import compose, wrap_angle
 from omninav.services.localizer import motion
 from omninav.services.localizer.bench import likelihood_field_numpy
 from omninav.services.localizer.params import AmclParams

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
-from omninav.services.chassis.odometry import integrate, wrap_angle
+from omninav.services.se2 import integrate, wrap_angle
 from omninav.services.costmap.costmap import Costmap
 from omninav.services.costmap.footprint import make_footprint
 from omninav.services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams

@@ -17,7 +17,7 @@ from omninav.schemas import decode, encode
 from omninav.schemas.attachment import pack_attachment
 from omninav.schemas.messages import Header, LocalCommand, Odometry, Path
 from omninav.schemas.registry import type_info
-from omninav.services.chassis.odometry import integrate
+from omninav.services.se2 import integrate
 from omninav.services.local_planner.approach import FinalApproach
 from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from omninav.services.local_planner.params import FollowerParams

@@ -11,7 +11,7 @@ from omninav.schemas import decode, encode
 from omninav.schemas.messages import (Header, LaserScan, Odometry, OccupancyGrid, Pose2D, PoseWithCovariance,
                                       Transform, Twist)
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
-from omninav.services.chassis.odometry import compose, inverse, wrap_angle
+from omninav.services.se2 import compose, inverse, wrap_angle
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.localizer.node import LocalizerNode, LocalizerParams, read_saved_pose
 from omninav.services.map_server.mapio import save_map

@@ -24,7 +24,7 @@ from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Clock, Goal, Header, NavStatus, Odometry, Pose2D, Twist
 from omninav.schemas.messages import Path as PathMsg
 from omninav.services.chassis.node import ChassisNode
-from omninav.services.chassis.odometry import compose
+from omninav.services.se2 import compose
 from omninav.services.navigator.mission import (MissionError, MissionRecord, load_mission, summarize_mission,
                                                 summary_lines)
 from omninav.services.navigator.truth_pose import TruthPoseNode, TruthPoseParams

@@ -13,7 +13,7 @@ from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Goal, Header, Pose2D
 from omninav.services.chassis.node import ChassisNode
-from omninav.services.chassis.odometry import wrap_angle
+from omninav.services.se2 import wrap_angle
 from omninav.services.costmap.node import CostmapNode, CostmapNodeParams
 from omninav.services.global_planner.node import PlannerNode, PlannerNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from omninav.schemas.messages import CancelGoal, Goal, Header, Pose2D
-from omninav.services.chassis.odometry import integrate, relative, wrap_angle
+from omninav.services.se2 import integrate, relative, wrap_angle
 from omninav.services.navigator.core import (ControlResult, Navigator, NavInputs, PlanResult, State)
 from omninav.services.navigator.params import NavigatorParams
 from omninav.services.navigator.recovery import back_up, behaviour, clear_costmaps, rotate, wait

@@ -12,7 +12,7 @@ from conftest import wait_until
 from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import CancelGoal, Goal, Header, LocalCommand, Odometry, Path, Pose2D
-from omninav.services.chassis.odometry import integrate, relative, wrap_angle
+from omninav.services.se2 import integrate, relative, wrap_angle
 from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.merge import StampMerger

@@ -12,7 +12,7 @@ from omninav.cli.main import main as omninav
 from omninav.schemas import decode
 from omninav.schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, Pose2D, PoseWithCovariance, Transform
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
-from omninav.services.chassis.odometry import compose
+from omninav.services.se2 import compose
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.localizer.evaluate import HarnessParams, Route
 from omninav.services.map_server.mapio import load_map, world_to_cell

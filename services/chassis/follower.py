@@ -21,7 +21,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .kinematics import ChassisParams
-from .odometry import EncoderOdometry, wrap_angle
+from .odometry import EncoderOdometry
+from ..se2 import wrap_angle
 
 
 def _geometry(params: ChassisParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

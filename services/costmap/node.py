@@ -45,7 +45,7 @@ from ...schemas.keys import type_for_key
 from ...schemas.messages import Costmap as CostmapMsg
 from ...schemas.messages import ClearCostmaps, Diagnostic, Header, LaserScan, OccupancyGrid, Transform
 from ...sim.raycast import LidarParams
-from ..chassis.odometry import compose
+from ..se2 import compose
 from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node, QueryError

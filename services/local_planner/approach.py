@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..chassis.odometry import wrap_angle
+from ..se2 import wrap_angle
 from .follower import Line, PathFollower
 from .params import FollowerParams
 

@@ -30,7 +30,7 @@ import time
 import numpy as np
 
 from ...schemas.messages import MapMetaData, Pose2D
-from ..chassis.odometry import integrate
+from ..se2 import integrate
 from ..costmap import layers as costmap_layers
 from ..costmap.footprint import transform
 from ..global_planner import astar

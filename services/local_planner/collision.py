@@ -20,7 +20,7 @@ import numpy as np
 
 from ...schemas.messages import LaserScan
 from ...sim.world import points_in_polygons
-from ..chassis.odometry import integrate
+from ..se2 import integrate
 from ..costmap.footprint import pad
 from ..costmap.layers import scan_points
 from .params import CollisionMonitorParams

@@ -38,7 +38,7 @@ import numpy as np
 
 from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Path
 from ...sim.world import DEFAULT_FOOTPRINT
-from ..chassis.odometry import compose, inverse
+from ..se2 import compose, inverse
 from ..costmap.footprint import make_footprint
 from ..costmap.frames import FrameParams
 from ..runtime.deferred import Deferred

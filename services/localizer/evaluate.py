@@ -35,7 +35,7 @@ from ...sim.node import SimNode, SimNodeParams
 from ...sim.world import World, WorldError
 from ..chassis.kinematics import DRIVES
 from ..chassis.node import ChassisNode, ChassisNodeParams
-from ..chassis.odometry import compose, wrap_angle
+from ..se2 import compose, wrap_angle
 from ..lidar.node import LidarNode, LidarNodeParams
 from ..runtime.inprocess import InProcessRunner
 from ..runtime.node import NS_PER_S, Node

@@ -37,7 +37,7 @@ import numpy as np
 from numba import njit
 
 from ...schemas.messages import OccupancyGrid
-from ..chassis.odometry import compose, inverse, wrap_angle
+from ..se2 import compose, inverse, wrap_angle
 from ..map_server.mapio import cell_to_world
 from . import motion, sensor
 from .params import AmclParams

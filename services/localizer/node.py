@@ -36,7 +36,7 @@ import yaml
 from ...schemas import MessageError
 from ...schemas.messages import (Diagnostic, Header, LaserScan, OccupancyGrid, Odometry, ParticleCloud, Pose2D,
                                  PoseWithCovariance, Transform)
-from ..chassis.odometry import compose, relative, wrap_angle
+from ..se2 import compose, relative, wrap_angle
 from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node

@@ -41,7 +41,7 @@ from ...schemas.codec import encode
 from ...schemas.keys import KeyLayout
 from ...schemas.messages import LaserScan, OccupancyGrid, Odometry, Transform
 from ...schemas.registry import type_info
-from ..chassis.odometry import compose, relative
+from ..se2 import compose, relative
 from ..map_server.mapio import MapError, cell_to_world, load_map
 from ..recorder.mcap_io import Record, read_records
 from ..replay.into import replay_into

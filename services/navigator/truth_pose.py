@@ -18,7 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...schemas.messages import Header, Odometry, Pose2D, PoseWithCovariance, Transform
-from ..chassis.odometry import compose, inverse
+from ..se2 import compose, inverse
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import require_nonnegative
 

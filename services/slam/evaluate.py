@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..chassis.odometry import compose, relative
+from ..se2 import compose, relative
 from ..importers.carmen import CarmenError, read_log
 from ..runtime.params import ParamError, load_params, parse_overrides, read_yaml, unwrap_ros
 from .params import MODES, SlamParams
