@@ -59,7 +59,7 @@ def reference_rollout(planner: DwaPlanner, twist, n: int, pose, velocity, costs:
     p = planner.params
     samples = np.asarray(twist, float)[None]
     dt = p.sim_time / n
-    outline = planner._outline(info.resolution)
+    outline, near = planner.check_setup(pose, costs, info)
     current = np.asarray(velocity, float) if not p.dwa else samples[0]
     step_limit = np.array([p.acc_lim_x, p.acc_lim_y, p.acc_lim_theta]) * dt
     poses, worst = [np.asarray(pose, float)], 0
@@ -76,7 +76,8 @@ def reference_rollout(planner: DwaPlanner, twist, n: int, pose, velocity, costs:
         centre = int(cost_at(poses[-1][None, :2])[0])
         if centre < 0 or centre >= costmap_layers.INSCRIBED_INFLATED_OBSTACLE:
             return np.array(poses), worst, False
-        if centre >= planner.check_cost:
+        row, col = world_to_cell(info, poses[-1][0], poses[-1][1])
+        if centre >= planner.check_cost or near[int(row), int(col)]:
             edge = cost_at(transform(outline, poses[-1]))
             if np.any((edge < 0) | (edge >= costmap_layers.LETHAL_OBSTACLE)):
                 return np.array(poses), worst, False

@@ -3,7 +3,9 @@
 One control cycle (`DwaPlanner.compute`):
 1. the local part of the global path (from the path point nearest the robot to where the path
    leaves the local costmap) is drawn into the grid and two distance maps are computed once:
-   metres to the nearest path cell and to the local goal (the last local path point);
+   metres to the nearest path cell and to the local goal (the last local path point), measured
+   through the cells the robot's centre may cross (as ROS's MapGrid floods them): a path that
+   turns back behind a wall is far from the robot's side of the wall, not next to it;
 2. velocities are sampled over the dynamic window — what the acceleration limits allow from the
    current velocity within one control period (dwa: true) or within sim_time (trajectory
    rollout) — and clipped to the velocity limits: vx × vy × ω (vy ≡ 0 for a differential drive;
@@ -11,18 +13,21 @@ One control cycle (`DwaPlanner.compute`):
 3. every sample is rolled out for sim_time in one numba call (exact constant-twist arcs; in
    trajectory-rollout mode the twist ramps towards the sample at the acceleration limits, as
    base_local_planner does) and checked against the costmap: a pose is illegal when its centre
-   cell is inscribed, lethal, unknown or off the grid, or — when the centre cost says an obstacle
-   is within the circumscribed radius — when any point of the footprint's outline lies on a lethal
-   or unknown cell;
+   cell is inscribed, lethal, unknown or off the grid, or — when its centre cell lies within the
+   outline's reach of a lethal or unknown cell — when any point of the outline lies on a lethal or
+   unknown cell: the footprint's grown by the collision monitor's stop zone (stop_padding), or,
+   when the robot already stands within that zone, its own (`check_setup`);
 4. legal trajectories are scored as dwa_local_planner does, lower is better:
    path_distance_bias·(path distance of the end pose + of the point forward_point_distance ahead
    of it) + goal_distance_bias·(goal distance of both) + occdist_scale·(highest cost met);
    the point ahead is the heading term (DWA's alignment and goal-front critics), dropped within
    forward_point_distance of the local goal as DWA does.
-With no legal trajectory, backing up at escape_vel is tried; else the command brakes as hard as
-the window allows. Distances are straight-line (scipy's Euclidean distance transform); ROS's
-MapGrid propagates them around obstacles instead, which matters only behind walls the
-illegality check already rules out.
+With no legal trajectory, base_local_planner's last resorts are rolled out (`fallback_velocities`:
+turns on the spot and, holonomic, pure strafes, at the reachable speed nearest standing whatever
+min_vel_x), then backing up at escape_vel; else the command brakes as hard as the window allows.
+Distances are 16-connected around the inscribed, lethal and unknown cells; cells the flood does
+not reach (those cells themselves) get the distance of the nearest reached cell plus the straight
+line to it, so a point ahead of a pose near a wall is scored, not rejected.
 """
 from __future__ import annotations
 
@@ -34,6 +39,7 @@ from numba import njit
 from scipy import ndimage
 
 from ...schemas.messages import MapMetaData
+from ..costmap.footprint import pad
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
 from ..map_server.mapio import in_grid, world_to_cell
 from .params import DwaParams
@@ -79,12 +85,75 @@ def _densify(points: np.ndarray, spacing: float) -> np.ndarray:
     return np.vstack([inner, xy[-1:]])
 
 
-def _distance_to(mask: np.ndarray, resolution: float) -> np.ndarray:
-    return (ndimage.distance_transform_edt(~mask) * resolution).astype(np.float32)
+# the flood's moves (row, col steps): 16-connected, so that in free space its distances are within
+# 3 % of the straight line (8-connected ones are up to 8 % long and tilt the scores off the path);
+# a knight's move also needs the two cells it passes between to be passable
+_MOVES = np.array([(dr, dc) for dr in range(-2, 3) for dc in range(-2, 3)
+                   if (dr, dc) != (0, 0) and max(abs(dr), abs(dc)) <= 2 and math.gcd(abs(dr), abs(dc)) == 1])
 
 
-def path_maps(path: np.ndarray, pose, info: MapMetaData) -> PathMaps | None:
-    """The distance maps of one cycle, or None when no path point lies on the grid."""
+@njit(cache=True)
+def _relax(distance, passable, moves, lengths, row, col) -> bool:
+    """Lower the cell's distance through the moves that end in it; whether it changed."""
+    height, width = passable.shape
+    best = distance[row, col]
+    for m in range(moves.shape[0]):
+        dr, dc = moves[m, 0], moves[m, 1]
+        r, c = row - dr, col - dc          # the move from (r, c) ends here
+        if r < 0 or c < 0 or r >= height or c >= width or distance[r, c] + lengths[m] >= best:
+            continue
+        if abs(dr) == 2 and not (passable[r + dr // 2, c] and passable[r + dr // 2, col]):
+            continue    # a knight's move: the two cells it passes between
+        if abs(dc) == 2 and not (passable[r, c + dc // 2] and passable[row, c + dc // 2]):
+            continue
+        best = distance[r, c] + lengths[m]
+    if best < distance[row, col]:
+        distance[row, col] = best
+        return True
+    return False
+
+
+@njit(cache=True)
+def _flood(sources, passable, moves):
+    """Cells from the nearest source cell through passable cells, by the moves (each its straight
+    length); inf where not reached. Sources count whether passable or not. Raster sweeps forwards
+    and backwards until nothing changes (a chamfer transform with obstacles: one pair of sweeps per
+    bend the shortest ways take, far cheaper here than a priority queue)."""
+    height, width = passable.shape
+    distance = np.where(sources, 0.0, np.inf)
+    # a sweep uses the moves from the cells it has already passed
+    ahead = (moves[:, 0] > 0) | ((moves[:, 0] == 0) & (moves[:, 1] > 0))
+    forward, backward = moves[ahead], moves[~ahead]
+    forward_lengths = np.sqrt((forward[:, 0] ** 2 + forward[:, 1] ** 2).astype(np.float64))
+    backward_lengths = np.sqrt((backward[:, 0] ** 2 + backward[:, 1] ** 2).astype(np.float64))
+    changed = True
+    while changed:
+        changed = False
+        for row in range(height):
+            for col in range(width):
+                if passable[row, col] and _relax(distance, passable, forward, forward_lengths, row, col):
+                    changed = True
+        for row in range(height - 1, -1, -1):
+            for col in range(width - 1, -1, -1):
+                if passable[row, col] and _relax(distance, passable, backward, backward_lengths, row, col):
+                    changed = True
+    return distance
+
+
+def _distance_to(mask: np.ndarray, passable: np.ndarray, resolution: float) -> np.ndarray:
+    """Metres from the mask's cells around the impassable cells; an unreached cell: the distance of
+    the nearest reached cell plus the straight line to it."""
+    distance = _flood(mask, passable, _MOVES)
+    reached = np.isfinite(distance)
+    if not reached.all():
+        gap, (rows, cols) = ndimage.distance_transform_edt(~reached, return_indices=True)
+        distance = np.where(reached, distance, distance[rows, cols] + gap)
+    return (distance * resolution).astype(np.float32)
+
+
+def path_maps(path: np.ndarray, pose, info: MapMetaData, costs: np.ndarray | None = None) -> PathMaps | None:
+    """The distance maps of one cycle, or None when no path point lies on the grid. With costs,
+    distances go around the cells the robot's centre may not enter (inscribed, lethal, unknown)."""
     local = local_path(path, pose, info)
     if len(local) == 0:
         return None
@@ -96,7 +165,9 @@ def path_maps(path: np.ndarray, pose, info: MapMetaData) -> PathMaps | None:
     on_path[rows[keep], cols[keep]] = True
     at_goal = np.zeros(shape, bool)
     at_goal[rows[keep][-1], cols[keep][-1]] = True
-    return PathMaps(local, _distance_to(on_path, info.resolution), _distance_to(at_goal, info.resolution))
+    passable = np.ones(shape, np.bool_) if costs is None else np.asarray(costs) < INSCRIBED_INFLATED_OBSTACLE
+    return PathMaps(local, _distance_to(on_path, passable, info.resolution),
+                    _distance_to(at_goal, passable, info.resolution))
 
 
 # ---------------------------------------------------------------- rollout kernel
@@ -116,15 +187,16 @@ def _cell_cost(costs, x, y, ox, oy, cos_o, sin_o, inv_res):
 
 
 @njit(cache=True)
-def _pose_cost(costs, x, y, th, grid, outline, check_cost):
+def _pose_cost(costs, near, x, y, th, grid, outline, check_cost):
     """The centre cost of the robot at (x, y, th), or -1 when that pose is illegal: its centre cell
-    inscribed, lethal, unknown or off the grid, or — from check_cost on — a point of the outline on
-    a lethal or unknown cell or off the grid. grid as in _rollout."""
+    inscribed, lethal, unknown or off the grid, or — from check_cost on, or where `near` (same
+    shape as costs) is non-zero — a point of the outline on a lethal or unknown cell or off the
+    grid. grid as in _rollout."""
     ox, oy, cos_o, sin_o, inv_res = grid[0], grid[1], grid[2], grid[3], grid[4]
     cost = _cell_cost(costs, x, y, ox, oy, cos_o, sin_o, inv_res)
     if cost < 0 or cost >= INSCRIBED_INFLATED_OBSTACLE:
         return -1
-    if cost >= check_cost:
+    if cost >= check_cost or _cell_cost(near, x, y, ox, oy, cos_o, sin_o, inv_res) > 0:
         c, s = math.cos(th), math.sin(th)
         for p in range(outline.shape[0]):
             px = x + c * outline[p, 0] - s * outline[p, 1]
@@ -136,7 +208,7 @@ def _pose_cost(costs, x, y, th, grid, outline, check_cost):
 
 
 @njit(cache=True)
-def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, grid, outline, check_cost,
+def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, grid, outline, check_cost,
              poses, max_cost, legal):
     """Roll out and check every sample; fills poses (T, n_steps+1, 3), max_cost (T,), legal (T,).
 
@@ -166,7 +238,7 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, grid, out
             x, y, th = x + c * bx - s * by, y + s * bx + c * by, th + phi
             k += 1
             poses[t, k, 0], poses[t, k, 1], poses[t, k, 2] = x, y, th
-            cost = _pose_cost(costs, x, y, th, grid, outline, check_cost)
+            cost = _pose_cost(costs, near, x, y, th, grid, outline, check_cost)
             if cost < 0:
                 ok = False
                 break
@@ -179,9 +251,9 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, grid, out
 
 
 @njit(cache=True)
-def _check_poses(poses, costs, grid, outline, check_cost, legal):
+def _check_poses(poses, costs, near, grid, outline, check_cost, legal):
     for i in range(poses.shape[0]):
-        legal[i] = _pose_cost(costs, poses[i, 0], poses[i, 1], poses[i, 2], grid, outline, check_cost) >= 0
+        legal[i] = _pose_cost(costs, near, poses[i, 0], poses[i, 1], poses[i, 2], grid, outline, check_cost) >= 0
 
 
 def footprint_outline(points: np.ndarray, spacing: float) -> np.ndarray:
@@ -257,9 +329,31 @@ def sample_velocities(params: DwaParams, velocity) -> np.ndarray:
     vx = _axis(low[0], high[0], params.vx_samples)
     vy = _axis(low[1], high[1], params.vy_samples, params.y_vels) if params.holonomic_robot else np.zeros(1)
     wz = _axis(low[2], high[2], params.vtheta_samples)
-    grid = np.stack(np.meshgrid(vx, vy, wz, indexing="ij"), axis=-1).reshape(-1, 3)
-    in_place = (grid[:, 0] == 0.0) & (grid[:, 1] == 0.0)
-    return grid[~(in_place & (np.abs(grid[:, 2]) < params.min_in_place_vel_theta))]
+    return _without_standing(params, np.stack(np.meshgrid(vx, vy, wz, indexing="ij"), axis=-1).reshape(-1, 3))
+
+
+def fallback_velocities(params: DwaParams, velocity) -> np.ndarray:
+    """(T, 3) base_local_planner's last resorts before backing up, at the reachable vx (and vy) nearest
+    zero whatever min_vel_x: turns on the spot over [min_vel_theta, max_vel_theta] (as its in-place
+    rotations, beyond one period's reach: from standing the window holds no turn as fast as
+    min_in_place_vel_theta; the velocity smoother ramps them) and, holonomic, pure strafes over the
+    window's vy — a robot facing a wall or with its goal behind it turns or slides away."""
+    low, high = dynamic_window(params, velocity)
+    soonest, furthest = reachable(params, velocity)
+    slowest = np.clip(0.0, soonest, furthest)
+    if not params.holonomic_robot:
+        slowest[1] = 0.0
+    wz = _axis(params.min_vel_theta, params.max_vel_theta, params.vtheta_samples)
+    turns = np.column_stack([np.full(len(wz), slowest[0]), np.full(len(wz), slowest[1]), wz])
+    if params.holonomic_robot:
+        vy = _axis(low[1], high[1], params.vy_samples, params.y_vels)
+        turns = np.vstack([turns, np.column_stack([np.full(len(vy), slowest[0]), vy, np.full(len(vy), slowest[2])])])
+    return _without_standing(params, np.unique(turns, axis=0))
+
+
+def _without_standing(params: DwaParams, samples: np.ndarray) -> np.ndarray:
+    in_place = (samples[:, 0] == 0.0) & (samples[:, 1] == 0.0)
+    return samples[~(in_place & (np.abs(samples[:, 2]) < params.min_in_place_vel_theta))]
 
 
 def _grid(info: MapMetaData) -> np.ndarray:
@@ -271,18 +365,57 @@ def _grid(info: MapMetaData) -> np.ndarray:
 class DwaPlanner:
     """The pure DWA core: `compute` is one control cycle. `footprint` is the (padded) polygon in the
     robot frame; `check_cost` the centre cost from which the footprint's outline is checked
-    (footprint_check_cost; 0 checks every pose)."""
+    (footprint_check_cost; 0 checks every pose); `stop_padding` the collision monitor's stop zone
+    around the footprint, kept free of lethal and unknown cells (see `check_setup`)."""
 
-    def __init__(self, params: DwaParams, footprint: np.ndarray, check_cost: int = 0):
+    def __init__(self, params: DwaParams, footprint: np.ndarray, check_cost: int = 0, stop_padding: float = 0.0):
         self.params = params
         self.footprint = np.asarray(footprint, np.float64).reshape(-1, 2)
         self.check_cost = int(check_cost)
-        self._outlines: dict[float, np.ndarray] = {}
+        if not (math.isfinite(stop_padding) and stop_padding >= 0):
+            raise ValueError(f"stop_padding must be zero or positive, got {stop_padding}")
+        self.stop_padding = float(stop_padding)
+        self._outlines: dict[tuple[float, float], np.ndarray] = {}
 
-    def _outline(self, resolution: float) -> np.ndarray:
-        if resolution not in self._outlines:
-            self._outlines[resolution] = footprint_outline(self.footprint, resolution / 2)
-        return self._outlines[resolution]
+    def _outline(self, resolution: float, padding: float = 0.0) -> np.ndarray:
+        if (resolution, padding) not in self._outlines:
+            self._outlines[resolution, padding] = footprint_outline(pad(self.footprint, padding), resolution / 2)
+        return self._outlines[resolution, padding]
+
+    def check_setup(self, pose, costs: np.ndarray, info: MapMetaData) -> tuple[np.ndarray, np.ndarray]:
+        """(outline, near) that poses are checked with, starting from `pose`.
+
+        The outline: the footprint padded by stop_padding plus a quarter cell — the monitor would
+        stop a motion into its stop zone, and the outline's points are half a cell apart, so a cell's
+        corner may reach a quarter cell in between them — while the robot stands a cell clear of
+        that zone (at its edge every slide along a jagged row of obstacle cells would cross it);
+        else the footprint padded by the quarter cell only, or at last the footprint itself: the
+        robot may still move (away).
+        near (H, W) uint8: 1 where a centre may put a point of the outline on a lethal or unknown
+        cell (within its farthest point plus a cell's diagonal: the centre anywhere in its cell, the
+        obstacle anywhere in its own); there the outline is checked whatever the centre cost (the
+        circumscribed cost alone let a corner reach a cell one further)."""
+        costs = np.ascontiguousarray(costs, np.uint8)
+        blocked = costs >= LETHAL_OBSTACLE
+        clearance = ndimage.distance_transform_edt(~blocked) * info.resolution if blocked.any() else None
+
+        def near(outline: np.ndarray) -> np.ndarray:
+            if clearance is None:
+                return np.zeros(costs.shape, np.uint8)
+            reach = float(np.max(np.hypot(outline[:, 0], outline[:, 1]))) + math.sqrt(2.0) * info.resolution
+            return (clearance <= reach).astype(np.uint8)
+
+        quarter = info.resolution / 4
+        legal = np.empty(1, np.bool_)
+        start = np.asarray(pose, np.float64).reshape(1, 3)
+        for padding, margin in ((self.stop_padding + quarter, info.resolution), (quarter, 0.0)):
+            clear = self._outline(info.resolution, padding + margin)
+            _check_poses(start, costs, near(clear), _grid(info), clear, self.check_cost, legal)
+            if legal[0]:
+                outline = self._outline(info.resolution, padding)
+                return outline, near(outline)
+        outline = self._outline(info.resolution)
+        return outline, near(outline)
 
     def n_steps(self, samples: np.ndarray) -> int:
         """Poses per rollout: the fastest sample moves at most sim_granularity (m, or rad) per step."""
@@ -301,17 +434,20 @@ class DwaPlanner:
         poses = np.empty((len(samples), n + 1, 3))
         max_cost = np.empty(len(samples), np.int64)
         legal = np.empty(len(samples), np.bool_)
+        outline, near = self.check_setup(pose, costs, info)
         _rollout(samples, np.asarray(velocity, np.float64), step_limit, not p.dwa, n, dt,
-                 np.asarray(pose, np.float64), np.ascontiguousarray(costs, np.uint8), _grid(info),
-                 self._outline(info.resolution), self.check_cost, poses, max_cost, legal)
+                 np.asarray(pose, np.float64), np.ascontiguousarray(costs, np.uint8), near, _grid(info),
+                 outline, self.check_cost, poses, max_cost, legal)
         return poses, max_cost, legal
 
     def legal_poses(self, poses, costs: np.ndarray, info: MapMetaData) -> np.ndarray:
-        """(N,) whether the robot may stand at each pose (N, 3), by the rollout's test."""
+        """(N,) whether the robot may stand at each pose (N, 3), by the rollout's test from the first."""
         poses = np.ascontiguousarray(poses, np.float64).reshape(-1, 3)
         legal = np.empty(len(poses), np.bool_)
-        _check_poses(poses, np.ascontiguousarray(costs, np.uint8), _grid(info), self._outline(info.resolution),
-                     self.check_cost, legal)
+        if len(poses) == 0:
+            return legal
+        outline, near = self.check_setup(poses[0], costs, info)
+        _check_poses(poses, np.ascontiguousarray(costs, np.uint8), near, _grid(info), outline, self.check_cost, legal)
         return legal
 
     def score(self, poses, max_cost, legal, maps: PathMaps, info: MapMetaData) -> np.ndarray:
@@ -336,7 +472,7 @@ class DwaPlanner:
                 maps: PathMaps | None = None) -> DwaResult:
         """One cycle: pose (x, y, yaw) and path (N, 3) in the costmap's frame, velocity (vx, vy, wz)
         in the robot frame. `maps` may be passed when already computed for this cycle."""
-        maps = maps if maps is not None else path_maps(path, pose, info)
+        maps = maps if maps is not None else path_maps(path, pose, info, costs)
         low, high = reachable(self.params, velocity)
         brake = np.clip(0.0, low, high)   # as hard as the acceleration limits allow
         if not self.params.holonomic_robot:
@@ -347,6 +483,11 @@ class DwaPlanner:
                              "no point of the path lies on the local costmap")
         poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info)
         scores = self.score(poses, max_cost, legal, maps, info)
+        last_resorts = fallback_velocities(self.params, velocity) if not legal.any() else samples[:0]
+        if len(last_resorts):     # base_local_planner's last resorts before backing up
+            samples = last_resorts
+            poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info)
+            scores = self.score(poses, max_cost, legal, maps, info)
         if legal.any():
             best = int(np.argmin(scores))
             return DwaResult("ok", samples[best].copy(), samples, poses, scores, best)
@@ -360,10 +501,11 @@ class DwaPlanner:
 
 
 def warm_up() -> None:
-    """Compile (or load from cache) the rollout kernel, outside any control cycle."""
+    """Compile (or load from cache) the rollout and flood kernels, outside any control cycle."""
     info = MapMetaData(resolution=0.1, width=4, height=4)
     square = np.array([[0.1, 0.1], [-0.1, 0.1], [-0.1, -0.1], [0.1, -0.1]])
     for dwa in (True, False):
         DwaPlanner(DwaParams(dwa=dwa), square).rollout(np.array([[0.1, 0.0, 0.1]]), (0.2, 0.2, 0.0), (0.0, 0.0, 0.0),
                         np.zeros((4, 4), np.uint8), info)
     DwaPlanner(DwaParams(), square).legal_poses(np.array([[0.2, 0.2, 0.0]]), np.zeros((4, 4), np.uint8), info)
+    _flood(np.eye(4, dtype=np.bool_), np.ones((4, 4), np.bool_), _MOVES)

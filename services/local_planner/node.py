@@ -91,13 +91,14 @@ class LocalPlannerNodeParams(FrameParams, DwaParams):
     inflation_radius: float = 0.55       # m: with cost_scaling_factor, where the footprint check starts
     cost_scaling_factor: float = 10.0    # 1/m
     request_delay_s: float = 0.5         # sim s from a costmap / tf / path stamp to its effect
+    stop_padding: float = 0.05           # m: the collision monitor's stop zone, kept free by DWA's rollouts
 
     def __post_init__(self):
         super().__post_init__()
         if self.controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
         require_nonnegative(self, "final_approach_distance", "request_delay_s", "robot_radius", "footprint_padding",
-                            "inflation_radius", "cost_scaling_factor")
+                            "inflation_radius", "cost_scaling_factor", "stop_padding")
         if self.footprint and len(self.footprint) < 3:
             raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
         for name in ("path_follower", "elastic_band"):
@@ -157,7 +158,7 @@ class LocalPlannerNode(Node):
         check_cost = footprint_check_cost(fp.inscribed_radius, fp.circumscribed_radius, p.inflation_radius,
                                           p.cost_scaling_factor)
         self.dwa = DwaPlanner(DwaParams(**{f.name: getattr(p, f.name) for f in fields(DwaParams)}), fp.points,
-                              check_cost)
+                              check_cost, p.stop_padding)
         self.follower_params = p.follower_params()
         self.controller = self._make_controller(fp.points, check_cost)
         self.ticks = Ticks(p.controller_frequency)
