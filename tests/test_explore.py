@@ -153,9 +153,10 @@ class ExploreProbe:
     def map(self, t: float, data) -> None:
         self.node.process(self.index["map"], grid_of(data, t))
 
-    def status(self, t: float, goal_id: str, status: str) -> None:
+    def status(self, t: float, goal_id: str, status: str, distance_remaining: float = 0.0) -> None:
         header = Header(stamp_ns=round(t * NS_PER_S), frame_id="map")
-        self.node.process(self.index["nav_status"], NavStatus(header=header, goal_id=goal_id, status=status))
+        self.node.process(self.index["nav_status"], NavStatus(header=header, goal_id=goal_id, status=status,
+                                                              distance_remaining=distance_remaining))
 
 
 def test_the_explore_node_sends_frontiers_as_goals_and_gives_up_the_aborted_ones():
@@ -185,6 +186,23 @@ def test_a_goal_whose_frontier_went_away_is_canceled_when_no_other_is_left():
     assert [c.goal_id for c in probe.cancels] == ["explore-1"]    # nothing left to preempt it with
     probe.map(3.0, closed)
     assert probe.node.finished and len(probe.goals) == 1
+
+
+@pytest.mark.parametrize("along_the_plan", [False, True], ids=["standing", "detouring"])
+def test_a_goal_is_given_up_without_progress_by_the_straight_line_and_along_the_plan(along_the_plan):
+    # the robot circles at 1 m from the goal's side (no straight-line progress); detouring, the
+    # navigator reports the plan's remaining length shrinking by 0.5 m a second
+    probe = ExploreProbe()
+    probe.pose(0.5, 1.0, 1.5)
+    probe.map(1.0, rooms())
+    timeout = probe.node.params.progress_timeout
+    for t in np.arange(2.0, timeout + 4.0):
+        probe.pose(t - 0.5, 1.0, 1.5)
+        if along_the_plan:
+            probe.status(t - 0.5, "explore-1", "active", distance_remaining=40.0 - 0.5 * t)
+        probe.map(t, rooms())
+    given_up = probe.node.counters["goals_without_progress"]
+    assert given_up == (0 if along_the_plan else 1)
 
 
 def test_exploring_the_room_maps_its_reachable_free_space_without_collision():

@@ -15,7 +15,9 @@ bearing from the robot to it) and `cancel`. Decisions are made on maps (every ma
   frontier is given up (explore_lite blacklists it), the next goal is chosen.
 - A goal out whose frontier has gone (no frontier cell within approach_distance of it), or that
   came no PROGRESS_M closer within progress_timeout: given up the same way and the next chosen,
-  which preempts it in the navigator.
+  which preempts it in the navigator. Closer by either measure: the straight line from slam's
+  pose, or the navigator's distance_remaining along its plan (a plan that leaves through a door
+  and comes back behind a wall makes progress while the straight line grows).
 - No reachable frontier: a goal given up but not ended is canceled (the robot stops); on two
   maps in a row: finished.
 
@@ -38,6 +40,19 @@ from .explore import ExploreGoal, Explorer, ExploreParams, find_frontiers, still
 PROGRESS_M = 0.1
 GOAL_PREFIX = "explore-"
 ENDED = ("succeeded", "aborted", "canceled")
+
+
+class Progress:
+    """The shortest distance to the goal seen so far by one measure, and when it last shrank by
+    PROGRESS_M."""
+
+    def __init__(self, start_ns: int):
+        self.best = math.inf
+        self.when_ns = start_ns
+
+    def see(self, distance: float, stamp_ns: int) -> None:
+        if distance < self.best - PROGRESS_M:
+            self.best, self.when_ns = distance, stamp_ns
 
 
 @dataclass(frozen=True)
@@ -69,14 +84,13 @@ class ExploreNode(Node):
         self.pose: tuple[float, float, float] | None = None
         self.empty_maps = 0                     # maps in a row without a reachable frontier
         self.finished = False
-        self._progress: tuple[float, int] = (math.inf, 0)   # (best distance to the goal, when)
+        self.straight = Progress(0)             # towards the goal out: along the straight line
+        self.along_plan = Progress(0)           # … and along the navigator's plan
 
     def on_pose(self, msg: PoseWithCovariance) -> None:
         self.pose = (msg.pose.x, msg.pose.y, msg.pose.theta)
         if self.goal is not None:
-            distance = math.dist(self.pose[:2], self.goal.xy)
-            if distance < self._progress[0] - PROGRESS_M:
-                self._progress = (distance, msg.header.stamp_ns)
+            self.straight.see(math.dist(self.pose[:2], self.goal.xy), msg.header.stamp_ns)
 
     def on_map(self, msg: OccupancyGrid) -> None:
         if self.explorer is None:
@@ -91,7 +105,8 @@ class ExploreNode(Node):
             elif not self._near_a_frontier(msg):
                 self.counters["goals_frontier_gone"] += 1
                 self._give_up(msg)
-            elif msg.header.stamp_ns - self._progress[1] > round(self.params.progress_timeout * NS_PER_S):
+            elif (msg.header.stamp_ns - max(self.straight.when_ns, self.along_plan.when_ns)
+                  > round(self.params.progress_timeout * NS_PER_S)):
                 self.counters["goals_without_progress"] += 1
                 self._give_up(msg)
         if self.goal is None:
@@ -100,13 +115,17 @@ class ExploreNode(Node):
     # ------------------------------------------------------------ decisions
 
     def _ended_status(self, now_ns: int) -> str | None:
-        """Put into effect the statuses stamped before now − status_delay_s; the last end of the
-        goal out among them, or None."""
+        """Put into effect the statuses stamped before now − status_delay_s (the goal's progress along
+        the plan); the last end of the goal out among them, or None."""
         ended = None
         for _, status in self.statuses.due(now_ns):
-            if status.goal_id == self.goal_id and status.status in ENDED:
+            if status.goal_id != self.goal_id:
+                continue
+            if status.status in ENDED:
                 self.goal_open = False
                 ended = status.status if self.goal is not None else ended
+            elif self.goal is not None and math.isfinite(status.distance_remaining):
+                self.along_plan.see(status.distance_remaining, status.header.stamp_ns)
         return ended
 
     def _near_a_frontier(self, grid: OccupancyGrid) -> bool:
@@ -129,7 +148,7 @@ class ExploreNode(Node):
         self.goal = goal
         self.counters["goals"] += 1
         self.goal_id, self.goal_open = f"{GOAL_PREFIX}{self.counters['goals']}", True
-        self._progress = (math.inf, grid.header.stamp_ns)
+        self.straight, self.along_plan = Progress(grid.header.stamp_ns), Progress(grid.header.stamp_ns)
         self.goal_pub.publish(Goal(header=self.header("map"), goal_id=self.goal_id,
                                    pose=Pose2D(*goal.xy, self._arrival_heading(goal))))
 
