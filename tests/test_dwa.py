@@ -9,7 +9,7 @@ from omninav.services.se2 import integrate, wrap_angle
 from omninav.services.costmap.costmap import Costmap
 from omninav.services.costmap.footprint import make_footprint
 from omninav.services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
-from omninav.services.local_planner.bench import reference_rollout
+from omninav.services.local_planner.bench import reference_pose_cost, reference_rollout
 from omninav.services.local_planner.dwa import (DwaPlanner, dynamic_window, footprint_check_cost, path_maps,
                                                 sample_velocities)
 from omninav.services.local_planner.params import DwaParams
@@ -197,6 +197,26 @@ def test_batch_rollout_matches_a_per_trajectory_python_loop():
             ours = poses[i, :len(ref_poses)]
             assert np.allclose(ref_poses[:, :2], ours[:, :2], atol=1e-9)
             assert np.allclose(wrap_angle(ref_poses[:, 2] - ours[:, 2]), 0.0, atol=1e-9)
+
+
+def test_pose_checks_match_looking_at_every_outline_point_near_obstacles_and_the_grid_edge():
+    # the rollout looks at only some outline points (those not ruled out by their neighbours'
+    # clearance); obstacles scattered up to the grid's edge, poses everywhere: the same verdicts
+    boxes = [(x, y, x + 0.1, y + 0.1) for x in np.arange(-2.9, 2.9, 0.7) for y in np.arange(-2.9, 2.9, 0.9)]
+    costs, info, check_cost = costmap(boxes=boxes)
+    rng = np.random.default_rng(5)
+    poses = np.column_stack([rng.uniform(-3.0, 3.0, 3000), rng.uniform(-3.0, 3.0, 3000), rng.uniform(-4.0, 4.0, 3000)])
+    poses[0] = (-2.55, -2.45, 0.0)     # a start clear of the stop zone
+    for stop_padding in (0.0, 0.05):
+        planner = DwaPlanner(HOLO, FOOTPRINT.points, check_cost, stop_padding=stop_padding)
+        legal = planner.legal_poses(poses, costs, info)
+        check = planner.check_setup(poses[0], costs, info)
+        expected = np.array([reference_pose_cost(planner, check, pose, costs, info) >= 0 for pose in poses])
+        assert np.array_equal(legal, expected)
+        # both verdicts, and poses whose centre cell is fine but whose outline leaves the grid
+        rows, cols = (((poses[:, 1::-1] + 3.0) / RES).astype(int).clip(0, info.width - 1)).T
+        off_edge = (np.abs(poses[:, :2]).max(axis=1) > 3.0 - 0.2) & (costs[rows, cols] < 253)
+        assert legal.any() and not legal.all() and (off_edge & ~legal).any()
 
 
 @pytest.mark.parametrize("params", [DwaParams(), HOLO], ids=["ros_defaults", "holonomic"])

@@ -92,15 +92,15 @@ _MOVES = np.array([(dr, dc) for dr in range(-2, 3) for dc in range(-2, 3)
                    if (dr, dc) != (0, 0) and max(abs(dr), abs(dc)) <= 2 and math.gcd(abs(dr), abs(dc)) == 1])
 
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _relax(distance, passable, moves, lengths, row, col) -> bool:
-    """Lower the cell's distance through the moves that end in it; whether it changed."""
-    height, width = passable.shape
+    """Lower the cell's distance through the moves that end in it; whether it changed. The grids'
+    borders (two cells) are unreached and impassable, so no move leaves them."""
     best = distance[row, col]
     for m in range(moves.shape[0]):
         dr, dc = moves[m, 0], moves[m, 1]
         r, c = row - dr, col - dc          # the move from (r, c) ends here
-        if r < 0 or c < 0 or r >= height or c >= width or distance[r, c] + lengths[m] >= best:
+        if distance[r, c] + lengths[m] >= best:
             continue
         if abs(dr) == 2 and not (passable[r + dr // 2, c] and passable[r + dr // 2, col]):
             continue    # a knight's move: the two cells it passes between
@@ -117,38 +117,65 @@ def _relax(distance, passable, moves, lengths, row, col) -> bool:
 def _flood(sources, passable, moves):
     """Cells from the nearest source cell through passable cells, by the moves (each its straight
     length); inf where not reached. Sources count whether passable or not. Raster sweeps forwards
-    and backwards until nothing changes (a chamfer transform with obstacles: one pair of sweeps per
-    bend the shortest ways take, far cheaper here than a priority queue)."""
+    and backwards until one changes nothing (a chamfer transform with obstacles: one pair of sweeps
+    per bend the shortest ways take, far cheaper here than a priority queue)."""
     height, width = passable.shape
-    distance = np.where(sources, 0.0, np.inf)
+    border = 2     # the longest move: around the grid, unreached impassable cells
+    distance = np.full((height + 2 * border, width + 2 * border), np.inf)
+    open_ = np.zeros(distance.shape, np.bool_)
+    for row in range(height):
+        for col in range(width):
+            distance[row + border, col + border] = 0.0 if sources[row, col] else np.inf
+            open_[row + border, col + border] = passable[row, col]
     # a sweep uses the moves from the cells it has already passed
     ahead = (moves[:, 0] > 0) | ((moves[:, 0] == 0) & (moves[:, 1] > 0))
     forward, backward = moves[ahead], moves[~ahead]
     forward_lengths = np.sqrt((forward[:, 0] ** 2 + forward[:, 1] ** 2).astype(np.float64))
     backward_lengths = np.sqrt((backward[:, 0] ** 2 + backward[:, 1] ** 2).astype(np.float64))
-    changed = True
-    while changed:
-        changed = False
-        for row in range(height):
-            for col in range(width):
-                if passable[row, col] and _relax(distance, passable, forward, forward_lengths, row, col):
-                    changed = True
-        for row in range(height - 1, -1, -1):
-            for col in range(width - 1, -1, -1):
-                if passable[row, col] and _relax(distance, passable, backward, backward_lengths, row, col):
-                    changed = True
-    return distance
+    # a sweep leaves every cell settled against the cells before it; once a sweep changes nothing, the
+    # other direction's last sweep holds too. A forward sweep only needs to start at the first row
+    # the backward sweep before it changed, a backward one at the last row the forward one changed.
+    top, bottom = border, height + border - 1
+    sweeps = 0
+    while True:
+        first, last = -1, -1
+        if sweeps % 2 == 0:
+            for row in range(top, height + border):
+                for col in range(border, width + border):
+                    if open_[row, col] and _relax(distance, open_, forward, forward_lengths, row, col):
+                        first = row if first < 0 else first
+                        last = row
+        else:
+            for row in range(bottom, border - 1, -1):
+                for col in range(width + border - 1, border - 1, -1):
+                    if open_[row, col] and _relax(distance, open_, backward, backward_lengths, row, col):
+                        last = row if last < 0 else last
+                        first = row
+        sweeps += 1
+        if first < 0 and sweeps > 1:
+            break
+        if sweeps % 2 == 1 and last >= 0:
+            bottom = last
+        elif sweeps % 2 == 0:
+            top = first
+    return distance[border:height + border, border:width + border].copy()
 
 
-def _distance_to(mask: np.ndarray, passable: np.ndarray, resolution: float) -> np.ndarray:
-    """Metres from the mask's cells around the impassable cells; an unreached cell: the distance of
-    the nearest reached cell plus the straight line to it."""
-    distance = _flood(mask, passable, _MOVES)
-    reached = np.isfinite(distance)
-    if not reached.all():
-        gap, (rows, cols) = ndimage.distance_transform_edt(~reached, return_indices=True)
-        distance = np.where(reached, distance, distance[rows, cols] + gap)
-    return (distance * resolution).astype(np.float32)
+def _distances_to(masks, passable: np.ndarray, resolution: float) -> list[np.ndarray]:
+    """Metres from each mask's cells around the impassable cells; an unreached cell: the distance of
+    the nearest reached cell plus the straight line to it (the nearest cells found once for floods
+    that reach the same cells)."""
+    result, reached_before, nearest = [], None, None
+    for mask in masks:
+        distance = _flood(mask, passable, _MOVES)
+        reached = np.isfinite(distance)
+        if not reached.all():
+            if reached_before is None or not np.array_equal(reached, reached_before):
+                reached_before, nearest = reached, ndimage.distance_transform_edt(~reached, return_indices=True)
+            gap, (rows, cols) = nearest
+            distance = np.where(reached, distance, distance[rows, cols] + gap)
+        result.append((distance * resolution).astype(np.float32))
+    return result
 
 
 def path_maps(path: np.ndarray, pose, info: MapMetaData, costs: np.ndarray | None = None) -> PathMaps | None:
@@ -166,49 +193,147 @@ def path_maps(path: np.ndarray, pose, info: MapMetaData, costs: np.ndarray | Non
     at_goal = np.zeros(shape, bool)
     at_goal[rows[keep][-1], cols[keep][-1]] = True
     passable = np.ones(shape, np.bool_) if costs is None else np.asarray(costs) < INSCRIBED_INFLATED_OBSTACLE
-    return PathMaps(local, _distance_to(on_path, passable, info.resolution),
-                    _distance_to(at_goal, passable, info.resolution))
+    return PathMaps(local, *_distances_to((on_path, at_goal), passable, info.resolution))
 
 
 # ---------------------------------------------------------------- rollout kernel
 
-@njit(cache=True)
-def _cell_cost(costs, x, y, ox, oy, cos_o, sin_o, inv_res):
-    """The cost under a world point; -1 off the grid."""
-    dx, dy = x - ox, y - oy
-    u = (cos_o * dx + sin_o * dy) * inv_res
-    v = (-sin_o * dx + cos_o * dy) * inv_res
-    if u < 0.0 or v < 0.0:
-        return -1
-    col, row = int(u), int(v)
-    if row >= costs.shape[0] or col >= costs.shape[1]:
-        return -1
-    return int(costs[row, col])
+# the outline's points are at most this many cells apart (footprint_outline's spacing)
+OUTLINE_SPACING_CELLS = 0.5
+
+
+@dataclass(frozen=True)
+class PoseCheck:
+    """What one cycle's poses are checked with (`DwaPlanner.check_setup`)."""
+    outline: np.ndarray     # (K, 2) points along the (padded) footprint, robot frame
+    near: np.ndarray        # (H, W) bool: where the outline is checked whatever the centre cost
+    # (H, W) int8: how many outline points on from one in this cell (either way along the outline) cannot lie on a
+    # lethal or unknown cell or off the grid (`outline_skips`); -1 on lethal and unknown cells
+    skips: np.ndarray
 
 
 @njit(cache=True)
-def _pose_cost(costs, near, x, y, th, grid, outline, check_cost):
-    """The centre cost of the robot at (x, y, th), or -1 when that pose is illegal: its centre cell
-    inscribed, lethal, unknown or off the grid, or — from check_cost on, or where `near` (same
-    shape as costs) is non-zero — a point of the outline on a lethal or unknown cell or off the
-    grid. grid as in _rollout."""
-    ox, oy, cos_o, sin_o, inv_res = grid[0], grid[1], grid[2], grid[3], grid[4]
-    cost = _cell_cost(costs, x, y, ox, oy, cos_o, sin_o, inv_res)
-    if cost < 0 or cost >= INSCRIBED_INFLATED_OBSTACLE:
+def _lower_envelope(f, out, v, z):
+    """out[q] = min over p of f[p] + (q - p)² (f may be inf; all inf gives inf): Felzenszwalb and
+    Huttenlocher's lower envelope of parabolas, v and z scratch of len(f) and len(f) + 1. Exact for
+    integer f: a boundary between two parabolas is a fraction of denominator below 2·len(f), too
+    far from any other integer for rounding to move it past one."""
+    n, k = f.shape[0], -1
+    for q in range(n):
+        if f[q] == np.inf:
+            continue
+        s = -np.inf
+        while k >= 0:
+            s = ((f[q] + q * q) - (f[v[k]] + v[k] * v[k])) / (2.0 * (q - v[k]))
+            if s > z[k]:
+                break
+            k -= 1
+        if k < 0:
+            s = -np.inf
+        k += 1
+        v[k], z[k], z[k + 1] = q, s, np.inf
+    if k < 0:
+        out[:] = np.inf
+        return
+    j = 0
+    for q in range(n):
+        while z[j + 1] < q:
+            j += 1
+        out[q] = (q - v[j]) * (q - v[j]) + f[v[j]]
+
+
+@njit(cache=True)
+def _clearance_cells(blocked):
+    """(H, W) cells from each cell's centre to the nearest blocked cell's (0 on them, inf without
+    any): the exact Euclidean distance transform, by columns then rows."""
+    height, width = blocked.shape
+    squared = np.full((height, width), np.inf)
+    size = max(height, width)
+    f, out, v, z = np.empty(size), np.empty(size), np.empty(size, np.int64), np.empty(size + 1)
+    for col in range(width):
+        for row in range(height):
+            f[row] = 0.0 if blocked[row, col] else np.inf
+        _lower_envelope(f[:height], out[:height], v, z)
+        squared[:, col] = out[:height]
+    for row in range(height):
+        f[:width] = squared[row]
+        _lower_envelope(f[:width], out[:width], v, z)
+        squared[row] = out[:width]
+    return np.sqrt(squared)
+
+
+def outline_skips(clearance: np.ndarray, resolution: float) -> np.ndarray:
+    """PoseCheck.skips from the clearance (m from each cell's centre to the nearest lethal or unknown
+    cell's, inf without one): a point of a cell is that far less a cell's diagonal (either point
+    anywhere in its cell) from any lethal or unknown cell, and from the cells just off the grid as
+    from lethal ones; the outline's next points are at most OUTLINE_SPACING_CELLS apart."""
+    height, width = clearance.shape
+    off_grid = np.minimum.outer(np.minimum(np.arange(1, height + 1), np.arange(height, 0, -1)),
+                                np.minimum(np.arange(1, width + 1), np.arange(width, 0, -1))) * resolution
+    room = np.minimum(clearance, off_grid) - (math.sqrt(2.0) * resolution + 1e-9)   # and a margin for rounding
+    skips = np.clip(np.floor(room / (OUTLINE_SPACING_CELLS * resolution)), 0, np.iinfo(np.int8).max).astype(np.int8)
+    skips[clearance == 0.0] = -1
+    return skips
+
+
+@njit(cache=True, inline="always")
+def _cell(x, y, grid, height, width):
+    """(row, col) of the cell under a world point; (-1, -1) off the grid. grid as in _rollout."""
+    dx, dy = x - grid[0], y - grid[1]
+    u = (grid[2] * dx + grid[3] * dy) * grid[4]
+    v = (-grid[3] * dx + grid[2] * dy) * grid[4]
+    if u < 0.0 or v < 0.0 or u >= width or v >= height:
+        return -1, -1
+    return int(v), int(u)
+
+
+@njit(cache=True, inline="always")
+def _outline_clear(skips, x, y, c, s, grid, outline):
+    """Whether no point of the outline around (x, y), heading (cos, sin) = (c, s), lies on a lethal or
+    unknown cell or off the grid; skips as in PoseCheck. Walked from both ends at once: two lookups
+    that do not wait for each other."""
+    height, width = skips.shape
+    first, last = 0, outline.shape[0] - 1
+    while first <= last:
+        row, col = _cell(x + c * outline[first, 0] - s * outline[first, 1],
+                         y + s * outline[first, 0] + c * outline[first, 1], grid, height, width)
+        back_row, back_col = _cell(x + c * outline[last, 0] - s * outline[last, 1],
+                                   y + s * outline[last, 0] + c * outline[last, 1], grid, height, width)
+        if row < 0 or skips[row, col] < 0 or back_row < 0 or skips[back_row, back_col] < 0:
+            return False
+        first += 1 + skips[row, col]
+        last -= 1 + skips[back_row, back_col]
+    return True
+
+
+@njit(cache=True, inline="always")
+def _pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost):
+    """The centre cost of the robot at (x, y), heading (cos, sin) = (c, s), or -1 when that pose is
+    illegal: its centre cell inscribed, lethal, unknown or off the grid, or — from check_cost on, or
+    where `near` — a point of the outline on a lethal or unknown cell or off the grid. near and
+    skips as in PoseCheck, grid as in _rollout."""
+    row, col = _cell(x, y, grid, costs.shape[0], costs.shape[1])
+    if row < 0 or costs[row, col] >= INSCRIBED_INFLATED_OBSTACLE:
         return -1
-    if cost >= check_cost or _cell_cost(near, x, y, ox, oy, cos_o, sin_o, inv_res) > 0:
-        c, s = math.cos(th), math.sin(th)
-        for p in range(outline.shape[0]):
-            px = x + c * outline[p, 0] - s * outline[p, 1]
-            py = y + s * outline[p, 0] + c * outline[p, 1]
-            edge = _cell_cost(costs, px, py, ox, oy, cos_o, sin_o, inv_res)
-            if edge < 0 or edge >= LETHAL_OBSTACLE:
-                return -1
+    cost = int(costs[row, col])
+    if (cost >= check_cost or near[row, col]) and not _outline_clear(skips, x, y, c, s, grid, outline):
+        return -1
     return cost
 
 
 @njit(cache=True)
-def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, grid, outline, check_cost,
+def _step(vx, vy, w, dt):
+    """(bx, by, phi): the exact pose increment of a constant twist over dt, robot frame (se2_exp, inlined)."""
+    phi = w * dt
+    if abs(phi) < SMALL_ANGLE:
+        along, across = 1.0, 0.5 * phi
+    else:
+        along, across = math.sin(phi) / phi, (1.0 - math.cos(phi)) / phi
+    return (along * vx - across * vy) * dt, (across * vx + along * vy) * dt, phi
+
+
+@njit(cache=True)
+def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, skips, grid, outline, check_cost,
              poses, max_cost, legal):
     """Roll out and check every sample; fills poses (T, n_steps+1, 3), max_cost (T,), legal (T,).
 
@@ -218,7 +343,9 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, gri
             vx, vy, w = v0[0], v0[1], v0[2]
         else:
             vx, vy, w = samples[t, 0], samples[t, 1], samples[t, 2]
+        bx, by, phi = _step(vx, vy, w, dt)     # the sample's own, unless ramping
         x, y, th = pose0[0], pose0[1], pose0[2]
+        c, s = math.cos(th), math.sin(th)
         poses[t, 0, 0], poses[t, 0, 1], poses[t, 0, 2] = x, y, th
         worst, ok, k = 0, True, 0
         while k < n_steps and ok:
@@ -226,19 +353,12 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, gri
                 vx += min(max(samples[t, 0] - vx, -step_limit[0]), step_limit[0])
                 vy += min(max(samples[t, 1] - vy, -step_limit[1]), step_limit[1])
                 w += min(max(samples[t, 2] - w, -step_limit[2]), step_limit[2])
-            # the exact pose increment of a constant twist (odometry.se2_exp, inlined)
-            phi = w * dt
-            if abs(phi) < SMALL_ANGLE:
-                along, across = 1.0, 0.5 * phi
-            else:
-                along, across = math.sin(phi) / phi, (1.0 - math.cos(phi)) / phi
-            bx = (along * vx - across * vy) * dt
-            by = (across * vx + along * vy) * dt
-            c, s = math.cos(th), math.sin(th)
+                bx, by, phi = _step(vx, vy, w, dt)
             x, y, th = x + c * bx - s * by, y + s * bx + c * by, th + phi
+            c, s = math.cos(th), math.sin(th)
             k += 1
             poses[t, k, 0], poses[t, k, 1], poses[t, k, 2] = x, y, th
-            cost = _pose_cost(costs, near, x, y, th, grid, outline, check_cost)
+            cost = _pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost)
             if cost < 0:
                 ok = False
                 break
@@ -251,9 +371,10 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, gri
 
 
 @njit(cache=True)
-def _check_poses(poses, costs, near, grid, outline, check_cost, legal):
+def _check_poses(poses, costs, near, skips, grid, outline, check_cost, legal):
     for i in range(poses.shape[0]):
-        legal[i] = _pose_cost(costs, near, poses[i, 0], poses[i, 1], poses[i, 2], grid, outline, check_cost) >= 0
+        x, y, th = poses[i, 0], poses[i, 1], poses[i, 2]
+        legal[i] = _pose_cost(costs, near, skips, x, y, math.cos(th), math.sin(th), grid, outline, check_cost) >= 0
 
 
 def footprint_outline(points: np.ndarray, spacing: float) -> np.ndarray:
@@ -375,47 +496,42 @@ class DwaPlanner:
         if not (math.isfinite(stop_padding) and stop_padding >= 0):
             raise ValueError(f"stop_padding must be zero or positive, got {stop_padding}")
         self.stop_padding = float(stop_padding)
-        self._outlines: dict[tuple[float, float], np.ndarray] = {}
+        self._outlines: dict[tuple[float, float], tuple[np.ndarray, float]] = {}
 
-    def _outline(self, resolution: float, padding: float = 0.0) -> np.ndarray:
+    def _check(self, clearance: np.ndarray, skips: np.ndarray, resolution: float, padding: float = 0.0) -> PoseCheck:
+        """The PoseCheck of the footprint padded by `padding`: its outline is checked where a centre may
+        put a point of it on a lethal or unknown cell (within its farthest point plus a cell's diagonal:
+        the centre anywhere in its cell, the obstacle anywhere in its own)."""
         if (resolution, padding) not in self._outlines:
-            self._outlines[resolution, padding] = footprint_outline(pad(self.footprint, padding), resolution / 2)
-        return self._outlines[resolution, padding]
+            outline = footprint_outline(pad(self.footprint, padding), OUTLINE_SPACING_CELLS * resolution)
+            reach = float(np.max(np.hypot(outline[:, 0], outline[:, 1]))) + math.sqrt(2.0) * resolution
+            self._outlines[resolution, padding] = outline, reach
+        outline, reach = self._outlines[resolution, padding]
+        return PoseCheck(outline, clearance <= reach, skips)
 
-    def check_setup(self, pose, costs: np.ndarray, info: MapMetaData) -> tuple[np.ndarray, np.ndarray]:
-        """(outline, near) that poses are checked with, starting from `pose`.
+    def check_setup(self, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
+        """What poses are checked with, starting from `pose`.
 
         The outline: the footprint padded by stop_padding plus a quarter cell — the monitor would
         stop a motion into its stop zone, and the outline's points are half a cell apart, so a cell's
         corner may reach a quarter cell in between them — while the robot stands a cell clear of
         that zone (at its edge every slide along a jagged row of obstacle cells would cross it);
         else the footprint padded by the quarter cell only, or at last the footprint itself: the
-        robot may still move (away).
-        near (H, W) uint8: 1 where a centre may put a point of the outline on a lethal or unknown
-        cell (within its farthest point plus a cell's diagonal: the centre anywhere in its cell, the
-        obstacle anywhere in its own); there the outline is checked whatever the centre cost (the
-        circumscribed cost alone let a corner reach a cell one further)."""
+        robot may still move (away). The outline is checked whatever the centre cost where
+        `PoseCheck.near` (the circumscribed cost alone let a corner reach a cell one further)."""
         costs = np.ascontiguousarray(costs, np.uint8)
         blocked = costs >= LETHAL_OBSTACLE
-        clearance = ndimage.distance_transform_edt(~blocked) * info.resolution if blocked.any() else None
-
-        def near(outline: np.ndarray) -> np.ndarray:
-            if clearance is None:
-                return np.zeros(costs.shape, np.uint8)
-            reach = float(np.max(np.hypot(outline[:, 0], outline[:, 1]))) + math.sqrt(2.0) * info.resolution
-            return (clearance <= reach).astype(np.uint8)
-
+        clearance = _clearance_cells(blocked) * info.resolution
+        skips = outline_skips(clearance, info.resolution)
         quarter = info.resolution / 4
         legal = np.empty(1, np.bool_)
         start = np.asarray(pose, np.float64).reshape(1, 3)
         for padding, margin in ((self.stop_padding + quarter, info.resolution), (quarter, 0.0)):
-            clear = self._outline(info.resolution, padding + margin)
-            _check_poses(start, costs, near(clear), _grid(info), clear, self.check_cost, legal)
+            clear = self._check(clearance, skips, info.resolution, padding + margin)
+            _check_poses(start, costs, clear.near, skips, _grid(info), clear.outline, self.check_cost, legal)
             if legal[0]:
-                outline = self._outline(info.resolution, padding)
-                return outline, near(outline)
-        outline = self._outline(info.resolution)
-        return outline, near(outline)
+                return self._check(clearance, skips, info.resolution, padding)
+        return self._check(clearance, skips, info.resolution)
 
     def n_steps(self, samples: np.ndarray) -> int:
         """Poses per rollout: the fastest sample moves at most sim_granularity (m, or rad) per step."""
@@ -424,8 +540,9 @@ class DwaPlanner:
                       float(np.max(np.abs(samples[:, 2]), initial=0.0)))
         return max(1, int(math.ceil(p.sim_time * fastest / p.sim_granularity)))
 
-    def rollout(self, samples, pose, velocity, costs: np.ndarray, info: MapMetaData):
-        """(poses (T, S+1, 3), max_cost (T,), legal (T,)) of the samples, one batch."""
+    def rollout(self, samples, pose, velocity, costs: np.ndarray, info: MapMetaData, check: PoseCheck | None = None):
+        """(poses (T, S+1, 3), max_cost (T,), legal (T,)) of the samples, one batch; `check` may be
+        passed when already set up for this pose and costmap."""
         samples = np.ascontiguousarray(samples, np.float64).reshape(-1, 3)
         p = self.params
         n = self.n_steps(samples)
@@ -434,10 +551,10 @@ class DwaPlanner:
         poses = np.empty((len(samples), n + 1, 3))
         max_cost = np.empty(len(samples), np.int64)
         legal = np.empty(len(samples), np.bool_)
-        outline, near = self.check_setup(pose, costs, info)
+        check = check if check is not None else self.check_setup(pose, costs, info)
         _rollout(samples, np.asarray(velocity, np.float64), step_limit, not p.dwa, n, dt,
-                 np.asarray(pose, np.float64), np.ascontiguousarray(costs, np.uint8), near, _grid(info),
-                 outline, self.check_cost, poses, max_cost, legal)
+                 np.asarray(pose, np.float64), np.ascontiguousarray(costs, np.uint8), check.near, check.skips,
+                 _grid(info), check.outline, self.check_cost, poses, max_cost, legal)
         return poses, max_cost, legal
 
     def legal_poses(self, poses, costs: np.ndarray, info: MapMetaData) -> np.ndarray:
@@ -446,8 +563,9 @@ class DwaPlanner:
         legal = np.empty(len(poses), np.bool_)
         if len(poses) == 0:
             return legal
-        outline, near = self.check_setup(poses[0], costs, info)
-        _check_poses(poses, np.ascontiguousarray(costs, np.uint8), near, _grid(info), outline, self.check_cost, legal)
+        check = self.check_setup(poses[0], costs, info)
+        _check_poses(poses, np.ascontiguousarray(costs, np.uint8), check.near, check.skips, _grid(info),
+                     check.outline, self.check_cost, legal)
         return legal
 
     def score(self, poses, max_cost, legal, maps: PathMaps, info: MapMetaData) -> np.ndarray:
@@ -481,19 +599,20 @@ class DwaPlanner:
         if maps is None:
             return DwaResult("no_path", brake, samples, np.zeros((0, 1, 3)), np.zeros(0), -1,
                              "no point of the path lies on the local costmap")
-        poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info)
+        check = self.check_setup(pose, costs, info)
+        poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info, check)
         scores = self.score(poses, max_cost, legal, maps, info)
         last_resorts = fallback_velocities(self.params, velocity) if not legal.any() else samples[:0]
         if len(last_resorts):     # base_local_planner's last resorts before backing up
             samples = last_resorts
-            poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info)
+            poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info, check)
             scores = self.score(poses, max_cost, legal, maps, info)
         if legal.any():
             best = int(np.argmin(scores))
             return DwaResult("ok", samples[best].copy(), samples, poses, scores, best)
         if self.params.escape_vel < 0:
             escape = np.clip(np.array([self.params.escape_vel, 0.0, 0.0]), low, high)
-            if escape[0] < 0 and self.rollout(escape[None], pose, velocity, costs, info)[2][0]:
+            if escape[0] < 0 and self.rollout(escape[None], pose, velocity, costs, info, check)[2][0]:
                 return DwaResult("escape", escape, samples, poses, scores, -1,
                                  f"every one of {len(samples)} trajectories collides; backing up")
         return DwaResult("no_valid_trajectory", brake, samples, poses, scores, -1,
