@@ -1,8 +1,8 @@
 """The local_planner service: the simulated room with the sample local costmap, the two gates and a
 stand-in navigator; straight and L-shaped paths end within 5 cm and 2° of the path's end by ground
 truth, without collisions, for a mecanum and a differential drive; idle and stop answers every
-tick; ROS planner files configure it; a live multi-process run replays byte for byte into it and
-into both gates."""
+tick; ROS planner files configure it; a robot facing away from its path turns on the spot first
+(the rotation shim); a live multi-process run replays byte for byte into it and into both gates."""
 import math
 import signal
 
@@ -57,6 +57,7 @@ def test_the_robot_stops_within_5_cm_and_2_degrees_of_the_paths_end(drive, corne
     assert np.abs(run.truths[-1][4:]).max() < 1e-3                        # standing
     reasons = [c.reason for c in commands]
     assert reasons[0] == "idle" and "" in reasons and "final_approach" in reasons
+    assert "rotate_to_heading" not in reasons                             # it faces the path: no shim
     assert all(c.goal_id == "g1" for c in commands if c.reason != "idle")
     assert all(c.ok for c in commands)
     if drive == "diff":
@@ -161,6 +162,14 @@ LIVE = (REPLAYED[0], ("velocity_smoother", ["--set", "command_delay_s=0.3"]),
         ("collision_monitor", ["--set", "scan_delay_s=0.3"]))
 
 
+def _recorder(writer: RecordingWriter):
+    """A tap writing every message as the recorder would."""
+    def record(key, payload, stamp):
+        msg = decode(payload)
+        writer.write_record(Record(key, type_info(type(msg))[0], payload, msg.header.seq, stamp, writer.count))
+    return record
+
+
 def _replays_byte_for_byte(recording, capsys, services=REPLAYED) -> None:
     for service, extra in services:
         assert main(["replay", str(recording), "--into", service, "--compare", *extra]) == 0, capsys.readouterr().out
@@ -171,14 +180,41 @@ def test_an_in_process_run_replays_byte_for_byte_into_the_local_planner_and_the_
     run = pipeline("room", "mecanum", [(0.5, follow_path(polyline(STRAIGHT[0], STRAIGHT[1])))], watch=["local_cmd"])
     recording = tmp_path / "in_process.mcap"
     with RecordingWriter(recording) as writer:        # what the recorder would write
-        def record(key, payload, stamp):
-            msg = decode(payload)
-            writer.write_record(Record(key, type_info(type(msg))[0], payload, msg.header.seq, stamp, writer.count))
-        run.runner.tap(record)
+        run.runner.tap(_recorder(writer))
         commands = run.published.setdefault(LOCAL_CMD, [])
         run.run(20.0, until=lambda: commands and commands[-1].reason == "goal_reached")
     assert commands[-1].reason == "goal_reached"
     _replays_byte_for_byte(recording, capsys)
+
+
+def test_a_robot_facing_away_from_the_path_turns_on_the_spot_first_then_drives_and_arrives(tmp_path, capsys):
+    world = tmp_path / "room_turned.yaml"      # the room, the robot facing west; the path runs east
+    world.write_text((REPO / "sim" / "worlds" / "room.yaml").read_text().replace("start: [1.2, 1.0, 0.0]",
+                                                                                 f"start: [1.2, 1.0, {math.pi}]"))
+    corners, goal_yaw = STRAIGHT
+    run = pipeline(str(world), "mecanum", [(0.5, follow_path(polyline(corners, goal_yaw)))], watch=["local_cmd"])
+    recording = tmp_path / "turned.mcap"
+    with RecordingWriter(recording) as writer:
+        run.runner.tap(_recorder(writer))
+        commands = run.published.setdefault(LOCAL_CMD, [])
+        run.run(40.0, until=lambda: commands and commands[-1].reason == "goal_reached")
+        run.run(1.0)                     # what is still on its way to the wheels
+    reasons = [c.reason for c in commands if c.reason != "idle"]
+    turning = reasons.index("")
+    assert turning > 10 and set(reasons[:turning]) == {"rotate_to_heading"}
+    assert "rotate_to_heading" not in reasons[turning:]                   # once per path
+    assert all(c.linear_x == c.linear_y == 0.0 and c.angular_z != 0.0
+               for c in commands if c.reason == "rotate_to_heading")
+    # no translation until the path lies within the threshold: the robot turned where it stood
+    handed_over = next(c.header.stamp_ns for c in commands if c.reason == "") / NS_PER_S
+    at_handover = [t for t in run.truths if t[0] <= handed_over]
+    assert max(math.hypot(t[1] - START[0], t[2] - START[1]) for t in at_handover) < 0.01
+    assert yaw_error(at_handover[-1][3], 0.0) <= run.local_planner.params.angular_dist_threshold + 0.1
+    x, y, yaw = run.truth()
+    assert math.hypot(x - corners[-1][0], y - corners[-1][1]) <= 0.05 and yaw_error(yaw, goal_yaw) <= math.radians(2)
+    assert run.sim.sim.collisions == 0 and run.sim.sim.contact_steps == 0
+    turned = [*REPLAYED[0][1], "--set", f"initial_pose_a={math.pi}"]
+    _replays_byte_for_byte(recording, capsys, (("local_planner", turned),))
 
 
 def test_a_live_run_replays_byte_for_byte_into_the_local_planner_and_the_gates(processes, router_endpoint, tmp_path,

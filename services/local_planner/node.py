@@ -25,6 +25,11 @@ Within final_approach_distance of the path's end (straight-line) the FinalApproa
 takes over as long as the poses it will pass through are free on the costmap; when they are not,
 the controller carries on along the path. It reports ok with a zero twist ("goal_reached") once
 within xy_goal_tolerance and yaw_goal_tolerance; the navigator decides success by its own.
+
+Before the controller, the rotation shim (shim.py; on by default with dwa) turns the robot on the
+spot towards a new path (a new goal_id, or a start more than START_MOVED from the last path's) that
+lies more than angular_dist_threshold off its heading: reason "rotate_to_heading". Its state is
+set by follow_path and the ticks alone, so a replay reproduces it.
 """
 from __future__ import annotations
 
@@ -48,11 +53,13 @@ from .approach import FinalApproach
 from .dwa import DwaPlanner, footprint_check_cost, reachable, warm_up
 from .follower import PathFollower, segments_from_poses
 from .params import DwaParams, FollowerParams
+from .shim import RotationShim, RotationShimParams
 
 CONTROLLERS = ("dwa", "eband", "follower")
 TIMES_KEPT = 10_000     # cycle times kept for the diagnostic's median
 COSTMAP, MAP_ODOM, PATH = range(3)    # sporadic inputs, in input order (the order of equal stamps)
 APPROACH_HYSTERESIS = 0.1             # m beyond final_approach_distance before an approach is given up
+START_MOVED = 0.05    # m: a path from the same goal starting farther from the last one's start is a new path
 
 # ROS local planner sections (move_base loads them under the planner's name) and how their names
 # map onto DwaParams; names that mean nothing here are accepted without effect (docs/local_planner.md)
@@ -75,13 +82,14 @@ ROS_WITHOUT_EFFECT = {
 
 
 @dataclass(frozen=True)
-class LocalPlannerNodeParams(FrameParams, DwaParams):
-    """DwaParams (TrajectoryPlannerROS / DWAPlannerROS names) plus the frames and the node's own;
-    the tolerances are the final approach's, tighter than ROS's."""
+class LocalPlannerNodeParams(FrameParams, DwaParams, RotationShimParams):
+    """DwaParams (TrajectoryPlannerROS / DWAPlannerROS names), RotationShimParams (Nav2's), the frames
+    and the node's own; the tolerances are the final approach's, tighter than ROS's."""
     xy_goal_tolerance: float = 0.02      # m: the controller stops here (the navigator judges success)
     yaw_goal_tolerance: float = 0.02     # rad
     controller: str = "dwa"              # dwa | eband | follower
     final_approach_distance: float = 0.6  # m from the path's end where the final approach takes over
+    rotation_shim: bool | None = None    # turn towards a new path first (shim.py); None: with the dwa controller
     path_follower: dict = field(default_factory=dict)   # FollowerParams by name (drive: from holonomic_robot)
     elastic_band: dict = field(default_factory=dict)    # ElasticBandParams by name; limits default to the above
     # the robot, spelled as costmap_2d spells it (the local costmap's values)
@@ -105,6 +113,14 @@ class LocalPlannerNodeParams(FrameParams, DwaParams):
             if not isinstance(getattr(self, name), dict):
                 raise ValueError(f"{name} must be a mapping of parameter names to values, got {getattr(self, name)!r}")
         self.follower_params()
+        self.shim_params()
+
+    def shim_params(self) -> RotationShimParams:
+        """The shim's parameters, its turn clamped to the controller's max_vel_theta and acc_lim_theta."""
+        values = {f.name: getattr(self, f.name) for f in fields(RotationShimParams)}
+        values["rotate_to_heading_angular_vel"] = min(self.rotate_to_heading_angular_vel, self.max_vel_theta)
+        values["max_angular_accel"] = min(self.max_angular_accel, self.acc_lim_theta)
+        return RotationShimParams(**values)
 
     def follower_params(self) -> FollowerParams:
         drive = "holonomic" if self.holonomic_robot else "diff"
@@ -163,6 +179,9 @@ class LocalPlannerNode(Node):
         self.controller = self._make_controller(fp.points, check_cost)
         self.ticks = Ticks(p.controller_frequency)
         self.dt = self.ticks.period_ns / NS_PER_S
+        shimmed = p.rotation_shim if p.rotation_shim is not None else p.controller == "dwa"
+        self.shim = RotationShim(p.shim_params(), self.dt) if shimmed else None
+        self.shim_key: tuple[str, np.ndarray] | None = None   # goal_id and start of the last path the shim saw
         self.pending = Deferred(p.request_delay_s)   # sporadic inputs not yet in effect
         self.costmap: Costmap | None = None
         self.path: Path | None = None            # followed; None: idle
@@ -221,6 +240,12 @@ class LocalPlannerNode(Node):
         self.path = msg if len(msg.poses) else None
         self.approach, self.arrived, self.path_follower = None, False, None
         self.counters["paths" if self.path is not None else "stops"] += 1
+        if self.shim is not None and self.path is not None:
+            start = np.asarray(msg.poses, np.float64).reshape(-1, 3)[0, :2]
+            if (self.shim_key is None or self.shim_key[0] != msg.goal_id
+                    or math.hypot(*(start - self.shim_key[1])) > START_MOVED):
+                self.shim.new_path()
+            self.shim_key = (msg.goal_id, start)
         if self.path is not None and self.params.controller == "follower":
             segments = segments_from_poses(self._in_frame(msg.poses, msg.header.frame_id, self.frames.map_frame))
             self.path_follower = PathFollower(self.follower_params, segments) if segments else None
@@ -274,6 +299,9 @@ class LocalPlannerNode(Node):
         approach = self._approach(velocity)
         if approach is not None:
             return approach
+        rotation = self._rotate(velocity, path, robot)
+        if rotation is not None:
+            return rotation
         if self.params.controller == "follower":
             return self._follow_path(velocity, path, robot)
         result = self.controller.compute(robot, velocity, self.costmap.data, self.costmap.info, path)
@@ -309,6 +337,19 @@ class LocalPlannerNode(Node):
             self.arrived = True
             return Control(np.zeros(3), True, "goal_reached", poses[-1:])
         return Control(command.twist, True, "final_approach", poses)
+
+    def _rotate(self, velocity: np.ndarray, path: np.ndarray, robot: np.ndarray) -> Control | None:
+        """The rotation shim's turn towards a new path, or None when it is off or has handed over;
+        it stays out within final_approach_distance of the goal, where the final approach turns."""
+        if self.shim is None or not self.shim.armed \
+                or math.hypot(*(path[-1, :2] - robot[:2])) <= self.params.final_approach_distance:
+            return None
+        command = self.shim.step(robot, velocity, path,
+                                 lambda poses: self.dwa.legal_poses(poses, self.costmap.data, self.costmap.info))
+        if command.phase != "rotate":
+            self.counters[f"shim/{command.phase}"] += 1
+            return None
+        return Control(command.twist, True, "rotate_to_heading", command.poses)
 
     def _follow_path(self, velocity: np.ndarray, path: np.ndarray, robot: np.ndarray) -> Control:
         """The path follower's command, unless the path ahead (as far as the robot gets in sim_time)
