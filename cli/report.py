@@ -32,8 +32,8 @@ from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..schemas import MessageError, decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ..schemas.messages import Costmap, Diagnostic, Goal, LaserScan, Obstacles, OccupancyGrid, Odometry, Path as PathMsg
-from ..services.se2 import compose, inverse, wrap_angle
 from ..services.recorder.mcap_io import Record, read_records
+from ..services.se2 import compose, inverse, wrap_angle
 from ..sim.raycast import LidarParams, laser_pose
 from ..sim.world import DEFAULT_FOOTPRINT, GRID_OBSTACLE, World, WorldError, load_world, world_path
 

@@ -17,7 +17,6 @@ from omninav.schemas import decode, encode
 from omninav.schemas.attachment import pack_attachment
 from omninav.schemas.messages import Header, LocalCommand, Odometry, Path
 from omninav.schemas.registry import type_info
-from omninav.services.se2 import integrate
 from omninav.services.local_planner.approach import FinalApproach
 from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from omninav.services.local_planner.params import FollowerParams
@@ -26,6 +25,7 @@ from omninav.services.runtime.node import NS_PER_S
 from omninav.services.runtime.params import ParamError
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client
+from omninav.services.se2 import integrate
 
 LOCAL_CMD = KEYS.robot("local_cmd")
 START = (1.2, 1.0)                       # the room's robot start

@@ -11,7 +11,6 @@ from omninav.schemas import decode, encode
 from omninav.schemas.messages import (Header, LaserScan, Odometry, OccupancyGrid, Pose2D, PoseWithCovariance,
                                       Transform, Twist)
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
-from omninav.services.se2 import compose, inverse, wrap_angle
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.localizer.node import LocalizerNode, LocalizerParams, read_saved_pose
 from omninav.services.map_server.mapio import save_map
@@ -19,6 +18,7 @@ from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
 from omninav.services.runtime.run import build_node
+from omninav.services.se2 import compose, inverse, wrap_angle
 from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.raycast import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path

@@ -24,7 +24,6 @@ from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Clock, Goal, Header, NavStatus, Odometry, Pose2D, Twist
 from omninav.schemas.messages import Path as PathMsg
 from omninav.services.chassis.node import ChassisNode
-from omninav.services.se2 import compose
 from omninav.services.navigator.mission import (MissionError, MissionRecord, load_mission, summarize_mission,
                                                 summary_lines)
 from omninav.services.navigator.truth_pose import TruthPoseNode, TruthPoseParams
@@ -34,6 +33,7 @@ from omninav.services.runtime.compose import load_compose
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
 from omninav.services.runtime.zenoh_config import open_client
+from omninav.services.se2 import compose
 from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.world import load_world, world_path
 

@@ -13,7 +13,6 @@ from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Goal, Header, Pose2D
 from omninav.services.chassis.node import ChassisNode
-from omninav.services.se2 import wrap_angle
 from omninav.services.costmap.node import CostmapNode, CostmapNodeParams
 from omninav.services.global_planner.node import PlannerNode, PlannerNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
@@ -24,6 +23,7 @@ from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
 from omninav.services.navigator.truth_pose import TruthPoseNode
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
+from omninav.services.se2 import wrap_angle
 from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.world import load_world, world_path
 

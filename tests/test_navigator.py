@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 from omninav.schemas.messages import CancelGoal, Goal, Header, Pose2D
-from omninav.services.se2 import integrate, relative, wrap_angle
 from omninav.services.navigator.core import (ControlResult, Navigator, NavInputs, PlanResult, State)
 from omninav.services.navigator.params import NavigatorParams
 from omninav.services.navigator.recovery import back_up, behaviour, clear_costmaps, rotate, wait
 from omninav.services.runtime.params import ParamError
+from omninav.services.se2 import integrate, relative, wrap_angle
 
 DT = 0.05  # 20 Hz, controller_frequency's default
 

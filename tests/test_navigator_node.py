@@ -12,7 +12,6 @@ from conftest import wait_until
 from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import CancelGoal, Goal, Header, LocalCommand, Odometry, Path, Pose2D
-from omninav.services.se2 import integrate, relative, wrap_angle
 from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.merge import StampMerger
@@ -20,6 +19,7 @@ from omninav.services.runtime.node import NS_PER_S, Node, QueryError
 from omninav.services.runtime.params import ParamError
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client
+from omninav.services.se2 import integrate, relative, wrap_angle
 
 KEYS = KeyLayout("r1")
 DT = 0.05

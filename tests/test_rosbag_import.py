@@ -9,9 +9,9 @@ import pytest
 from omninav.cli.main import main as omninav
 from omninav.schemas.codec import decode
 from omninav.schemas.keys import KeyLayout
-from omninav.services.se2 import wrap_angle
 from omninav.services.importers.rosbag import RosbagError, odometry, read_bag, yaw_of
 from omninav.services.recorder.mcap_io import read_records
+from omninav.services.se2 import wrap_angle
 
 from conftest import SHARED_DATA
 

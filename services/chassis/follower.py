@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..se2 import wrap_angle
 from .kinematics import ChassisParams
 from .odometry import EncoderOdometry
-from ..se2 import wrap_angle
 
 
 def _geometry(params: ChassisParams) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

@@ -45,11 +45,11 @@ from ...schemas.keys import type_for_key
 from ...schemas.messages import Costmap as CostmapMsg
 from ...schemas.messages import ClearCostmaps, Diagnostic, Header, LaserScan, OccupancyGrid, Transform
 from ...sim.raycast import LidarParams
-from ..se2 import compose
 from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node, QueryError
 from ..runtime.params import require_nonnegative
+from ..se2 import compose
 from .costmap import Costmap
 from .frames import FrameParams
 from .layers import same_geometry, warm_up

@@ -30,7 +30,6 @@ import time
 import numpy as np
 
 from ...schemas.messages import MapMetaData, Pose2D
-from ..se2 import integrate
 from ..costmap import layers as costmap_layers
 from ..costmap.footprint import transform
 from ..global_planner import astar
@@ -38,6 +37,7 @@ from ..global_planner.bench import MAP, inflated_costmap, load_bench_map, pick_p
 from ..global_planner.params import GlobalPlannerParams
 from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
 from ..runtime.errors import UserError, exits_2_on_user_error
+from ..se2 import integrate
 from . import eband
 from .dwa import DwaPlanner, PoseCheck, footprint_check_cost, warm_up
 from .params import DwaParams, ElasticBandParams

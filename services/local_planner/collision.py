@@ -20,9 +20,9 @@ import numpy as np
 
 from ...schemas.messages import LaserScan
 from ...sim.world import points_in_polygons
-from ..se2 import integrate
 from ..costmap.footprint import pad
 from ..costmap.layers import scan_points
+from ..se2 import integrate
 from .params import CollisionMonitorParams
 
 

@@ -43,16 +43,17 @@ import numpy as np
 
 from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Path
 from ...sim.world import DEFAULT_FOOTPRINT
-from ..se2 import compose, inverse
 from ..costmap.footprint import make_footprint
 from ..costmap.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, Ticks
 from ..runtime.params import ParamError, load_params, require_nonnegative
+from ..se2 import compose, inverse
 from .approach import FinalApproach
 from .dwa import DwaPlanner, footprint_check_cost, reachable, warm_up
 from .follower import PathFollower, segments_from_poses
-from .params import DwaParams, FollowerParams
+from .params import CollisionMonitorParams, DwaParams, FollowerParams
+from .path_ahead import ahead_of
 from .shim import RotationShim, RotationShimParams
 
 CONTROLLERS = ("dwa", "eband", "follower")
@@ -99,7 +100,8 @@ class LocalPlannerNodeParams(FrameParams, DwaParams, RotationShimParams):
     inflation_radius: float = 0.55       # m: with cost_scaling_factor, where the footprint check starts
     cost_scaling_factor: float = 10.0    # 1/m
     request_delay_s: float = 0.5         # sim s from a costmap / tf / path stamp to its effect
-    stop_padding: float = 0.05           # m: the collision monitor's stop zone, kept free by DWA's rollouts
+    # m: the collision monitor's stop zone (its default), kept free by DWA's rollouts
+    stop_padding: float = CollisionMonitorParams.stop_padding
 
     def __post_init__(self):
         super().__post_init__()
@@ -357,9 +359,8 @@ class LocalPlannerNode(Node):
         if self.path_follower is None:
             return Control(self._brake(velocity), False, "no_path: the path has no length", np.zeros((0, 3)))
         command = self.path_follower.step(self.frames.robot(self.frames.map_frame), self.dt)
-        nearest = int(np.argmin(np.hypot(path[:, 0] - robot[0], path[:, 1] - robot[1])))
-        along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(path[nearest:, :2], axis=0).T))])
-        ahead = path[nearest:][along <= self.follower_params.cruise_speed * self.params.sim_time]
+        ahead, along = ahead_of(path, robot)
+        ahead = ahead[along <= self.follower_params.cruise_speed * self.params.sim_time]
         if not self.dwa.legal_poses(ahead, self.costmap.data, self.costmap.info).all():
             return Control(self._brake(velocity), False, "path_blocked: the path ahead collides on the local costmap",
                            ahead)

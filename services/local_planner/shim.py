@@ -27,6 +27,7 @@ import numpy as np
 
 from ..runtime.params import require_positive
 from ..se2 import wrap_angle
+from .path_ahead import ahead_of
 
 SWEEP_STEP = 0.05    # rad between the swept poses checked: a footprint corner 0.55 m out moves half a 5 cm cell
 
@@ -55,10 +56,7 @@ class ShimCommand:
 def sampled_point(path: np.ndarray, pose, distance: float) -> np.ndarray:
     """The path point `distance` metres along the path from the point nearest `pose` (the path's end
     when it is shorter)."""
-    path = np.asarray(path, np.float64).reshape(-1, 3)
-    nearest = int(np.argmin(np.hypot(path[:, 0] - pose[0], path[:, 1] - pose[1])))
-    ahead = path[nearest:]
-    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ahead[:, :2], axis=0).T))])
+    ahead, along = ahead_of(np.asarray(path, np.float64).reshape(-1, 3), pose)
     return ahead[min(int(np.searchsorted(along, distance)), len(ahead) - 1)]
 
 

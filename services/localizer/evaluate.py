@@ -35,12 +35,12 @@ from ...sim.node import SimNode, SimNodeParams
 from ...sim.world import World, WorldError
 from ..chassis.kinematics import DRIVES
 from ..chassis.node import ChassisNode, ChassisNodeParams
-from ..se2 import compose, wrap_angle
 from ..lidar.node import LidarNode, LidarNodeParams
 from ..runtime.inprocess import InProcessRunner
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
 from ..runtime.run import configure_logging
+from ..se2 import compose, wrap_angle
 from . import realdata
 from .node import LocalizerNode, LocalizerParams
 

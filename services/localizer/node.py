@@ -36,11 +36,11 @@ import yaml
 from ...schemas import MessageError
 from ...schemas.messages import (Diagnostic, Header, LaserScan, OccupancyGrid, Odometry, ParticleCloud, Pose2D,
                                  PoseWithCovariance, Transform)
-from ..se2 import compose, relative, wrap_angle
 from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import ParamError, load_params, read_params_mapping
+from ..se2 import compose, relative, wrap_angle
 from .filter import Amcl, warm_up
 from .params import AmclParams
 from .sensor import ScanBeams, scan_beams

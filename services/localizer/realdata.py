@@ -41,12 +41,12 @@ from ...schemas.codec import encode
 from ...schemas.keys import KeyLayout
 from ...schemas.messages import LaserScan, OccupancyGrid, Odometry, Transform
 from ...schemas.registry import type_info
-from ..se2 import compose, relative
 from ..map_server.mapio import MapError, cell_to_world, load_map
 from ..recorder.mcap_io import Record, read_records
 from ..replay.into import replay_into
 from ..runtime.node import NS_PER_S
 from ..runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
+from ..se2 import compose, relative
 from .node import LocalizerNode, LocalizerParams, OdomHistory
 from .params import AmclParams
 from .sensor import FREE, OCCUPIED, GridFrame, LaserModel, prepare_scan

@@ -18,9 +18,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...schemas.messages import Header, Odometry, Pose2D, PoseWithCovariance, Transform
-from ..se2 import compose, inverse
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import require_nonnegative
+from ..se2 import compose, inverse
 
 
 @dataclass(frozen=True)

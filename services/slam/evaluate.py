@@ -21,9 +21,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..se2 import compose, relative
 from ..importers.carmen import CarmenError, read_log
 from ..runtime.params import ParamError, load_params, parse_overrides, read_yaml, unwrap_ros
+from ..se2 import compose, relative
 from .params import MODES, SlamParams
 from .rbpf import Rbpf
 from .relations import RelationsError, interpolate, load_relations, score
