@@ -186,6 +186,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="seed of the simulator's noise and of the localization's filter (default 0)")
     parser.add_argument("--rate", type=float, default=1.0, help="sim seconds per wall second (default 1)")
     parser.add_argument("--robot", default=DEFAULT_ROBOT, help="robot namespace (default r1)")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="run every service in this one process, in lockstep with the simulator: as fast "
+                             "as the CPU computes, the same recording every time at any machine load (--rate "
+                             "does not apply)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
 
 
@@ -345,11 +349,39 @@ def main(args: argparse.Namespace) -> int:
         load_compose(compose_file)
     except ComposeError as exc:
         raise NavigateError(f"the mission's compose file is not usable: {exc}") from None
+    say(f"{len(compose['services'])} services ({args.localization} localization, {drive} drive) in {world.name}")
+    if args.lockstep:
+        summary = run_lockstep(compose, world, goals, args, recording, say)
+    else:
+        run_processes(compose, compose_file, args, recording, log, goals, say)
+        summary = summarize_mission(load_mission(recording, args.robot), world, goals_total=len(goals),
+                                    recording=str(recording))
+    if args.json:
+        print(json.dumps(summary.to_json()))
+    else:
+        print("\n".join(summary_lines(summary)))
+    return 0 if summary.success else 1
+
+
+def run_lockstep(compose: dict, world: World, goals: np.ndarray, args: argparse.Namespace, recording: Path, say):
+    from ..experiments.lockstep_mission import run_mission
+
+    say("running them in lockstep in this process")
+    run = run_mission(compose["services"], world, goals, timeout_s=args.timeout, robot=args.robot,
+                      recording=recording)
+    for goal_id, outcome in run.outcomes.items():
+        say(f"{goal_id}: {outcome}")
+    say(f"{run.sim_s:.1f} sim s")
+    return run.summary
+
+
+def run_processes(compose: dict, compose_file: Path, args: argparse.Namespace, recording: Path, log: Path,
+                  goals: np.ndarray, say) -> None:
+    """Every service its own process under `omninav up`; the goals sent over the bus."""
     names = [s["name"] for s in compose["services"]]
 
     router = free_loopback_endpoint()
-    say(f"starting {len(names)} services ({args.localization} localization, {drive} drive) in {world.name}; "
-        f"log {log}")
+    say(f"starting them as processes; log {log}")
     up = start_stack(compose_file, router, log)
     problem = ""
     try:
@@ -370,10 +402,3 @@ def main(args: argparse.Namespace) -> int:
     say(f"stopped every service (up exit {stopped})")
     if problem:
         raise NavigateError(f"{problem}; the recording is kept: {recording}")
-    summary = summarize_mission(load_mission(recording, args.robot), world, goals_total=len(goals),
-                                recording=str(recording))
-    if args.json:
-        print(json.dumps(summary.to_json()))
-    else:
-        print("\n".join(summary_lines(summary)))
-    return 0 if summary.success else 1

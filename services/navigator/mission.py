@@ -88,40 +88,64 @@ class MissionSummary:
 
 # ---------------------------------------------------------------- reading a recording
 
+def mission_keys(robot: str = DEFAULT_ROBOT) -> dict[str, str]:
+    """The keys a mission summary reads -> the MissionRecord part each fills."""
+    keys = KeyLayout(robot)
+    return {keys.sim_robot("truth"): "truth", keys.sim("movers"): "movers", keys.robot("goal"): "goals",
+            keys.robot("nav_status"): "statuses", keys.robot("plan"): "plans", keys.diagnostics("sim"): "sim"}
+
+
+class MissionCollector:
+    """Gathers what a mission summary needs from (key, payload) pairs, in any order: the messages
+    of a recording, or of an in-process run as they are published."""
+
+    def __init__(self, robot: str = DEFAULT_ROBOT):
+        self.robot = robot
+        self.wanted = mission_keys(robot)
+        self.found: dict[str, list] = {name: [] for name in self.wanted.values()}
+
+    def add(self, key: str, payload: bytes) -> None:
+        part = self.wanted.get(key)
+        if part is None:
+            return
+        try:
+            self.found[part].append(decode(payload, type_for_key(key), key=key))
+        except MessageError:
+            pass        # a malformed message counts as not sent
+
+    def record(self, source: str) -> MissionRecord:
+        """The MissionRecord (MissionError naming `source` if it holds no ground truth)."""
+        found = {name: sorted(messages, key=lambda m: (m.header.stamp_ns, m.header.seq))
+                 for name, messages in self.found.items()}
+        truth = found["truth"]
+        if not truth:
+            raise MissionError(f"{source}: no ground truth ({KeyLayout(self.robot).sim_robot('truth')}): "
+                               "was the sim recorded?")
+        record = MissionRecord(np.array([m.header.stamp_ns for m in truth], np.int64),
+                               np.array([(m.pose.x, m.pose.y, m.pose.theta) for m in truth], np.float64),
+                               goals=found["goals"], statuses=found["statuses"], plans=found["plans"],
+                               sim_values=dict(found["sim"][-1].values) if found["sim"] else {})
+        movers = found["movers"]
+        if movers and len(movers[0].circles):
+            count = len(movers[0].circles)
+            movers = [m for m in movers if len(m.circles) == count]
+            record.mover_stamps = np.array([m.header.stamp_ns for m in movers], np.int64)
+            record.mover_circles = np.array([m.circles for m in movers], np.float64).reshape(len(movers), count, 3)
+        return record
+
+
 def load_mission(path: str | Path, robot: str = DEFAULT_ROBOT) -> MissionRecord:
     """The mission's messages from a recording (MissionError if unreadable or without truth)."""
-    path, keys = Path(path), KeyLayout(robot)
-    wanted = {keys.sim_robot("truth"): "truth", keys.sim("movers"): "movers", keys.robot("goal"): "goals",
-              keys.robot("nav_status"): "statuses", keys.robot("plan"): "plans",
-              keys.diagnostics("sim"): "sim"}
-    found: dict[str, list] = {name: [] for name in wanted.values()}
+    path, collector = Path(path), MissionCollector(robot)
     try:
-        for rec in read_records(path, wanted):
-            try:
-                found[wanted[rec.key]].append(decode(rec.payload, type_for_key(rec.key), key=rec.key))
-            except MessageError:
-                continue
+        for rec in read_records(path, collector.wanted):
+            collector.add(rec.key, rec.payload)
     except FileNotFoundError:
         raise MissionError(f"{path}: no such recording") from None
     except (McapError, EOFError, ValueError, OSError) as exc:
         raise MissionError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc}); "
                            f"`omninav recover {path}` rewrites what is readable") from None
-    if not found["truth"]:
-        raise MissionError(f"{path}: no ground truth ({keys.sim_robot('truth')}): was the sim recorded?")
-    for name in found:
-        found[name].sort(key=lambda m: (m.header.stamp_ns, m.header.seq))
-    truth = found["truth"]
-    record = MissionRecord(np.array([m.header.stamp_ns for m in truth], np.int64),
-                           np.array([(m.pose.x, m.pose.y, m.pose.theta) for m in truth], np.float64),
-                           goals=found["goals"], statuses=found["statuses"], plans=found["plans"],
-                           sim_values=dict(found["sim"][-1].values) if found["sim"] else {})
-    movers = found["movers"]
-    if movers and len(movers[0].circles):
-        count = len(movers[0].circles)
-        movers = [m for m in movers if len(m.circles) == count]
-        record.mover_stamps = np.array([m.header.stamp_ns for m in movers], np.int64)
-        record.mover_circles = np.array([m.circles for m in movers], np.float64).reshape(len(movers), count, 3)
-    return record
+    return collector.record(str(path))
 
 
 # ---------------------------------------------------------------- the figures

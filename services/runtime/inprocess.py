@@ -28,6 +28,7 @@ class InProcessRunner:
             for index, inp in enumerate(node.inputs):
                 self._routes[inp.key].append((node, index))
         self._taps: list[Callable[[str, bytes, int], None]] = []
+        self._writers: list = []
         for node in self.nodes:
             for pub in (*node.outputs.values(), node.diagnostics):
                 pub.sink = self._deliver
@@ -36,7 +37,14 @@ class InProcessRunner:
         """Also hand every published (key, payload, stamp_ns) to callback — a recorder, a probe."""
         self._taps.append(callback)
 
+    def record(self, writer) -> None:
+        """Also write every published message to a recording (a RecordingWriter), as the recorder
+        would; its log time is the sim stamp, so the same run gives the same file byte for byte."""
+        self._writers.append(writer)
+
     def _deliver(self, pub: Publisher, payload: bytes, stamp_ns: int) -> None:
+        for writer in self._writers:
+            writer.write(pub.key, pub.type_name, payload, pub.seq, stamp_ns, stamp_ns)
         for tap in self._taps:
             tap(pub.key, payload, stamp_ns)
         for node, index in self._routes.get(pub.key, ()):
@@ -78,3 +86,4 @@ class InProcessRunner:
                 node.process(index, msg)
         for node in self.nodes:
             node.close()
+            node.diagnostics.publish(node.diagnostic())     # as a live service does when it stops
