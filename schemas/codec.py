@@ -2,8 +2,9 @@
 
 A payload is a msgpack map: {"_type": name, "_version": v, <field>: <value>, …} in field order, so
 the same message always encodes to the same bytes. ndarrays travel as {"dtype", "shape", "data"}
-and decode as read-only views over the received bytes (no copy). Decoding checks every field and
-raises MessageError naming the key, the type and the field.
+and decode as read-only views over the received bytes (no copy). Decoding checks every field, then
+the type's own rules (its `problem()`: sizes that must agree, REP 117 ranges, …), and raises
+MessageError naming the key, the type and the field.
 """
 from __future__ import annotations
 
@@ -183,6 +184,7 @@ def _field_decoder(f: _Field):
 def _struct_decoder(cls: type, envelope: tuple[str, ...] = ()):
     fields = tuple((f.name, _field_decoder(f)) for f in _plan(cls))
     expected = frozenset(name for name, _ in fields) | frozenset(envelope)
+    check = getattr(cls, "problem", None)       # the type's own consistency rules (messages.py)
 
     def dec(raw):
         if type(raw) is not dict:
@@ -201,7 +203,14 @@ def _struct_decoder(cls: type, envelope: tuple[str, ...] = ()):
             except _Bad as bad:
                 bad.path.insert(0, name)
                 raise
-        return cls(*values)
+        msg = cls(*values)
+        if check is not None:
+            problem = check(msg)
+            if problem is not None:
+                bad = _Bad(problem[1])
+                bad.path.extend(problem[0].split("."))
+                raise bad
+        return msg
 
     return dec
 

@@ -2,15 +2,57 @@
 
 2-D simplifications of ROS types: poses are (x, y, theta); covariances are 3×3 over (x, y, theta);
 arrays of poses travel as one (N, 3) float64 array instead of a list of PoseStamped.
+
+A type whose fields must agree with each other (a grid's size and its data, a scan's angles and its
+ranges, a covariance's symmetry) has a `problem()` method: the codec calls it after decoding the
+fields and refuses the payload with the (field, reason) it returns, so no consumer sees such a
+message; None means the message is sound.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from .fields import array, real
 from .registry import message
+
+Problem = tuple[str, str] | None        # (field, reason) of the first inconsistency, or None
+WHEEL_COUNTS = {"mecanum": 4, "omni3": 3, "diff": 2}     # the drives and their driven wheels
+SCAN_BEAM_SLACK = 1     # beams: drivers differ on whether angle_max is the last beam's angle or its end
+
+
+def covariance_problem(name: str, cov: np.ndarray) -> Problem:
+    if cov.size and not np.allclose(cov, cov.T, rtol=1e-9, atol=1e-12):
+        return name, "is not symmetric"
+    if cov.size and (np.diagonal(cov) < 0).any():
+        return name, f"has a negative variance on its diagonal {np.diagonal(cov).tolist()}"
+    return None
+
+
+def same_length(names: tuple[str, ...], arrays: tuple[np.ndarray, ...]) -> Problem:
+    """Arrays that describe the same items, one row each, must have as many rows."""
+    for name, arr in zip(names[1:], arrays[1:]):
+        if len(arr) != len(arrays[0]):
+            return name, f"has {len(arr)} entries but {names[0]} has {len(arrays[0])}"
+    return None
+
+
+def wheels_problem(drive: str, velocities: np.ndarray) -> Problem:
+    if drive not in WHEEL_COUNTS:
+        return "drive", f"{drive!r} is not one of {list(WHEEL_COUNTS)}"
+    if len(velocities) != WHEEL_COUNTS[drive]:
+        return "velocities", f"{len(velocities)} wheel velocities for a {drive} drive of {WHEEL_COUNTS[drive]} wheels"
+    return None
+
+
+def grid_problem(info: "MapMetaData", data: np.ndarray) -> Problem:
+    if not (math.isfinite(info.resolution) and info.resolution > 0):
+        return "info.resolution", f"{info.resolution} is not a positive number of metres per cell"
+    if data.shape != (info.height, info.width):
+        return "data", f"shape {data.shape} does not match height × width = ({info.height}, {info.width})"
+    return None
 
 
 @dataclass(slots=True)
@@ -55,6 +97,10 @@ class Odometry:
     pose_covariance: np.ndarray = array("<f8", (3, 3))
     twist_covariance: np.ndarray = array("<f8", (3, 3))
 
+    def problem(self) -> Problem:
+        return covariance_problem("pose_covariance", self.pose_covariance) or \
+            covariance_problem("twist_covariance", self.twist_covariance)
+
 
 @message("WheelCommand", 1)
 @dataclass(slots=True)
@@ -62,6 +108,9 @@ class WheelCommand:
     header: Header = field(default_factory=Header)
     drive: str = "mecanum"                              # mecanum | omni3 | diff
     velocities: np.ndarray = array("<f8", (None,))      # rad/s, one per wheel
+
+    def problem(self) -> Problem:
+        return wheels_problem(self.drive, self.velocities)
 
 
 @message("WheelState", 1)
@@ -73,6 +122,10 @@ class WheelState:
     velocities: np.ndarray = array("<f8", (None,))      # rad/s
     follower_positions: np.ndarray = array("<f8", (None,))  # passive follower-wheel encoders, rad
     gyro_z: float = 0.0                                 # yaw rate, rad/s
+
+    def problem(self) -> Problem:
+        return wheels_problem(self.drive, self.velocities) or \
+            same_length(("velocities", "positions"), (self.velocities, self.positions))
 
 
 @message("LaserScan", 1)
@@ -90,6 +143,29 @@ class LaserScan:
     ranges: np.ndarray = array("<f4", (None,), allow_nonfinite=True)
     intensities: np.ndarray = array("<f4", (None,))
 
+    def problem(self) -> Problem:
+        """REP 117: a range is a distance (≥ 0), +inf (no return) or NaN / −inf (no valid reading)."""
+        if not (math.isfinite(self.angle_increment) and self.angle_increment != 0.0):
+            return "angle_increment", f"{self.angle_increment} is not a non-zero finite angle"
+        if not (math.isfinite(self.angle_min) and math.isfinite(self.angle_max)):
+            return "angle_min", "the angles are not finite"
+        beams = round((self.angle_max - self.angle_min) / self.angle_increment) + 1
+        if beams < 0:
+            return "angle_increment", (f"{self.angle_increment} runs away from angle_max "
+                                       f"({self.angle_min} → {self.angle_max})")
+        if abs(len(self.ranges) - beams) > SCAN_BEAM_SLACK:
+            return "ranges", (f"{len(self.ranges)} ranges, but angle_min..angle_max in steps of angle_increment "
+                              f"make {beams} beams")
+        if (self.ranges < 0).any():     # NaN compares false: only negative numbers and -inf
+            negative = self.ranges[(self.ranges < 0) & np.isfinite(self.ranges)]
+            if negative.size:
+                return "ranges", f"{negative.size} negative range(s), e.g. {float(negative[0])}"
+        if len(self.intensities) not in (0, len(self.ranges)):
+            return "intensities", f"{len(self.intensities)} intensities for {len(self.ranges)} ranges"
+        if not (self.range_min >= 0 and self.range_max >= self.range_min):
+            return "range_max", f"range_min {self.range_min} .. range_max {self.range_max} is not a range"
+        return None
+
 
 @message("OccupancyGrid", 1)
 @dataclass(slots=True)
@@ -98,6 +174,11 @@ class OccupancyGrid:
     info: MapMetaData = field(default_factory=MapMetaData)
     # row-major (height, width); -1 unknown, 0..100 occupancy probability in percent
     data: np.ndarray = array("|i1", (None, None))
+
+    def problem(self) -> Problem:
+        if self.data.size and ((self.data < -1) | (self.data > 100)).any():
+            return "data", "holds values outside -1 (unknown) and 0..100 (percent)"
+        return grid_problem(self.info, self.data)
 
 
 @message("Costmap", 1)
@@ -110,6 +191,9 @@ class Costmap:
     info: MapMetaData = field(default_factory=MapMetaData)
     data: np.ndarray = array("|u1", (None, None))       # row-major (height, width)
 
+    def problem(self) -> Problem:
+        return grid_problem(self.info, self.data)
+
 
 @message("PoseWithCovariance", 1)
 @dataclass(slots=True)
@@ -118,6 +202,9 @@ class PoseWithCovariance:
     pose: Pose2D = field(default_factory=Pose2D)
     covariance: np.ndarray = array("<f8", (3, 3))
 
+    def problem(self) -> Problem:
+        return covariance_problem("covariance", self.covariance)
+
 
 @message("ParticleCloud", 1)
 @dataclass(slots=True)
@@ -125,6 +212,11 @@ class ParticleCloud:
     header: Header = field(default_factory=Header)
     poses: np.ndarray = array("<f8", (None, 3))         # x, y, theta per particle
     weights: np.ndarray = array("<f8", (None,))
+
+    def problem(self) -> Problem:
+        if (self.weights < 0).any():
+            return "weights", "holds a negative weight"
+        return same_length(("poses", "weights"), (self.poses, self.weights))
 
 
 @message("Path", 2)
@@ -166,12 +258,20 @@ class Obstacles:
     circles: np.ndarray = array("<f8", (None, 3))       # x, y, radius
     velocities: np.ndarray = array("<f8", (None, 2))    # vx, vy in the world frame
 
+    def problem(self) -> Problem:
+        if (self.circles[:, 2] < 0).any():
+            return "circles", "holds a negative radius"
+        return same_length(("circles", "velocities"), (self.circles, self.velocities))
+
 
 @message("Clock", 1)
 @dataclass(slots=True)
 class Clock:
     header: Header = field(default_factory=Header)     # stamp_ns is the sim time
     rate: float = 1.0                                   # sim seconds per wall second
+
+    def problem(self) -> Problem:
+        return None if self.rate > 0 else ("rate", f"{self.rate} is not a positive rate")
 
 
 @message("Goal", 1)
@@ -196,6 +296,9 @@ class ClearCostmaps:
     """A recovery's request: forget obstacles farther than reset_distance from the robot."""
     header: Header = field(default_factory=Header)
     reset_distance: float = 3.0    # m: the side of the square around the robot that is kept
+
+    def problem(self) -> Problem:
+        return None if self.reset_distance >= 0 else ("reset_distance", f"{self.reset_distance} m is negative")
 
 
 @message("NavStatus", 1)

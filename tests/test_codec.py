@@ -8,9 +8,10 @@ from hypothesis import strategies as st
 
 from omninav.schemas import MessageError, all_types, decode, encode, peek_type
 from omninav.schemas.codec import describe, to_wire
-from omninav.schemas.messages import Chatter, LaserScan, OccupancyGrid, Odometry, Path
+from omninav.schemas.messages import (Chatter, Clock, Costmap, LaserScan, MapMetaData, Obstacles, OccupancyGrid,
+                                      Odometry, ParticleCloud, Path, PoseWithCovariance, WheelCommand, WheelState)
 
-from strategies import struct_strategy
+from strategies import sound, struct_strategy
 
 ALL_TYPES = sorted(all_types().items())
 
@@ -32,7 +33,8 @@ def assert_same(a, b):
 @settings(max_examples=40, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
 def test_every_type_round_trips_byte_for_byte(name, cls, data):
-    msg = data.draw(struct_strategy(cls))
+    msg = sound(data.draw(struct_strategy(cls)))
+    assert getattr(msg, "problem", lambda: None)() is None
     payload = encode(msg)
     back = decode(payload, cls)
     assert_same(msg, back)
@@ -44,7 +46,7 @@ def test_every_type_round_trips_byte_for_byte(name, cls, data):
 @settings(max_examples=25, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
 def test_damaged_payloads_raise_message_error_only(name, cls, data):
-    payload = encode(data.draw(struct_strategy(cls)))
+    payload = encode(sound(data.draw(struct_strategy(cls))))
     cut = data.draw(st.integers(0, len(payload) - 1))
     with pytest.raises(MessageError):
         decode(payload[:cut])
@@ -57,8 +59,14 @@ def test_damaged_payloads_raise_message_error_only(name, cls, data):
         pass                                 # a clean refusal; anything else fails the test
 
 
+def scan_of(ranges, angle_increment=0.01, **fields) -> LaserScan:
+    ranges = np.asarray(ranges, np.float32)
+    return LaserScan(ranges=ranges, angle_increment=angle_increment, range_max=30.0,
+                     angle_max=(len(ranges) - 1) * angle_increment, **fields)
+
+
 def test_arrays_decode_without_copy():
-    scan = LaserScan(ranges=np.arange(360, dtype=np.float32))
+    scan = scan_of(np.arange(360))
     back = decode(encode(scan))
     assert not back.ranges.flags.writeable   # a view over the received bytes
     assert back.ranges.base is not None
@@ -110,7 +118,7 @@ def test_missing_field_and_wrong_type_and_version():
 
 
 def test_nan_allowed_only_where_declared():
-    scan = LaserScan(ranges=np.array([1.0, np.inf, np.nan], dtype=np.float32))
+    scan = scan_of([1.0, np.inf, np.nan, -np.inf])
     assert np.isinf(decode(encode(scan)).ranges[1])
     odom = Odometry(pose_covariance=np.full((3, 3), np.nan))
     with pytest.raises(MessageError, match="pose_covariance"):
@@ -121,3 +129,44 @@ def test_nan_allowed_only_where_declared():
 def test_every_type_has_a_schema(name, cls):
     schema = describe(cls)
     assert schema["title"] == name and "header" in schema["properties"]
+
+
+@pytest.mark.parametrize("msg,field", [
+    (OccupancyGrid(info=MapMetaData(resolution=0.0, width=2, height=1), data=np.zeros((1, 2), np.int8)),
+     "OccupancyGrid.info.resolution"),
+    (OccupancyGrid(info=MapMetaData(resolution=math.nan, width=2, height=1), data=np.zeros((1, 2), np.int8)),
+     "OccupancyGrid.info.resolution"),
+    (OccupancyGrid(info=MapMetaData(width=3, height=1), data=np.zeros((1, 2), np.int8)), "OccupancyGrid.data"),
+    (OccupancyGrid(info=MapMetaData(width=1, height=1), data=np.full((1, 1), 101, np.int8)), "OccupancyGrid.data"),
+    (Costmap(info=MapMetaData(width=2, height=2), data=np.zeros((1, 2), np.uint8)), "Costmap.data"),
+    (scan_of([1.0, -0.5, 2.0]), "LaserScan.ranges"),
+    (scan_of([1.0, 2.0], angle_increment=0.0), "LaserScan.angle_increment"),
+    (LaserScan(ranges=np.ones(3, np.float32), angle_increment=-0.01, angle_max=0.02, range_max=5.0),
+     "LaserScan.angle_increment"),
+    (LaserScan(ranges=np.ones(10, np.float32), angle_increment=0.1, angle_max=0.3, range_max=5.0),
+     "LaserScan.ranges"),
+    (scan_of([1.0, 2.0], intensities=np.ones(3, np.float32)), "LaserScan.intensities"),
+    (PoseWithCovariance(covariance=np.array([[1.0, 0.5, 0], [0, 1.0, 0], [0, 0, 1.0]])),
+     "PoseWithCovariance.covariance"),
+    (PoseWithCovariance(covariance=np.diag([1.0, -1.0, 1.0])), "PoseWithCovariance.covariance"),
+    (Odometry(twist_covariance=np.diag([0.0, 0.0, -1e-3])), "Odometry.twist_covariance"),
+    (WheelCommand(drive="tank", velocities=np.zeros(2)), "WheelCommand.drive"),
+    (WheelCommand(drive="mecanum", velocities=np.zeros(3)), "WheelCommand.velocities"),
+    (WheelState(drive="diff", velocities=np.zeros(2), positions=np.zeros(1)), "WheelState.positions"),
+    (ParticleCloud(poses=np.zeros((2, 3)), weights=np.ones(3)), "ParticleCloud.weights"),
+    (Obstacles(circles=np.array([[0.0, 0.0, -0.3]]), velocities=np.zeros((1, 2))), "Obstacles.circles"),
+    (Clock(rate=0.0), "Clock.rate"),
+])
+def test_messages_whose_fields_disagree_are_refused_naming_the_field(msg, field):
+    with pytest.raises(MessageError) as err:
+        decode(encode(msg), key="omninav/r1/x")
+    assert field in str(err.value) and "omninav/r1/x" in str(err.value)
+
+
+def test_rep_117_ranges_and_a_last_beam_convention_are_accepted():
+    scan = scan_of([0.0, np.inf, np.nan, -np.inf, 3.0])
+    assert decode(encode(scan)).ranges.size == 5
+    scan.angle_max += scan.angle_increment      # angle_max at the end of the last beam, as some drivers do
+    assert decode(encode(scan)).ranges.size == 5
+    clockwise = scan_of([1.0, 2.0, 3.0], angle_increment=-0.01)      # angle_max below angle_min
+    assert decode(encode(clockwise)).angle_increment == -0.01

@@ -157,7 +157,8 @@ def test_readable_form_summarises_large_arrays_and_is_strict_json():
     ranges = np.linspace(0.5, 5.0, 360).astype("<f4")
     ranges[1] = np.inf
     scan = decode(encode(LaserScan(header=Header(stamp_ns=7, frame_id="laser", seq=3), range_max=6.0,
-                                   ranges=ranges, intensities=np.ones(360, "<f4"))))
+                                   angle_increment=0.01, angle_max=3.59, ranges=ranges,
+                                   intensities=np.ones(360, "<f4"))))
     plain = to_plain(scan)
     assert plain["_type"] == "LaserScan" and plain["header"] == {"stamp_ns": 7, "frame_id": "laser", "seq": 3}
     summary = plain["ranges"]

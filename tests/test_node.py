@@ -71,3 +71,22 @@ def test_ticks_fall_on_the_first_stamp_at_or_after_each_multiple_of_the_period()
     ticks = Ticks(10.0)                                   # every 0.1 s
     stamps = [int(s * NS_PER_S) for s in (0.05, 0.1, 0.15, 0.26, 0.29, 0.3, 0.52)]
     assert [s / NS_PER_S for s in stamps if ticks.due(s)] == [0.1, 0.26, 0.3, 0.52]
+
+
+def test_a_handler_that_raises_is_counted_and_the_node_carries_on(caplog):
+    class Fragile(Listener):
+        def on_chatter(self, msg):
+            if msg.value < 0:
+                raise ZeroDivisionError("a value the handler cannot take")
+            super().on_chatter(msg)
+
+    node = Fragile(ListenerParams(summary_period_s=100.0))
+    out = capture(node)
+    chatter_index = next(i for i, inp in enumerate(node.inputs) if inp.key == "omninav/r1/chatter")
+    for seq, value in enumerate([1.0, -1.0, -2.0, 2.0], start=1):
+        node.process(chatter_index, chatter(0.1 * seq, seq, value))
+    assert [m.text for _, m in out] == ["echo: m1", "echo: m4"]          # the bad ones dropped, the next handled
+    assert node.counters["handler_errors/omninav/r1/chatter"] == 2
+    assert sum("ZeroDivisionError" in r.getMessage() or r.exc_info is not None for r in caplog.records) == 1
+    diag = node.diagnostic()
+    assert diag.level == 1 and "handler_errors/omninav/r1/chatter" in diag.message

@@ -262,8 +262,9 @@ def test_the_recorded_parameters_build_the_same_parameters(service):
 
 
 def test_array_fields_name_the_first_differing_index():
-    a = LaserScan(ranges=np.linspace(1, 2, 50, dtype="<f4"), intensities=np.zeros(50, "<f4"))
-    b = LaserScan(ranges=a.ranges.copy(), intensities=a.intensities.copy())
+    fan = dict(angle_increment=0.01, angle_max=0.49, range_max=5.0)
+    a = LaserScan(ranges=np.linspace(1, 2, 50, dtype="<f4"), intensities=np.zeros(50, "<f4"), **fan)
+    b = LaserScan(ranges=a.ranges.copy(), intensities=a.intensities.copy(), **fan)
     b.ranges[17] += 1.0
     b.ranges[30] = np.inf
     b.intensities[0] = -0.0                                 # equal as a number, not as bytes

@@ -122,6 +122,7 @@ class Node:
         self.params_record = params_json(self.params)
         self._timers: list[_Timer] = []
         self._logged_bad_keys: set[str] = set()
+        self._logged_failures: set[tuple[str, str]] = set()
         # not in self.outputs: diagnostics count wall-time events, so replay does not compare them
         self.diagnostics = Publisher(self.keys.diagnostics(self.name), Diagnostic)
         self.setup()
@@ -181,7 +182,21 @@ class Node:
         self.now_ns = max(self.now_ns, msg.header.stamp_ns)
         self.first_seq.setdefault(inp.key, msg.header.seq)
         self.counters[f"received/{inp.key}"] += 1
-        inp.handler(msg)
+        try:
+            inp.handler(msg)
+        except Exception as exc:    # the guard: one bad message must not end the service
+            self.handler_failed(inp.key, exc)
+
+    def handler_failed(self, key: str, exc: Exception) -> None:
+        """A handler raised: counted per key, logged with its traceback once per key and exception
+        type; the message is dropped and the node carries on with the next input (so does replay,
+        which runs this same code)."""
+        self.counters[f"handler_errors/{key}"] += 1
+        kind = (key, type(exc).__name__)
+        if kind not in self._logged_failures:
+            self._logged_failures.add(kind)
+            self.log.error("handling a message on %s failed; dropped it and carrying on (further %s on this "
+                           "key only counted)", key, kind[1], exc_info=exc)
 
     def answer(self, key: str, parameters: dict[str, str]) -> Any:
         """The reply to a `get` on one of this node's queryables (raises QueryError)."""
@@ -208,7 +223,7 @@ class Node:
         values.update({f"first_seq/{k}": v for k, v in self.first_seq.items()})
         if self.params_record:
             values[PARAMS_VALUE] = self.params_record
-        trouble = sorted(k for k in self.counters if k.startswith(("malformed/", "late/", "sync_timeout")))
+        trouble = sorted(k for k in self.counters if k.startswith(("malformed/", "late/", "sync_timeout", "handler_errors/")))
         return Diagnostic(
             header=self.header(),
             name=self.name,
