@@ -26,13 +26,12 @@ from matplotlib.collections import PathCollection
 from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Circle, Patch, Polygon
-from mcap.exceptions import McapError
 
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..schemas import MessageError, decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ..schemas.messages import Costmap, Diagnostic, Goal, LaserScan, Obstacles, OccupancyGrid, Odometry, Path as PathMsg
-from ..services.recorder.mcap_io import Record, read_records
+from ..services.recorder.mcap_io import Record, RecordingError, read_records
 from ..services.se2 import compose, inverse, wrap_angle
 from ..sim.raycast import LidarParams, laser_pose
 from ..sim.world import DEFAULT_FOOTPRINT, GRID_OBSTACLE, World, WorldError, load_world, world_path
@@ -109,11 +108,8 @@ def _track(messages: list[Odometry]) -> Track | None:
 def _read(path: Path) -> Iterator[Record]:
     try:
         yield from read_records(path)
-    except FileNotFoundError:
-        raise ReportError(f"{path}: no such recording") from None
-    except (McapError, EOFError, ValueError, OSError) as exc:
-        raise ReportError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc}); "
-                          f"`omninav recover {path}` rewrites what is readable") from None
+    except RecordingError as exc:
+        raise ReportError(str(exc)) from None
 
 
 def load_run(path: str | Path, robot: str = DEFAULT_ROBOT) -> RunData:

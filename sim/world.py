@@ -20,6 +20,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
+from ..services.runtime.params import unknown_names
 from ..services.map_server.mapio import MapError, cell_to_world, grid_coords, load_map, read_yaml, world_to_cell
 
 WALL_THICKNESS = 0.1          # m, walls and the outer walls along the bounds
@@ -432,9 +433,14 @@ class _Keys:
             self.fail(where, f"expected a list, got {value!r}")
         return value
 
-    def mapping(self, value, where: str, required: tuple[str, ...] = ()) -> dict:
+    def mapping(self, value, where: str, required: tuple[str, ...] = (), optional: tuple[str, ...] = ()) -> dict:
+        """A mapping with the required keys and no key beyond required and optional: a misspelt key
+        would otherwise load a different world without a word."""
         if not isinstance(value, dict):
             self.fail(where, f"expected a mapping, got {value!r}")
+        problem = unknown_names(value, (*required, *optional))
+        if problem:
+            self.fail(where or "top level", problem)
         for key in required:
             if key not in value:
                 self.fail(f"{where}.{key}", "missing")
@@ -448,7 +454,7 @@ class _Keys:
 
 
 def _load_map_key(keys: _Keys, spec, world_file: Path) -> OccupancyGrid:
-    spec = keys.mapping(spec, "map", required=("yaml",))
+    spec = keys.mapping(spec, "map", required=("yaml",), optional=("relative_to",))
     if not isinstance(spec["yaml"], str) or not spec["yaml"]:
         keys.fail("map.yaml", f"expected a path to a map_server YAML file, got {spec['yaml']!r}")
     relative_to = spec.get("relative_to", "world")
@@ -479,11 +485,15 @@ def _grid_extent(grid: OccupancyGrid) -> tuple[tuple[float, float], tuple[float,
     return (float(xs.min()), float(ys.min())), (float(xs.max() - xs.min()), float(ys.max() - ys.min()))
 
 
+WORLD_KEYS = ("name", "bounds", "origin", "map", "walls", "boxes", "circles", "movers", "robot", "goals")
+
+
 def load_world(path: str | Path) -> World:
     """Read and validate a world file; raises WorldError naming the file and key on any problem."""
     path = Path(path)
     doc = read_yaml(path, WorldError)
     keys = _Keys(str(path))
+    keys.mapping(doc, "", optional=WORLD_KEYS)
 
     name = doc.get("name", path.stem)
     if not isinstance(name, str) or not name:
@@ -508,7 +518,7 @@ def load_world(path: str | Path) -> World:
             keys.fail(f"walls[{i}]", "has zero length")
         solids.append(wall_rectangle(x1, y1, x2, y2))
     for i, box in enumerate(keys.items(doc.get("boxes"), "boxes")):
-        box = keys.mapping(box, f"boxes[{i}]", required=("center", "size"))
+        box = keys.mapping(box, f"boxes[{i}]", required=("center", "size"), optional=("yaw",))
         center = keys.numbers(box["center"], f"boxes[{i}].center", 2, "a point [x, y]")
         size = keys.numbers(box["size"], f"boxes[{i}].size", 2, "two positive numbers", positive=True)
         yaw = keys.number(box.get("yaw", 0.0), f"boxes[{i}].yaw")
@@ -529,7 +539,7 @@ def load_world(path: str | Path) -> World:
     radii, speeds, loops, yields = [], [], [], []
     for i, mover in enumerate(keys.items(doc.get("movers"), "movers")):
         where = f"movers[{i}]"
-        mover = keys.mapping(mover, where, required=("radius", "speed", "path"))
+        mover = keys.mapping(mover, where, required=("radius", "speed", "path"), optional=("loop", "yield_distance"))
         radii.append(keys.number(mover["radius"], f"{where}.radius", positive=True))
         speeds.append(keys.number(mover["speed"], f"{where}.speed", nonnegative=True))
         yield_distance = mover.get("yield_distance")
@@ -548,7 +558,7 @@ def load_world(path: str | Path) -> World:
 
     if "robot" not in doc:
         keys.fail("robot", "missing (give at least start: [x, y, yaw])")
-    robot_doc = keys.mapping(doc["robot"], "robot", required=("start",))
+    robot_doc = keys.mapping(doc["robot"], "robot", required=("start",), optional=("drive", "footprint"))
     start = keys.numbers(robot_doc["start"], "robot.start", 3, "[x, y, yaw] (three numbers)")
     drive = robot_doc.get("drive", "mecanum")
     if drive not in DRIVES:

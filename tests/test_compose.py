@@ -68,13 +68,13 @@ def test_defaults(tmp_path):
      ["services[0] (listener).params_file", "missing.yaml: no such file"]),
     ("- {service: listener, params_file: broken.yaml}", ["services[0] (listener).params_file", "not valid YAML"]),
     ("- {service: listener, params_file: typo.yaml}",
-     ["services[0] (listener).params_file", "typo.yaml", "unknown parameter(s) ['gian']"]),
-    ("- {service: listener, params: {gian: 2}}", ["services[0] (listener).params", "unknown parameter(s) ['gian']"]),
+     ["services[0] (listener).params_file", "typo.yaml", "unknown parameter 'gian' (did you mean 'gain'?)"]),
+    ("- {service: listener, params: {gian: 2}}", ["services[0] (listener).params", "unknown parameter 'gian' (did you mean 'gain'?)"]),
     ("- {service: listener, params: {gain: fast}}", ["services[0] (listener).params", "'gain' must be a number"]),
     ("- {service: talker, params: {rate: -1}}", ["services[0] (talker).params", "must be positive"]),
     ("- {service: listener, params: [gain]}", ["services[0] (listener).params", "must be a mapping"]),
     ("- service: talker\n- service: listener\n- service: talker", ["services[2]", "duplicate name 'talker'"]),
-    ("- {service: talker, parmas: {rate: 2}}", ["services[0]", "unknown key(s) ['parmas']"]),
+    ("- {service: talker, parmas: {rate: 2}}", ["services[0]", "unknown key 'parmas' (did you mean 'params'?)"]),
     ("- {service: talker, restart: sometimes}", ["services[0] (talker).restart", "'sometimes'"]),
     ("- {service: talker, max_restarts: -1}", ["services[0] (talker).max_restarts", "-1"]),
     ("- {service: talker, max_restarts: 1.5}", ["services[0] (talker).max_restarts", "1.5"]),
@@ -96,7 +96,7 @@ def test_service_errors_name_the_file_and_the_key(tmp_path, services, needles):
 
 
 @pytest.mark.parametrize("text,needle", [
-    ("servces: [{service: talker}]\n", "unknown key(s) ['servces']"),
+    ("servces: [{service: talker}]\n", "unknown key 'servces' (did you mean 'services'?)"),
     ("router: tcp/0.0.0.0:7447\nservices: [{service: talker}]\n", "router: endpoint 'tcp/0.0.0.0:7447'"),
     ("router: 7447\nservices: [{service: talker}]\n", "router must be an endpoint string"),
     ("robot: 'a b'\nservices: [{service: talker}]\n", "robot: robot namespace 'a b'"),
@@ -127,3 +127,13 @@ def test_the_demo_compose_file_is_valid():
     pytest.importorskip("omninav.services.recorder.node", reason="the recorder service is not written yet")
     compose = load_compose(REPO / "compose" / "demo.yaml")
     assert [s.name for s in compose.services] == ["recorder", "talker", "listener"]  # recorder stops last
+
+
+def test_a_misspelt_compose_key_names_the_closest_known_one(tmp_path):
+    path = tmp_path / "c.yaml"
+    path.write_text("services:\n  - {service: chassis, param: {drive: diff}}\n")
+    with pytest.raises(ComposeError, match=r"unknown key 'param' \(did you mean 'params'\?\)"):
+        load_compose(path)
+    path.write_text("services:\n  - {service: chassis, params: {drvie: diff}}\n")
+    with pytest.raises(ComposeError, match=r"unknown parameter 'drvie' \(did you mean 'drive'\?\)"):
+        load_compose(path)

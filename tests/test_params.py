@@ -21,7 +21,7 @@ def test_defaults_and_int_to_float():
 
 
 @pytest.mark.parametrize("values,needle", [
-    ({"min_particle": 5}, "unknown parameter(s) ['min_particle']"),
+    ({"min_particle": 5}, "unknown parameter 'min_particle' (did you mean 'min_particles'?)"),
     ({"min_particles": 5.5}, "'min_particles' must be an integer"),
     ({"min_particles": True}, "'min_particles' must be an integer"),
     ({"tf_broadcast": "yes"}, "'tf_broadcast' must be true or false"),

@@ -8,7 +8,6 @@ import zlib
 import pytest
 import zenoh
 import zstandard
-from mcap.exceptions import McapError
 from mcap.reader import make_reader
 from mcap.records import Chunk, Message, MessageIndex
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -18,7 +17,7 @@ from omninav.schemas.attachment import pack_attachment
 from omninav.schemas.codec import encode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Chatter, Clock, Header
-from omninav.services.recorder.mcap_io import RecordingWriter, read_readable_records, read_records
+from omninav.services.recorder.mcap_io import RecordingError, RecordingWriter, read_readable_records, read_records
 from omninav.services.recorder.node import RecorderNode, RecorderParams, distinct_key_exprs
 from omninav.services.recorder.tally import SequenceTally
 from omninav.services.runtime.zenoh_config import open_client
@@ -124,7 +123,7 @@ def test_a_file_cut_after_a_flush_keeps_everything_flushed(tmp_path):
     cut = tmp_path / "copy.mcap"
     cut.write_bytes(path.read_bytes())
     writer.close()
-    with pytest.raises(McapError):
+    with pytest.raises(RecordingError, match="omninav recover"):
         list(read_records(cut))
     readable, why = read_readable_records(cut)
     assert len(readable) == 60 and why
@@ -220,7 +219,7 @@ def test_sigkilled_recorder_file_is_recovered_completely(processes, router_endpo
     # the flush timer alone (no stop, no more traffic) must bring every message to disk
     wait_until(lambda: len(read_readable_records(out)[0]) == n, 30, what="the burst flushed to disk")
     processes.stop(recorder, signal.SIGKILL)
-    with pytest.raises(McapError):
+    with pytest.raises(RecordingError, match="omninav recover"):
         list(read_records(out))
     before = hashlib.sha256(out.read_bytes()).hexdigest()
 

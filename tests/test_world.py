@@ -130,7 +130,8 @@ GOOD = {"name": "t", "bounds": [10.0, 8.0], "robot": {"start": [1.0, 1.0, 0.0]}}
     ({"robot": {"start": [1.0, 1.0, 0.0], "footprint": [[0, 0], [1, 1], [2, 2]]}}, r"robot\.footprint: encloses no area"),
     ({"goals": [[1.0, 2.0]]}, r"goals\[0\]: expected \[x, y, yaw\]"),
     ({"map": {"yaml": "nowhere.yaml"}}, r"map\.yaml: .*nowhere\.yaml: no such file"),
-    ({"map": {"path": "nowhere.yaml"}}, r"map\.yaml: missing"),
+    ({"map": {"path": "nowhere.yaml"}}, r"map: unknown key 'path'"),
+    ({"map": {}}, r"map\.yaml: missing"),
     ({"map": {"yaml": "m.yaml", "relative_to": "home"}}, r"map\.relative_to: expected 'world' or 'data'"),
 ])
 def test_broken_world_files_name_file_and_key(tmp_path, change, message):
@@ -155,9 +156,11 @@ def test_missing_world_file(tmp_path):
         load_world(tmp_path / "gone.yaml")
 
 
-def test_extra_keys_are_allowed(tmp_path):
-    world = box_world(tmp_path, lights={"ceiling": 3}, robot={"start": [5.0, 4.0, 0.0], "wheel_radius": 0.076})
-    assert world.name == "w" and len(world.solids) == 4  # just the outer walls
+def test_unknown_keys_are_refused_not_ignored(tmp_path):
+    with pytest.raises(WorldError, match="top level: unknown key 'lights'"):
+        box_world(tmp_path, lights={"ceiling": 3})
+    with pytest.raises(WorldError, match="robot: unknown key 'wheel_radius'"):
+        box_world(tmp_path, robot={"start": [5.0, 4.0, 0.0], "wheel_radius": 0.076})
 
 
 # ---------------------------------------------------------------- maps in worlds
@@ -327,3 +330,18 @@ def test_shipped_warehouse_movers_yield_and_the_crossing_people_do_not():
 def test_no_movers(tmp_path):
     world = box_world(tmp_path)
     assert world.movers.pose_at(1.0).shape == (0, 2) and world.movers.circles_at(1.0).shape == (0, 3)
+
+
+@pytest.mark.parametrize("text,problem", [
+    ("boxs: []\n", "unknown key 'boxs' (did you mean 'boxes'?)"),
+    ("robot: {start: [1, 1, 0], drve: diff}\n", "robot: unknown key 'drve' (did you mean 'drive'?)"),
+    ("boxes: [{center: [2, 2], size: [1, 1], yaww: 1}]\n", "boxes[0]: unknown key 'yaww' (did you mean 'yaw'?)"),
+    ("movers: [{radius: 0.3, speed: 1, path: [[1, 1], [2, 2]], yield: 1}]\n", "movers[0]: unknown key 'yield'"),
+])
+def test_a_misspelt_key_is_an_error_naming_it_and_the_closest_known_one(tmp_path, text, problem):
+    path = tmp_path / "w.yaml"
+    base = "bounds: [5, 5]\n" + ("" if text.startswith("robot") else "robot: {start: [1, 1, 0]}\n")
+    path.write_text(base + text)
+    with pytest.raises(WorldError) as err:
+        load_world(path)
+    assert problem in str(err.value) and str(path) in str(err.value)

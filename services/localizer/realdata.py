@@ -33,7 +33,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from mcap.exceptions import McapError
 from scipy import ndimage
 
 from ...schemas import MessageError, decode
@@ -42,7 +41,7 @@ from ...schemas.keys import KeyLayout
 from ...schemas.messages import LaserScan, OccupancyGrid, Odometry, Transform
 from ...schemas.registry import type_info
 from ..map_server.mapio import MapError, cell_to_world, load_map
-from ..recorder.mcap_io import Record, read_records
+from ..recorder.mcap_io import Record, RecordingError, read_records
 from ..replay.into import replay_into
 from ..runtime.node import NS_PER_S
 from ..runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
@@ -92,8 +91,10 @@ def load_run(path: str | Path, scan_topic: str, odom_topic: str, robot: str = "r
             records = list(read_records(path, [keys.robot("scan"), keys.robot("odom")]))
             scans = [decode(r.payload, LaserScan, key=r.key) for r in records if r.key == keys.robot("scan")]
             odometry = [decode(r.payload, Odometry, key=r.key) for r in records if r.key == keys.robot("odom")]
-        except (McapError, EOFError, ValueError, OSError, MessageError) as exc:
-            raise RealDataError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc})") from None
+        except RecordingError as exc:
+            raise RealDataError(str(exc)) from None
+        except MessageError as exc:
+            raise RealDataError(f"{path}: {exc}") from None
     else:
         from ..importers.rosbag import RosbagError, read_bag
         try:

@@ -23,13 +23,12 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
-from mcap.exceptions import McapError
 
 from ...schemas import MessageError, decode
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ...schemas.messages import Goal, NavStatus, Path as PathMsg
 from ...sim.world import World, point_segment_distance, points_in_polygons, transform_points
-from ..recorder.mcap_io import read_records
+from ..recorder.mcap_io import RecordingError, read_records
 from ..runtime.errors import UserError
 from ..runtime.node import NS_PER_S
 from ..se2 import wrap_angle
@@ -140,11 +139,8 @@ def load_mission(path: str | Path, robot: str = DEFAULT_ROBOT) -> MissionRecord:
     try:
         for rec in read_records(path, collector.wanted):
             collector.add(rec.key, rec.payload)
-    except FileNotFoundError:
-        raise MissionError(f"{path}: no such recording") from None
-    except (McapError, EOFError, ValueError, OSError) as exc:
-        raise MissionError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc}); "
-                           f"`omninav recover {path}` rewrites what is readable") from None
+    except RecordingError as exc:
+        raise MissionError(str(exc)) from None
     return collector.record(str(path))
 
 

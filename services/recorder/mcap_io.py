@@ -241,13 +241,23 @@ def recording_summary(path: str | Path) -> Summary:
     return summary
 
 
+class RecordingError(ValueError):
+    """A recording that cannot be read: one line naming the file and what is wrong with it."""
+
+
 def read_records(path: str | Path, keys: Iterable[str] | None = None) -> Iterator[Record]:
-    """Every message of a finished recording, in file order (raises McapError on a damaged file)."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"{path}: no such recording")
+    """Every message of a finished recording, in file order; RecordingError when there is no such
+    file, it is not MCAP, or it is damaged."""
+    try:
+        path = check_mcap_file(path)
+    except (FileNotFoundError, McapError) as exc:
+        raise RecordingError(str(exc)) from None
     with open(path, "rb") as f:
-        yield from _records(make_reader(f), keys)
+        try:
+            yield from _records(make_reader(f), keys)
+        except (McapError, EOFError, ValueError, OSError, struct.error) as exc:
+            raise RecordingError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc}); "
+                                 f"`omninav recover {path}` rewrites what is readable") from None
 
 
 def read_readable_records(path: str | Path) -> tuple[list[Record], str | None]:

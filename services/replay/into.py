@@ -19,13 +19,12 @@ from pathlib import Path
 from typing import Any, Iterable
 
 import numpy as np
-from mcap.exceptions import McapError
 
 from ..runtime.errors import UserError, exits_2_on_user_error
 from ...schemas import MessageError, decode
 from ...schemas.keys import KeyLayout
 from ...schemas.messages import Diagnostic
-from ..recorder.mcap_io import Record, RecordingWriter, read_records
+from ..recorder.mcap_io import Record, RecordingError, RecordingWriter, read_records
 from ..runtime.live import RUN_STARTED
 from ..runtime.merge import order_key
 from ..runtime.node import NS_PER_S, PARAMS_VALUE, Node, Publisher
@@ -255,11 +254,8 @@ def _seconds(stamp_ns: int) -> str:
 def _load(path: str, keys: set[str]) -> list[Record]:
     try:
         return list(read_records(path, keys))
-    except FileNotFoundError as exc:
+    except RecordingError as exc:
         raise ReplayError(str(exc)) from None
-    except (McapError, EOFError, ValueError, OSError) as exc:
-        raise ReplayError(f"{path}: not a readable MCAP recording ({type(exc).__name__}: {exc}); "
-                          f"`omninav recover {path}` rewrites what is readable") from None
 
 
 def _alignment_notes(node: Node, alignment: Alignment, run: ReplayRun, diag_key: str) -> list[str]:

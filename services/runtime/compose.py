@@ -13,7 +13,7 @@ from typing import Any
 
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout
 from .node import Node
-from .params import ParamError, load_params, load_params_file, read_yaml, unwrap_ros
+from .params import ParamError, load_params, load_params_file, read_yaml, unknown_names, unwrap_ros
 from .registry import UnknownService, node_class
 from .zenoh_config import check_loopback
 
@@ -156,6 +156,6 @@ def _robot(value: Any, where: str) -> str:
 
 
 def _no_unknown_keys(mapping: dict, known: tuple[str, ...], where: str) -> None:
-    unknown = sorted(map(str, set(mapping) - set(known)))
-    if unknown:
-        raise ComposeError(f"{where}: unknown key(s) {unknown}; known: {list(known)}")
+    problem = unknown_names(mapping, known)
+    if problem:
+        raise ComposeError(f"{where}: {problem}")

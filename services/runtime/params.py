@@ -6,6 +6,7 @@ file (flat, or under the node's name) both give the flat mapping.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import math
 import typing
 from pathlib import Path
@@ -86,14 +87,25 @@ def _coerce(name: str, hint: Any, value: Any, source: str) -> Any:
     return value
 
 
+def unknown_names(given, known, what: str = "key") -> str:
+    """'' when every given name is known; else one line naming each unknown one with the closest
+    known name: "unknown key 'boxs' (did you mean 'boxes'?)"."""
+    known = sorted(map(str, known))
+    parts = []
+    for name in sorted(map(str, set(given) - set(known))):
+        close = difflib.get_close_matches(name, known, n=1, cutoff=0.6)
+        parts.append(f"unknown {what} {name!r}" + (f" (did you mean {close[0]!r}?)" if close else ""))
+    return "; ".join(parts) + (f"; known: {', '.join(known)}" if parts else "")
+
+
 def load_params(cls: type, values: dict | None, source: str = "parameters") -> Any:
     """Build `cls` (a dataclass) from a mapping; unknown names and wrong types raise ParamError."""
     values = dict(values or {})
     hints = typing.get_type_hints(cls)
     known = {f.name for f in dataclasses.fields(cls) if f.init}
-    unknown = sorted(set(values) - known)
-    if unknown:
-        raise ParamError(f"{source}: unknown parameter(s) {unknown} for {cls.__name__}; known: {sorted(known)}")
+    problem = unknown_names(values, known, "parameter")
+    if problem:
+        raise ParamError(f"{source}: {cls.__name__}: {problem}")
     kwargs = {name: _coerce(name, hints[name], v, source) for name, v in values.items()}
     for name, v in kwargs.items():
         if isinstance(v, float) and not math.isfinite(v):
