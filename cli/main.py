@@ -21,6 +21,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "get": ("omninav.cli.introspect", "query a queryable and print the reply"),
     "teleop": ("omninav.cli.teleop", "drive the robot from the keyboard"),
     "report": ("omninav.cli.report", "draw a picture of a recording"),
+    "view": ("omninav.cli.view", "show the running stack in the Foxglove app (WebSocket server on 127.0.0.1)"),
     "map": ("omninav.cli.map", "save the map served on the bus, or draw a map file"),
     "import": ("omninav.cli.importers", "convert CARMEN logs or ROS bags into MCAP recordings"),
     "localize-eval": ("omninav.services.localizer.evaluate", "score AMCL in the simulator against the ground truth"),
