@@ -23,6 +23,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "report": ("omninav.cli.report", "draw a picture of a recording"),
     "view": ("omninav.cli.view", "show the running stack in the Foxglove app (WebSocket server on 127.0.0.1)"),
     "map": ("omninav.cli.map", "save the map served on the bus, or draw a map file"),
+    "export": ("omninav.cli.export", "write a recording in Foxglove's well-known schemas (--foxglove)"),
     "import": ("omninav.cli.importers", "convert CARMEN logs or ROS bags into MCAP recordings"),
     "localize-eval": ("omninav.services.localizer.evaluate", "score AMCL in the simulator against the ground truth"),
     "slam-eval": ("omninav.services.slam.evaluate", "run SLAM on a CARMEN log and score it with the relations metric"),

@@ -10,9 +10,8 @@ from omninav.schemas.keys import KeyLayout
 from omninav.services.view import convert
 from omninav.services.view.convert import Converter, RouteTable, ViewParams
 
-from foxglove_decoding import decode_foxglove
+from view_fixtures import S, decode_foxglove
 
-S = 1_000_000_000
 
 
 def header(frame: str, stamp_s: float = 2.5) -> m.Header:
@@ -108,7 +107,9 @@ def test_movers_are_cylinders_of_their_radius():
 
 def test_diagnostic_is_json_with_its_values():
     diag = m.Diagnostic(header("", 3.0), "costmap", 1, "late", {"received/x": 4, "params": "{}"})
-    assert json.loads(json.dumps(convert.diagnostic(diag))) == {
+    message = convert.diagnostic(diag)
+    assert message.schema_name == "omninav.Diagnostic" and "values" in message.schema["properties"]
+    assert json.loads(json.dumps(message.value)) == {
         "timestamp": {"sec": 3, "nsec": 0}, "name": "costmap", "level": 1, "message": "late",
         "values": {"received/x": 4, "params": "{}"}}
 

@@ -12,48 +12,15 @@ import websockets
 
 from omninav.schemas import decode
 from omninav.schemas.codec import encode
-from omninav.schemas import messages as m
 from omninav.schemas.keys import KeyLayout
 from omninav.services.runtime.zenoh_config import open_client
 
 from conftest import free_port
-from foxglove_decoding import decode_with_schema
+from view_fixtures import S, VIEW_CHANNELS, decode_with_schema, stack_messages
 
 # the SDK's current subprotocol and the one older Foxglove servers speak; the app offers both
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = 0x01     # binary opcode, server → client and client → server
-S = 1_000_000_000
-EXPECTED = {"/map": "foxglove.Grid", "/costmap/global": "foxglove.Grid", "/costmap/local": "foxglove.Grid",
-            "/scan": "foxglove.LaserScan", "/tf": "foxglove.FrameTransforms", "/truth/robot": "foxglove.SceneUpdate",
-            "/truth/movers": "foxglove.SceneUpdate", "/localizer/pose": "foxglove.PoseInFrame",
-            "/localizer/particles": "foxglove.PosesInFrame", "/plan": "foxglove.PosesInFrame",
-            "/local_plan": "foxglove.PosesInFrame", "/goal": "foxglove.PosesInFrame",
-            "/diagnostics/costmap": ""}
-
-
-def stack_messages(stamp_ns: int) -> dict[str, object]:
-    """One message on every key the view shows, as the services would publish them."""
-    h = lambda frame: m.Header(stamp_ns=stamp_ns, frame_id=frame)     # noqa: E731
-    info = m.MapMetaData(0.1, 4, 3, m.Pose2D(-0.2, -0.1, 0.0))
-    poses = np.array([[0.0, 0.0, 0.0], [1.0, 0.5, 0.3]])
-    keys = KeyLayout("r1")
-    return {
-        keys.resolve("map"): m.OccupancyGrid(h("map"), info, np.zeros((3, 4), np.int8)),
-        keys.resolve("costmap/global"): m.Costmap(h("map"), info, np.full((3, 4), 254, np.uint8)),
-        keys.resolve("costmap/local"): m.Costmap(h("odom"), info, np.zeros((3, 4), np.uint8)),
-        keys.resolve("scan"): m.LaserScan(h("laser"), -0.1, 0.1, 0.1, range_max=5.0,
-                                          ranges=np.array([1.0, 2.0, np.inf], np.float32)),
-        keys.resolve("sim/truth"): m.Odometry(h("world"), "base_link", m.Pose2D(1.0, 2.0, 0.5)),
-        keys.resolve("odom"): m.Odometry(h("odom"), "base_link", m.Pose2D(0.9, 2.1, 0.4)),
-        keys.resolve("tf/map_odom"): m.Transform(h("map"), "odom", m.Pose2D(0.1, -0.1, 0.1)),
-        keys.resolve("pose"): m.PoseWithCovariance(h("map"), m.Pose2D(1.0, 2.0, 0.5)),
-        keys.resolve("particlecloud"): m.ParticleCloud(h("map"), poses, np.full(2, 0.5)),
-        keys.resolve("plan"): m.Path(h("map"), poses, goal_id="g1"),
-        keys.resolve("local_plan"): m.Path(h("odom"), poses, goal_id="g1"),
-        keys.resolve("goal"): m.Goal(h("map"), "g1", m.Pose2D(3.0, 4.0, 0.0)),
-        keys.resolve("sim/movers"): m.Obstacles(h("world"), np.array([[2.0, 2.0, 0.3]]), np.zeros((1, 2))),
-        keys.diagnostics("costmap"): m.Diagnostic(h(""), "costmap", 0, "ok", {"received/scan": 3}),
-    }
 
 
 class FoxgloveClient:
@@ -121,7 +88,7 @@ async def watch_and_send_goals(port: int, heard: dict) -> FoxgloveClient:
     async with ws:
         assert ws.subprotocol in SUBPROTOCOLS
         client = FoxgloveClient(ws)
-        await client.receive(lambda c: set(EXPECTED) <= set(c.decoded), 90)
+        await client.receive(lambda c: set(VIEW_CHANNELS) <= set(c.decoded), 90)
         # a client channel on a motion topic is refused; the goal channel reaches the navigator's key
         await client.publish(1, "/cmd_vel", pose_stamped(9.0, 9.0, 0.0))
         await client.publish(2, "/goal_pose", pose_stamped(1.5, -2.0, 0.8))
@@ -160,9 +127,7 @@ def test_the_view_serves_every_channel_and_forwards_goals_only_to_the_goal_key(p
     assert processes.stop(view) == 0
 
     advertised = {c["topic"]: c["schemaName"] for c in client.channels.values()}
-    for topic, schema in EXPECTED.items():
-        if schema:
-            assert advertised[topic] == schema
+    assert {topic: advertised[topic] for topic in VIEW_CHANNELS} == VIEW_CHANNELS
     assert all(c["encoding"] in ("protobuf", "json") for c in client.channels.values())
     grid = client.decoded["/map"][0]
     assert (grid.column_count, grid.cell_size.x) == (4, 0.1)

@@ -1,16 +1,19 @@
 """Foxglove channels opened on first use, in one foxglove Context (a WebSocket server or an MCAP writer).
 
 Each topic gets the SDK's typed channel for the message's schema (GridChannel for a Grid, …) or,
-for a dict, a JSON channel. The latest message of every topic is kept, so a viewer that
+for a JsonMessage, a JSON channel with its JSON Schema. The latest message of every topic is kept, so a viewer that
 subscribes late (after the map was published once) can be sent it again.
 """
 from __future__ import annotations
 
+import json
 import threading
 from typing import Any
 
 import foxglove
 import foxglove.channels
+
+from .convert import JsonMessage
 
 
 class ChannelSet:
@@ -24,8 +27,10 @@ class ChannelSet:
     def _channel(self, topic: str, message: Any):
         channel = self._channels.get(topic)
         if channel is None:
-            if isinstance(message, dict):
-                channel = foxglove.Channel(topic, message_encoding="json", context=self.context)
+            if isinstance(message, JsonMessage):
+                schema = foxglove.Schema(name=message.schema_name, encoding="jsonschema",
+                                         data=json.dumps(message.schema).encode())
+                channel = foxglove.Channel(topic, schema=schema, message_encoding="json", context=self.context)
             else:
                 channel_class = getattr(foxglove.channels, f"{type(message).__name__}Channel")
                 channel = channel_class(topic, context=self.context)
@@ -36,14 +41,18 @@ class ChannelSet:
         with self._lock:
             channel = self._channel(topic, message)
             self._latest[topic] = message
-        channel.log(message, log_time=log_time_ns)
+        self._log(channel, message, log_time_ns)
+
+    @staticmethod
+    def _log(channel, message: Any, log_time_ns: int | None = None) -> None:
+        channel.log(message.value if isinstance(message, JsonMessage) else message, log_time=log_time_ns)
 
     def resend_latest(self, topic: str) -> None:
         """Log the newest message of a topic again (for a viewer that just subscribed to it)."""
         with self._lock:
             channel, message = self._channels.get(topic), self._latest.get(topic)
         if channel is not None:
-            channel.log(message)
+            self._log(channel, message)
 
     @property
     def topics(self) -> list[str]:

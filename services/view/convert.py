@@ -31,7 +31,28 @@ MOVER_COLOR = Color(r=0.9, g=0.4, b=0.1, a=0.8)
 MOVER_HEIGHT_M = 0.5
 MAX_SEC = 2**32 - 1
 
-Output = tuple[str, Any]        # (Foxglove topic, a foxglove.messages instance or a JSON dict)
+
+
+@dataclass(frozen=True)
+class JsonMessage:
+    """A message for a JSON channel, with the JSON Schema that names and describes its type."""
+    schema_name: str
+    schema: dict
+    value: dict
+
+
+Output = tuple[str, Any]        # (Foxglove topic, a foxglove.messages instance or a JsonMessage)
+
+DIAGNOSTIC_SCHEMA = {
+    "type": "object",
+    "properties": {
+        "timestamp": {"type": "object", "properties": {"sec": {"type": "integer"}, "nsec": {"type": "integer"}}},
+        "name": {"type": "string", "description": "the service"},
+        "level": {"type": "integer", "description": "0 ok, 1 warn, 2 error"},
+        "message": {"type": "string"},
+        "values": {"type": "object", "description": "counters, first input seqs, parameters"},
+    },
+}
 
 
 @dataclass(frozen=True)
@@ -182,10 +203,11 @@ def movers(msg: m.Obstacles) -> SceneUpdate:
                                              cylinders=cylinders)])
 
 
-def diagnostic(msg: m.Diagnostic) -> dict:
+def diagnostic(msg: m.Diagnostic) -> JsonMessage:
     """A service's Diagnostic as JSON (Foxglove shows it in a Raw Messages panel)."""
-    return {"timestamp": {"sec": msg.header.stamp_ns // NS_PER_S, "nsec": msg.header.stamp_ns % NS_PER_S},
-            "name": msg.name, "level": msg.level, "message": msg.message, "values": dict(msg.values)}
+    return JsonMessage("omninav.Diagnostic", DIAGNOSTIC_SCHEMA, {
+        "timestamp": {"sec": msg.header.stamp_ns // NS_PER_S, "nsec": msg.header.stamp_ns % NS_PER_S},
+        "name": msg.name, "level": msg.level, "message": msg.message, "values": dict(msg.values)})
 
 
 # ---------------------------------------------------------------- which key goes where
