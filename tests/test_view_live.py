@@ -8,11 +8,13 @@ import struct
 import threading
 
 import numpy as np
+import pytest
 import websockets
 
 from omninav.schemas import decode
 from omninav.schemas.codec import encode
 from omninav.schemas.keys import KeyLayout
+from omninav.services.runtime.compose import ComposeError, load_compose
 from omninav.services.runtime.zenoh_config import open_client
 
 from conftest import free_port
@@ -140,3 +142,13 @@ def test_the_view_serves_every_channel_and_forwards_goals_only_to_the_goal_key(p
     assert goal.header.frame_id == "map"
     assert np.allclose((goal.pose.x, goal.pose.y, goal.pose.theta), (1.5, -2.0, 0.8))
     assert heard["cmd_vel"] == []
+
+
+def test_compose_files_run_the_view_by_name_with_its_port(tmp_path):
+    compose = tmp_path / "view.yaml"
+    compose.write_text("services:\n  - name: view\n    service: view\n    params: {port: 8766, grid_period_s: 2.0}\n")
+    (spec,) = load_compose(compose).services
+    assert (spec.service, spec.params) == ("view", {"port": 8766, "grid_period_s": 2.0})
+    compose.write_text("services:\n  - name: view\n    service: view\n    params: {host: 0.0.0.0}\n")
+    with pytest.raises(ComposeError, match="host"):       # no parameter opens it beyond loopback
+        load_compose(compose)
