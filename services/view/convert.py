@@ -9,8 +9,8 @@ Adding a message kind (e.g. tracked moving obstacles) is one function plus one R
 from __future__ import annotations
 
 import math
-from json import JSONDecodeError, loads
 from dataclasses import dataclass
+from json import JSONDecodeError, loads
 from typing import Any, Callable
 
 import numpy as np
@@ -21,16 +21,14 @@ from foxglove.messages import (Color, CylinderPrimitive, FrameTransform, FrameTr
 
 from ...schemas import messages as m
 from ...schemas.keys import KeyLayout, type_for_key
+from ...sim.world import DEFAULT_FOOTPRINT
 
 NS_PER_S = 1_000_000_000
 WORLD_FRAME, MAP_FRAME, BASE_FRAME = "world", "map", "base_link"
-# (x, y) corners in base_link: the simulator's default robot (sim/world.py DEFAULT_FOOTPRINT)
-DEFAULT_FOOTPRINT = ((0.416, 0.318), (-0.416, 0.318), (-0.416, -0.318), (0.416, -0.318))
 TRUTH_COLOR = Color(r=0.1, g=0.8, b=0.2, a=1.0)
 MOVER_COLOR = Color(r=0.9, g=0.4, b=0.1, a=0.8)
 MOVER_HEIGHT_M = 0.5
 MAX_SEC = 2**32 - 1
-
 
 
 @dataclass(frozen=True)
@@ -58,8 +56,8 @@ DIAGNOSTIC_SCHEMA = {
 @dataclass(frozen=True)
 class ViewParams:
     """What the messages do not say: the robot's outline and where its lidar sits."""
-    footprint: tuple[tuple[float, float], ...] = DEFAULT_FOOTPRINT     # polygon in base_link, m
-    laser_frame: str = "laser"
+    # polygon in base_link, m: the simulator's default robot
+    footprint: tuple[tuple[float, float], ...] = tuple(map(tuple, DEFAULT_FOOTPRINT.tolist()))
     laser_mount: tuple[float, float, float] = (0.0, 0.0, 0.0)            # x, y, yaw of the laser in base_link
 
     def __post_init__(self):
@@ -74,8 +72,10 @@ class ViewParams:
 def timestamp(stamp_ns: int) -> Timestamp:
     """Foxglove's time is unsigned 32-bit seconds: a stamp outside that (only a broken publisher
     sends one) is shown at the nearest end rather than refused."""
-    sec = min(max(stamp_ns // NS_PER_S, 0), MAX_SEC)
-    return Timestamp(sec=sec, nsec=stamp_ns % NS_PER_S if 0 <= stamp_ns // NS_PER_S <= MAX_SEC else 0)
+    sec, nsec = divmod(stamp_ns, NS_PER_S)
+    if not 0 <= sec <= MAX_SEC:
+        sec, nsec = min(max(sec, 0), MAX_SEC), 0
+    return Timestamp(sec=sec, nsec=nsec)
 
 
 def yaw_quaternion(theta: float) -> Quaternion:
