@@ -73,6 +73,14 @@ def pose_stamped(x: float, y: float, yaw: float) -> dict:
                      "orientation": {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)}}}
 
 
+TREE = {("world", "map"), ("map", "odom"), ("odom", "base_link"), ("base_link", "laser")}
+
+
+def frames(client: FoxgloveClient) -> set[tuple[str, str]]:
+    """(parent, child) of every transform seen on /tf (each message holds one of them)."""
+    return {(t.parent_frame_id, t.child_frame_id) for tf in client.decoded.get("/tf", []) for t in tf.transforms}
+
+
 def from_foxglove(goals: list) -> list:
     """The goals the view forwarded (the test itself also publishes goal g1, as a navigator user would)."""
     return [g for g in goals if g.goal_id.startswith("foxglove-")]
@@ -90,7 +98,7 @@ async def watch_and_send_goals(port: int, heard: dict) -> FoxgloveClient:
     async with ws:
         assert ws.subprotocol in SUBPROTOCOLS
         client = FoxgloveClient(ws)
-        await client.receive(lambda c: set(VIEW_CHANNELS) <= set(c.decoded), 90)
+        await client.receive(lambda c: set(VIEW_CHANNELS) <= set(c.decoded) and TREE <= frames(c), 90)
         # a client channel on a motion topic is refused; the goal channel reaches the navigator's key
         await client.publish(1, "/cmd_vel", pose_stamped(9.0, 9.0, 0.0))
         await client.publish(2, "/goal_pose", pose_stamped(1.5, -2.0, 0.8))
@@ -134,8 +142,7 @@ def test_the_view_serves_every_channel_and_forwards_goals_only_to_the_goal_key(p
     grid = client.decoded["/map"][0]
     assert (grid.column_count, grid.cell_size.x) == (4, 0.1)
     assert list(client.decoded["/scan"][0].ranges[:2]) == [1.0, 2.0]
-    frames = {(t.parent_frame_id, t.child_frame_id) for tf in client.decoded["/tf"] for t in tf.transforms}
-    assert {("world", "map"), ("map", "odom"), ("odom", "base_link"), ("base_link", "laser")} <= frames
+    assert TREE <= frames(client)
     assert client.decoded["/diagnostics/costmap"][0]["values"] == {"received/scan": 3}
     assert [(p.position.x, p.position.y) for p in client.decoded["/plan"][0].poses] == [(0.0, 0.0), (1.0, 0.5)]
     (goal,) = from_foxglove(heard["goal"])
