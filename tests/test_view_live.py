@@ -4,6 +4,7 @@ import asyncio
 import base64
 import json
 import math
+import socket
 import struct
 import threading
 
@@ -159,3 +160,12 @@ def test_compose_files_run_the_view_by_name_with_its_port(tmp_path):
     compose.write_text("services:\n  - name: view\n    service: view\n    params: {host: 0.0.0.0}\n")
     with pytest.raises(ComposeError, match="host"):       # no parameter opens it beyond loopback
         load_compose(compose)
+
+
+def test_a_taken_port_stops_the_view_with_one_line_saying_so(processes):
+    with socket.socket() as taken:
+        taken.bind(("127.0.0.1", 0))
+        taken.listen()
+        view = processes.omninav("view", "--port", str(taken.getsockname()[1]))
+        assert view.wait(60) != 0
+    assert "cannot serve on 127.0.0.1:" in processes.log_of(view)

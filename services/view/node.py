@@ -107,7 +107,10 @@ class ViewNode(Node):
         """Serve viewers while the bus is followed; the server lives only as long as the live run."""
         runner = LiveRunner(self, router)
         runner.stop_event = stop_event
-        self.start_server()
+        try:
+            self.start_server()
+        except RuntimeError as exc:     # the SDK's FoxgloveError, e.g. the port is taken
+            raise SystemExit(f"view: cannot serve on {LOOPBACK}:{self.params.port}: {exc}") from None
         try:
             runner.run()
         finally:
