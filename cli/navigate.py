@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import queue
 import signal
 import subprocess
@@ -40,7 +41,7 @@ from ..services.runtime.compose import ComposeError, load_compose
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..services.runtime.live import LiveRunner
 from ..services.runtime.node import NS_PER_S, Node
-from ..services.runtime.zenoh_config import free_loopback_endpoint, open_client
+from ..services.runtime.zenoh_config import ROUTER_ENV, free_loopback_endpoint, open_client, router_endpoint
 from ..sim.node import open_world
 from ..sim.world import World, WorldError, world_path
 
@@ -380,8 +381,9 @@ def run_processes(compose: dict, compose_file: Path, args: argparse.Namespace, r
     """Every service its own process under `omninav up`; the goals sent over the bus."""
     names = [s["name"] for s in compose["services"]]
 
-    router = free_loopback_endpoint()
-    say(f"starting them as processes; log {log}")
+    # $OMNINAV_ROUTER names the mission's router, so `omninav view` can join it; else any free port
+    router = router_endpoint() if os.environ.get(ROUTER_ENV) else free_loopback_endpoint()
+    say(f"starting them as processes on the router {router}; log {log}")
     up = start_stack(compose_file, router, log)
     problem = ""
     try:

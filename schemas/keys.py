@@ -88,6 +88,10 @@ class KeyLayout:
     def diagnostics(self, service: str) -> str:
         return f"{ROOT}/{self.robot_name}/diagnostics/{_check_segment('service name', service)}"
 
+    def diagnostics_of_all(self) -> str:
+        """The key expression of every service's diagnostics (for a viewer of them all)."""
+        return f"{ROOT}/{self.robot_name}/diagnostics/*"
+
     def alive(self, service: str) -> str:
         """The liveliness token a running service declares once its inputs and outputs are in place."""
         return f"{ROOT}/{self.robot_name}/alive/{_check_segment('service name', service)}"

@@ -1,0 +1,31 @@
+"""`omninav export --foxglove IN.mcap -o OUT.mcap`: a recording for the Foxglove app (or any MCAP viewer
+that knows Foxglove's well-known schemas): map, costmaps, scans, frames, robot, paths, goals, movers
+and diagnostics, the channels of `omninav view`. IN.mcap is only read."""
+from __future__ import annotations
+
+import argparse
+
+from ..services.recorder.mcap_io import RecordingError
+from ..services.runtime.errors import UserError, exits_2_on_user_error
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("input", help="an omninav recording (MCAP, msgpack messages)")
+    parser.add_argument("--foxglove", action="store_true", required=True,
+                        help="write Foxglove's well-known schemas (the only export format so far)")
+    parser.add_argument("-o", "--output", required=True, help="the MCAP file to write (must not exist)")
+    parser.add_argument("--robot", default="r1", help="robot namespace (default r1)")
+
+
+@exits_2_on_user_error("export")
+def main(args: argparse.Namespace) -> int:
+    from ..services.view.export import export_foxglove     # foxglove-sdk only when exporting
+    try:
+        counts = export_foxglove(args.input, args.output, args.robot)
+    except (RecordingError, FileExistsError) as exc:
+        raise UserError(str(exc)) from None
+    exported = {topic: n for topic, n in counts.items() if not topic.startswith("malformed/")}
+    print(f"wrote {sum(exported.values())} messages on {len(exported)} channels to {args.output}")
+    for topic, n in sorted(counts.items()):
+        print(f"  {topic:32s} {n:8d}")
+    return 0

@@ -1,0 +1,1 @@
+"""The live view in the Foxglove app (node.py) and the Foxglove export of recordings (export.py), over one conversion (convert.py)."""

@@ -1,0 +1,53 @@
+"""A recording in Foxglove's well-known schemas: the live view's channels, written with foxglove-sdk's
+MCAP writer. The input recording is only read (its msgpack channels stay the replayable original).
+
+log_time of every exported message is its sim stamp, so the Foxglove app's timeline is sim time.
+"""
+from __future__ import annotations
+
+from collections import Counter
+from pathlib import Path
+
+import foxglove
+
+from ...schemas import MessageError, decode
+from ...schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
+from ..recorder.mcap_io import read_records
+from .channels import ChannelSet
+from .convert import Converter, RouteTable, ViewParams
+
+PROFILE = "omninav-foxglove"
+
+
+def export_foxglove(source: str | Path, target: str | Path, robot: str = DEFAULT_ROBOT,
+                    params: ViewParams | None = None) -> Counter[str]:
+    """Write target from the recording at source; returns how many messages went to each topic, and
+    under 'malformed/<key>' how many recorded payloads did not decode (they are skipped). Raises
+    RecordingError for an unreadable source and FileExistsError when target exists."""
+    target = Path(target)
+    if target.exists():
+        raise FileExistsError(f"{target} exists; the export never overwrites a file (choose another output)")
+    routes = RouteTable(KeyLayout(robot))
+    converter = Converter(params)
+    context = foxglove.Context()     # its own: nothing else logged in this process lands in the file
+    channels = ChannelSet(context)
+    counts: Counter[str] = Counter()
+    writer = foxglove.open_mcap(target, context=context,
+                                writer_options=foxglove.mcap.MCAPWriteOptions(profile=PROFILE))
+    try:
+        for record in read_records(source):
+            route = routes.route_for(record.key)
+            if route is None:
+                continue
+            try:
+                msg = decode(record.payload, type_for_key(record.key), key=record.key)
+            except MessageError:
+                counts[f"malformed/{record.key}"] += 1
+                continue
+            for topic, message in converter.outputs(route, msg):
+                channels.log(topic, message, log_time_ns=max(msg.header.stamp_ns, 0))
+                counts[topic] += 1
+    finally:
+        writer.close()
+        channels.close()
+    return counts

@@ -1,0 +1,75 @@
+"""`omninav export --foxglove`: a recording in Foxglove's well-known schemas, read back channel by
+channel with the mcap reader; the input stays as it was."""
+import hashlib
+
+import numpy as np
+from mcap.reader import make_reader
+from mcap_protobuf.decoder import DecoderFactory
+
+from omninav.cli.main import main as cli_main
+from omninav.schemas.codec import encode
+from omninav.schemas.keys import KeyLayout
+from omninav.schemas.messages import Chatter, Header
+from omninav.services.recorder.mcap_io import RecordingWriter
+
+from view_fixtures import S, VIEW_CHANNELS, JsonDecoderFactory, stack_messages
+
+ROUNDS = 5      # 0.5 s apart: the grids, unchanged, go out once
+
+
+def write_recording(path) -> None:
+    with RecordingWriter(path) as writer:
+        for round_ in range(ROUNDS):
+            stamp = round_ * S // 2
+            for key, msg in stack_messages(stamp).items():
+                writer.write(key, type(msg).__name__, encode(msg), round_ + 1, stamp, stamp)
+            # not shown by the view: left out of the export
+            chatter = Chatter(Header(stamp_ns=stamp), "hello")
+            writer.write(KeyLayout("r1").resolve("chatter"), "Chatter", encode(chatter), round_ + 1, stamp, stamp)
+        writer.write(KeyLayout("r1").resolve("scan"), "LaserScan", b"\x93not a scan", 99, stamp, stamp)
+
+
+def read_export(path) -> dict[str, list]:
+    """topic -> [(schema name, log_time, decoded message)], as a viewer reads the file."""
+    out: dict[str, list] = {}
+    with open(path, "rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory(), JsonDecoderFactory()])
+        for schema, channel, message, decoded in reader.iter_decoded_messages():
+            out.setdefault(channel.topic, []).append((schema.name, message.log_time, decoded))
+    return out
+
+
+def test_export_writes_every_view_channel_and_leaves_the_recording_alone(tmp_path, capsys):
+    recording, exported = tmp_path / "run.mcap", tmp_path / "foxglove.mcap"
+    write_recording(recording)
+    before = hashlib.sha256(recording.read_bytes()).hexdigest()
+    assert cli_main(["export", "--foxglove", str(recording), "-o", str(exported)]) == 0
+    assert hashlib.sha256(recording.read_bytes()).hexdigest() == before
+    report = capsys.readouterr().out
+    assert "malformed/omninav/r1/scan" in report
+
+    channels = read_export(exported)
+    assert {topic: rows[0][0] for topic, rows in channels.items()} == VIEW_CHANNELS
+    # grids once (unchanged), everything else every round; log time = sim stamp
+    assert len(channels["/map"]) == len(channels["/costmap/global"]) == 1
+    assert [t for _, t, _ in channels["/scan"]] == [r * S // 2 for r in range(ROUNDS)]
+    assert len(channels["/tf"]) == 4 * ROUNDS      # world→map, map→odom, odom→base_link, base_link→laser
+    grid = channels["/costmap/global"][0][2]
+    assert (grid.column_count, grid.frame_id) == (4, "map") and set(grid.data) == {254}
+    assert list(channels["/scan"][-1][2].ranges[:2]) == [1.0, 2.0]
+    (mover,) = channels["/truth/movers"][0][2].entities[0].cylinders
+    assert (mover.pose.position.x, mover.size.x) == (2.0, 0.6)
+    assert np.allclose([p.position.x for p in channels["/plan"][0][2].poses], [0.0, 1.0])
+    assert channels["/localizer/pose"][0][2].pose.position.y == 2.0
+    assert channels["/diagnostics/costmap"][0][2]["values"] == {"received/scan": 3}
+
+
+def test_export_refuses_to_overwrite_and_names_an_unreadable_recording(tmp_path, capsys):
+    recording, exported = tmp_path / "run.mcap", tmp_path / "foxglove.mcap"
+    write_recording(recording)
+    exported.write_bytes(b"keep me")
+    assert cli_main(["export", "--foxglove", str(recording), "-o", str(exported)]) == 2
+    assert "exists" in capsys.readouterr().err and exported.read_bytes() == b"keep me"
+    (tmp_path / "junk.mcap").write_bytes(b"junk")
+    assert cli_main(["export", "--foxglove", str(tmp_path / "junk.mcap"), "-o", str(tmp_path / "out.mcap")]) == 2
+    assert "not an MCAP file" in capsys.readouterr().err
