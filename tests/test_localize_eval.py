@@ -1,5 +1,7 @@
 """`omninav localize-eval`: the routes, the harness's driving, the scoring, short runs in the simulator
 (tracking, a kidnapping), and the real racecar bag against raw odometry."""
+import contextlib
+import io
 import json
 import math
 
@@ -137,11 +139,29 @@ def test_user_errors_are_one_line(capsys, args, message):
     assert message in err and "Traceback" not in err
 
 
-@pytest.mark.skipif(not HAVE_ROSBAGS, reason="the optional rosbags package is not installed (pip install '.[rosbag]')")
-@pytest.mark.skipif(not (BAG.is_file() and BASEMENT.is_file()), reason="no shared data (bag and basement map)")
-def test_on_the_racecar_bag_the_localizer_agrees_with_the_map_better_than_odometry(capsys, tmp_path):
-    picture = tmp_path / "real.png"
-    r = _run(capsys, "--bag", str(BAG), "--map", str(BASEMENT), "--plot", str(picture))
+def needs_the_bag(test):
+    test = pytest.mark.skipif(not HAVE_ROSBAGS,
+                              reason="the optional rosbags package is not installed (pip install '.[rosbag]')")(test)
+    return pytest.mark.skipif(not (BAG.is_file() and BASEMENT.is_file()), reason="no shared data (bag and basement map)")(test)
+
+
+@pytest.fixture(scope="module")
+def racecar_run(tmp_path_factory):
+    """localize-eval on the racecar bag with amcl's behaviour (no update without motion), and its figure."""
+    picture = tmp_path_factory.mktemp("real") / "real.png"
+    return _run_quietly("--bag", str(BAG), "--map", str(BASEMENT), "--plot", str(picture)), picture
+
+
+def _run_quietly(*args):
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert omninav(["localize-eval", *args, "--json"]) == 0
+    return json.loads(out.getvalue())
+
+
+@needs_the_bag
+def test_on_the_racecar_bag_the_localizer_agrees_with_the_map_better_than_odometry(racecar_run):
+    r, picture = racecar_run
     assert r["scans"] == 281 and r["odometry"] == 350 and r["scans_scored"] > 270
     assert r["start"]["how"] == "searched" and r["laser_pose"] == [0.285, 0.0, 0.0]
     ours, odometry = r["localizer"], r["raw_odometry"]
@@ -150,6 +170,21 @@ def test_on_the_racecar_bag_the_localizer_agrees_with_the_map_better_than_odomet
     assert min(ours["per_second"]) > 0.3                    # never lost for a whole second
     assert np.mean(r["series"]["raw_odometry"][-40:]) < 0.2  # while odometry ends up in a wall
     assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@needs_the_bag
+def test_on_the_racecar_bag_temporal_updates_end_where_the_scans_fit(racecar_run):
+    # amcl: the car brakes, stands for 2.5 s, and the estimate stays where the last update left it
+    ros = racecar_run[0]["end"]
+    assert ros["distance_m"] > 0.3 and ros["localizer_share"] < ros["best_fit_share"] - 0.3
+    # an update at every scan while it stands (the racecar's lidar: 40 Hz)
+    ours = _run_quietly("--bag", str(BAG), "--map", str(BASEMENT), "--set", "temporal_update=0.025")
+    end = ours["end"]
+    assert end["distance_m"] < 0.05 and end["heading_deg"] < 1.5
+    assert end["localizer_share"] > end["best_fit_share"] - 0.02 and end["best_fit_share"] > 0.85
+    # while it drives, updates come from motion nearly always: no worse than amcl's
+    assert np.all(np.array(ours["localizer"]["per_second"][:4])
+                  > np.array(racecar_run[0]["localizer"]["per_second"][:4]) - 0.03)
 
 
 @pytest.mark.skipif(not HAVE_ROSBAGS, reason="the optional rosbags package is not installed (pip install '.[rosbag]')")

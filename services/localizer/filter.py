@@ -8,6 +8,9 @@ It runs as ROS amcl's laser callback does (amcl_node.cpp, pf.c):
   track the average weight w_avg with a slow and a fast exponential filter;
 - every resample_interval-th update resamples (unless selective_resampling finds the effective
   sample size above N/2).
+Not in amcl: with temporal_update > 0, a scan that comes that long after the last update updates
+the filter without motion too, after spreading the particles by temporal_update_jitter_* (see
+_jitter), so a robot that stopped on a wrong estimate still converges to what its scans say.
 
 Resampling draws N particles, N chosen by KLD sampling (Fox 2003): samples are drawn one by one,
 the 0.5 m × 0.5 m × 10° bins they fall in are counted (k), and drawing stops once the count
@@ -341,6 +344,7 @@ class Amcl:
         self.resampled = False            # whether the last update resampled
         self.injected = 0                 # random poses among the particles of the last resampling
         self._odom = None                 # odometry pose at the last update; None: next scan starts
+        self._update_s: float | None = None   # sim time of the last update (for temporal_update)
         self._updates = 0
         self._force_update = False
         self._estimate: PoseEstimate | None = None
@@ -387,8 +391,9 @@ class Amcl:
         self._force_update = True
 
     # ---- the update
-    def update(self, odom_pose, scan: ScanBeams) -> bool:
-        """Process one scan taken at odometry pose `odom_pose`; True when the filter updated."""
+    def update(self, odom_pose, scan: ScanBeams, stamp_s: float | None = None) -> bool:
+        """Process one scan taken at odometry pose `odom_pose` (sim time `stamp_s`, needed only for
+        temporal updates); True when the filter updated."""
         p = self.params
         odom_pose = np.asarray(odom_pose, np.float64)
         self.resampled = False
@@ -396,18 +401,37 @@ class Amcl:
             self._odom = odom_pose.copy()
         else:
             dx, dy, da = motion.odom_delta(self._odom, odom_pose)
-            if not (abs(dx) > p.update_min_d or abs(dy) > p.update_min_d or abs(da) > p.update_min_a
-                    or self._force_update):
+            moved = abs(dx) > p.update_min_d or abs(dy) > p.update_min_d or abs(da) > p.update_min_a
+            temporal = not (moved or self._force_update) and self._temporal_update_due(stamp_s)
+            if not (moved or self._force_update or temporal):
                 return False
             self._force_update = False  # as in amcl, only a scan after the first one uses it up
             step = motion.decompose(p.odom_model_type, self._odom, odom_pose, p.odom_alphas)
             motion.sample_motion(self._poses[self._current], self.n, step, self.rng)
+            if temporal:
+                self._jitter()
         self._weigh(scan)
         self._odom = odom_pose.copy()
+        self._update_s = stamp_s
         self._updates += 1
         if self._updates % p.resample_interval == 0:
             self.resample()
         return True
+
+    def _temporal_update_due(self, stamp_s: float | None) -> bool:
+        p = self.params
+        return (p.temporal_update > 0 and stamp_s is not None and self._update_s is not None
+                and stamp_s - self._update_s >= p.temporal_update)
+
+    def _jitter(self) -> None:
+        """Spread the particles a little: the motion model adds (almost) no noise without motion, so
+        weighing the same view again and resampling would otherwise shrink the set onto the few
+        particles that fit it best (particle deprivation), and no particle would move towards a
+        better pose between them."""
+        p, poses = self.params, self._poses[self._current][:self.n]
+        noise = self.rng.standard_normal((self.n, 3))
+        poses[:, :2] += noise[:, :2] * p.temporal_update_jitter_xy
+        poses[:, 2] = wrap_angle(poses[:, 2] + noise[:, 2] * p.temporal_update_jitter_a)
 
     def _weigh(self, scan: ScanBeams) -> None:
         poses, weights = self._poses[self._current], self._weights[self._current]
@@ -442,7 +466,7 @@ class Amcl:
         self._poses[target][drawn:count] = self._randoms[:randoms]
         self._weights[target][:count] = 1.0 / count
         self._current, self.n = target, count
-        if w_diff > 0.0:
+        if w_diff > 0.0 and p.recovery_reset_after_injection:
             self.w_slow = self.w_fast = 0.0
         self.converged = _converged(self._poses[target], count, CONVERGED_DISTANCE)
         self.resampled = True

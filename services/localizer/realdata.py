@@ -46,10 +46,10 @@ from ..recorder.mcap_io import Record, read_records
 from ..replay.into import replay_into
 from ..runtime.node import NS_PER_S
 from ..runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
-from ..se2 import compose, relative
+from ..se2 import compose, relative, wrap_angle
 from .node import LocalizerNode, LocalizerParams, OdomHistory
 from .params import AmclParams
-from .sensor import FREE, OCCUPIED, GridFrame, LaserModel, prepare_scan
+from .sensor import FREE, OCCUPIED, GridFrame, LaserModel, prepare_scan, share_near_obstacles
 
 NEAR_M = 0.1                 # an end point this close to an occupied cell agrees with the map
 RACECAR_LASER_X = 0.285      # m, base_link → laser on the MIT racecar (see the module docstring)
@@ -59,6 +59,7 @@ SEARCH_CLEARANCE_M = 0.15    # the car's centre is at least this far from obstac
 SEARCH_CANDIDATES = 40
 SEARCH_SCANS = 3              # few: the racecar's odometry heading drifts fast
 SEARCH_BEAMS = 120
+END_SEARCH_M, END_SEARCH_A = 1.0, math.radians(10.0)   # where the end's best fit is looked for, around the localizer
 START_COV = (0.1 ** 2, 0.1 ** 2, 0.05 ** 2)   # m², m², rad²: a good start, not an exact one
 
 # amcl for the racecar (Ackermann steering, VESC odometry, 1081-beam 270° lidar, about 2 m/s); the rest
@@ -125,7 +126,7 @@ class Agreement:
 
     def __init__(self, grid: OccupancyGrid, laser_pose):
         occupied = np.asarray(grid.data) == OCCUPIED
-        self.near = ndimage.distance_transform_edt(~occupied) * grid.info.resolution <= NEAR_M
+        self.distance = ndimage.distance_transform_edt(~occupied) * grid.info.resolution
         self.affine = GridFrame.of(grid).affine
         self.laser_pose = laser_pose
 
@@ -140,16 +141,7 @@ class Agreement:
         return np.column_stack([lx + r[valid] * np.cos(a), ly + r[valid] * np.sin(a)])
 
     def share(self, pose, points: np.ndarray) -> float:
-        if len(points) == 0:
-            return float("nan")
-        world = compose(pose, np.column_stack([points, np.zeros(len(points))]))[:, :2]
-        u = self.affine[0, 0] * world[:, 0] + self.affine[0, 1] * world[:, 1] + self.affine[0, 2]
-        v = self.affine[1, 0] * world[:, 0] + self.affine[1, 1] * world[:, 1] + self.affine[1, 2]
-        col, row = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
-        height, width = self.near.shape
-        inside = (row >= 0) & (row < height) & (col >= 0) & (col < width)
-        hits = self.near[np.clip(row, 0, height - 1), np.clip(col, 0, width - 1)] & inside
-        return float(hits.mean())
+        return share_near_obstacles(self.distance, self.affine, pose, points[:, 0], points[:, 1], NEAR_M)
 
 
 # ---------------------------------------------------------------- the start pose
@@ -162,15 +154,41 @@ def _weigh(laser: LaserModel, poses: np.ndarray, beams) -> np.ndarray:
     return weights
 
 
+class ScanFit:
+    """Scores robot poses by how well a few consecutive scans fit the map (AMCL's likelihood field,
+    SEARCH_BEAMS beams, σ 0.1 m), each scan seen from where the odometry says the robot went."""
+
+    def __init__(self, grid: OccupancyGrid, scans: list[LaserScan], history: OdomHistory, laser_pose):
+        params = AmclParams(laser_max_beams=SEARCH_BEAMS, laser_sigma_hit=0.1)
+        self.laser = LaserModel(grid, params)
+        self.beams = [prepare_scan(s.ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max, params,
+                                   laser_pose) for s in scans]
+        first = history.at(scans[0].header.stamp_ns)
+        self.moves = [relative(first, history.at(s.header.stamp_ns)) for s in scans]
+
+    def first_scan(self, poses: np.ndarray) -> np.ndarray:
+        return _weigh(self.laser, poses, self.beams[0])
+
+    def log_likelihood(self, poses: np.ndarray) -> np.ndarray:
+        total = np.zeros(len(poses))
+        for move, beams in zip(self.moves, self.beams):
+            total += np.log(_weigh(self.laser, compose(poses, move), beams))
+        return total
+
+    def refine(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every pose within REFINE_CELLS steps of the candidates, best first, with its score."""
+        steps = np.arange(-REFINE_CELLS, REFINE_CELLS + 1)
+        offsets = np.stack(np.meshgrid(steps * REFINE_STEP_M, steps * REFINE_STEP_M, steps * REFINE_STEP_A,
+                                       indexing="ij"), axis=-1).reshape(-1, 3)
+        fine = (np.asarray(candidates)[:, None, :] + offsets[None, :, :]).reshape(-1, 3)
+        total = self.log_likelihood(fine)
+        order = np.argsort(total)[::-1]
+        return fine[order], total[order]
+
+
 def search_start(grid: OccupancyGrid, scans: list[LaserScan], history: OdomHistory, laser_pose) -> dict:
     """The pose at scans[0] that best explains the first scans (see the module docstring)."""
-    params = AmclParams(laser_max_beams=SEARCH_BEAMS, laser_sigma_hit=0.1)
-    laser = LaserModel(grid, params)
-    used = scans[:SEARCH_SCANS]
-    beams = [prepare_scan(s.ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max, params, laser_pose)
-             for s in used]
-    first = history.at(used[0].header.stamp_ns)
-    moves = [relative(first, history.at(s.header.stamp_ns)) for s in used]
+    fit = ScanFit(grid, scans[:SEARCH_SCANS], history, laser_pose)
     # free poses: on free cells, SEARCH_CLEARANCE_M from obstacles and unknown space
     data = np.asarray(grid.data)
     clear = ndimage.distance_transform_edt(data == FREE) * grid.info.resolution >= SEARCH_CLEARANCE_M
@@ -179,20 +197,22 @@ def search_start(grid: OccupancyGrid, scans: list[LaserScan], history: OdomHisto
     xs, ys = cell_to_world(grid.info, rows * stride, cols * stride)
     yaws = np.arange(-math.pi, math.pi, SEARCH_STEP_A)
     coarse = np.column_stack([np.repeat(xs, len(yaws)), np.repeat(ys, len(yaws)), np.tile(yaws, len(xs))])
-    scores = _weigh(laser, coarse, beams[0])
-    best = coarse[np.argsort(scores)[::-1][:SEARCH_CANDIDATES]]
-    steps = np.arange(-REFINE_CELLS, REFINE_CELLS + 1)
-    grid_offsets = np.stack(np.meshgrid(steps * REFINE_STEP_M, steps * REFINE_STEP_M, steps * REFINE_STEP_A,
-                                        indexing="ij"), axis=-1).reshape(-1, 3)
-    fine = (best[:, None, :] + grid_offsets[None, :, :]).reshape(-1, 3)
-    total = np.zeros(len(fine))
-    for move, b in zip(moves, beams):   # the same candidate seen from where the odometry says it went
-        total += np.log(_weigh(laser, compose(fine, move), b))
-    order = np.argsort(total)[::-1]
-    start = fine[order[0]]
-    far = next((i for i in order if math.hypot(*(fine[i, :2] - start[:2])) > 1.0), None)
-    return {"pose": start, "score": float(total[order[0]]),
+    best = coarse[np.argsort(fit.first_scan(coarse))[::-1][:SEARCH_CANDIDATES]]
+    fine, total = fit.refine(best)
+    start = fine[0]
+    far = next((i for i in range(len(fine)) if math.hypot(*(fine[i, :2] - start[:2])) > 1.0), None)
+    return {"pose": start, "score": float(total[0]),
             "runner_up": None if far is None else {"pose": fine[far], "score": float(total[far])}}
+
+
+def best_fit_near(grid: OccupancyGrid, scans: list[LaserScan], history: OdomHistory, laser_pose, pose) -> np.ndarray:
+    """The pose at scans[0], within END_SEARCH_M and END_SEARCH_A of `pose`, that the scans fit best."""
+    fit = ScanFit(grid, scans, history, laser_pose)
+    spacing = (2 * REFINE_CELLS + 1) * np.array([REFINE_STEP_M, REFINE_STEP_M, REFINE_STEP_A])
+    reach = np.ceil(np.array([END_SEARCH_M, END_SEARCH_M, END_SEARCH_A]) / spacing).astype(int)
+    centres = np.stack(np.meshgrid(*(np.arange(-k, k + 1) * d for k, d in zip(reach, spacing)), indexing="ij"),
+                       axis=-1).reshape(-1, 3)
+    return fit.refine(np.asarray(pose, float) + centres)[0][0]
 
 
 # ---------------------------------------------------------------- the run
@@ -252,6 +272,7 @@ def score_run(run: Run, grid: OccupancyGrid, map_file: str, laser_pose, params_f
                      estimate, raw))
     t = np.array([r[0] for r in rows])
     amcl, raw = np.array([r[1] for r in rows]), np.array([r[2] for r in rows])
+    end = _end_of_run(grid, scans, history, laser_pose, rows[-1][3], agreement)
     return {"scans": len(run.scans), "odometry": len(run.odometry), "scans_scored": len(rows),
             "duration_s": round(float(t[-1]), 3) if len(t) else 0.0,
             "laser_pose": [float(v) for v in laser_pose],
@@ -259,11 +280,26 @@ def score_run(run: Run, grid: OccupancyGrid, map_file: str, laser_pose, params_f
                       "how": "given" if search is None else "searched",
                       **({} if search is None else _search_summary(search))},
             "near_m": NEAR_M,
-            "localizer": _summary(t, amcl), "raw_odometry": _summary(t, raw),
+            "localizer": _summary(t, amcl), "raw_odometry": _summary(t, raw), "end": end,
             "series": {"t": [round(float(v), 4) for v in t], "localizer": [round(float(v), 4) for v in amcl],
                        "raw_odometry": [round(float(v), 4) for v in raw]},
             "paths": {"localizer": [list(map(float, r[3])) for r in rows],
                       "raw_odometry": [list(map(float, r[4])) for r in rows]}}
+
+
+def _end_of_run(grid, scans, history, laser_pose, estimate, agreement: Agreement) -> dict:
+    """Where the last scans fit the map best near the localizer's last pose, and how far that is."""
+    last = scans[-SEARCH_SCANS:]
+    at_last = compose(estimate, relative(history.at(scans[-1].header.stamp_ns), history.at(last[0].header.stamp_ns)))
+    best = best_fit_near(grid, last, history, laser_pose, at_last)
+    best_last = compose(best, relative(history.at(last[0].header.stamp_ns), history.at(scans[-1].header.stamp_ns)))
+    points = agreement.end_points(scans[-1])
+    return {"localizer_pose": [round(float(v), 4) for v in estimate],
+            "best_fit_pose": [round(float(v), 4) for v in best_last],
+            "distance_m": round(math.hypot(*(best_last[:2] - np.asarray(estimate)[:2])), 3),
+            "heading_deg": round(math.degrees(abs(float(wrap_angle(best_last[2] - estimate[2])))), 2),
+            "localizer_share": round(agreement.share(estimate, points), 4),
+            "best_fit_share": round(agreement.share(best_last, points), 4)}
 
 
 def _search_summary(search: dict) -> dict:
@@ -351,6 +387,9 @@ def format_result(r: dict, source: str) -> str:
         lines.append(f"  {label:14}{f['mean']:7.3f}{f['median']:7.3f}{f['p10']:7.3f}{f['min']:7.3f}"
                      f"{f['last_second']:10.3f}   "
                      + " ".join(f"{v:.3f}" for v in f["per_second"]))
+    e = r["end"]
+    lines.append(f"at the end: the last scans fit best {e['distance_m']:.3f} m and {e['heading_deg']:.1f}° from the "
+                 f"localizer's pose (share {e['best_fit_share']:.3f} there, {e['localizer_share']:.3f} at the localizer's)")
     return "\n".join(lines)
 
 
