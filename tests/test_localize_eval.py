@@ -13,8 +13,10 @@ from omninav.schemas.codec import encode
 from omninav.services.localizer.evaluate import (PARAMS_FILE, ROUTES, Route, Series, kidnap_result, route_command,
                                                  route_problems)
 from omninav.services.localizer.params import AmclParams
-from omninav.services.localizer.realdata import load_run
+from omninav.services.localizer.node import OdomHistory
+from omninav.services.localizer.realdata import Agreement, judge_start, load_run, search_start
 from omninav.services.runtime.params import load_params_file
+from omninav.sim.raycast import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path
 
 from conftest import SHARED_DATA
@@ -96,6 +98,47 @@ def test_a_kidnapping_is_scored_against_the_injections_while_tracking():
     assert k["random_poses_per_s_before"] == pytest.approx(3 / 1.4, abs=0.05)   # 0.5 s to 1.9 s
     assert k["random_poses_first_s_after"] == 500                              # scans at 2.0 … 2.9 s
     assert not k["recovered"]
+
+
+SYMMETRIC_ROOM = """\
+name: symmetric
+bounds: [6.0, 4.0]
+boxes:                 # the same about the centre (3, 2) turned half a turn
+  - {center: [1.5, 1.0], size: [0.8, 0.5]}
+  - {center: [4.5, 3.0], size: [0.8, 0.5]}
+robot:
+  start: [2.0, 2.6, 0.3]
+"""
+
+
+def _scans_from(world, pose, count=3):
+    lidar = LidarParams(beams=360, range_max=10.0, noise_std=0.01)
+    rng = np.random.default_rng(0)
+    scans = [make_scan(lidar, scan(world, pose, None, lidar, rng), k * 100_000_000) for k in range(count)]
+    history = OdomHistory(keep_ns=10 ** 12)
+    for k in range(count):
+        history.add(k * 100_000_000, np.zeros(3))
+    return scans, history
+
+
+@pytest.mark.parametrize("second_box, ambiguous", [("[4.5, 3.0]", True), ("[4.5, 1.0]", False)])
+def test_a_start_that_a_point_symmetric_room_cannot_tell_apart_is_reported_ambiguous(tmp_path, second_box, ambiguous):
+    path = tmp_path / "symmetric.yaml"
+    path.write_text(SYMMETRIC_ROOM.replace("[4.5, 3.0]", second_box))   # [4.5, 1.0]: no longer symmetric
+    world = load_world(path)
+    grid = world.rasterize(0.05)
+    scans, history = _scans_from(world, world.robot.start)
+    search = judge_start(search_start(grid, scans, history, (0.0, 0.0, 0.0)), Agreement(grid, (0.0, 0.0, 0.0)),
+                         scans, history)
+    found = [search["pose"], search["runner_up"]["pose"]]
+    mirror = (6.0 - world.robot.start[0], 4.0 - world.robot.start[1])
+    assert min(math.hypot(p[0] - world.robot.start[0], p[1] - world.robot.start[1]) for p in found) < 0.1
+    assert search["ambiguous"] is ambiguous and search["fit"] > 0.9
+    if ambiguous:   # the other candidate is the mirror image, fitting as well
+        assert min(math.hypot(p[0] - mirror[0], p[1] - mirror[1]) for p in found) < 0.1
+        assert search["runner_up"]["fit"] > 0.9
+    else:
+        assert search["runner_up"]["fit"] < search["fit"] - 0.1
 
 
 def _run(capsys, *args):

@@ -314,6 +314,73 @@ def test_the_pipeline_in_process_converges_on_the_truth(room_map):
     assert localizer.counters.get("sync_timeouts", 0) == 0 and not any(k.startswith("late/") for k in localizer.counters)
 
 
+class DriveThenStop(Node):
+    """Forward at 0.3 m/s for 3 s, then standing."""
+    service = "script"
+
+    def setup(self):
+        self.pub = self.publisher("cmd_vel")
+        self.subscribe("sim/truth", self.on_truth)
+
+    def on_truth(self, msg):
+        self.pub.publish(Twist(header=self.header("base_link"), linear_x=0.3 if msg.header.stamp_ns < 3 * NS_PER_S else 0.0))
+
+
+SHOVE_AT_S = 5.0
+
+
+def shoved_run(room_map, **params):
+    """The room pipeline in lockstep; at SHOVE_AT_S the standing robot is pushed 0.3 m, 0.3 m and
+    0.4 rad (a teleport: wheels and gyro do not see it). Returns per scan (s, beam fit, position
+    error m, heading error rad)."""
+    localizer = LocalizerNode(LocalizerParams(**{**QUICK, "max_particles": 5000, "laser_sigma_hit": 0.2,
+                                                 "recovery_alpha_slow": 0.01, "recovery_alpha_fast": 0.5,
+                                                 "map_file": room_map, "initial_pose_x": START[0],
+                                                 "initial_pose_y": START[1], **params}))
+    sim = SimNode(SimNodeParams(world="room"))
+    runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams()), LidarNode(LidarNodeParams(world="room")),
+                              localizer, DriveThenStop()])
+    truth, odometry, fits, rows = {}, {}, {}, []
+
+    def tap(key, payload, stamp):
+        if key.endswith("/truth") or key.endswith("/odom"):
+            pose = decode(payload).pose
+            (truth if key.endswith("/truth") else odometry)[stamp] = (pose.x, pose.y, pose.theta)
+        elif key.endswith("/pose_fit"):
+            fits[stamp] = decode(payload).beam_fit
+        elif key.endswith("/tf/map_odom"):
+            tf = decode(payload)
+            stamp = tf.header.stamp_ns - round(localizer.params.transform_tolerance * NS_PER_S)
+            est, true = estimate_at(tf, odometry[stamp]), truth[stamp]
+            rows.append((stamp / NS_PER_S, fits[stamp], math.hypot(est[0] - true[0], est[1] - true[1]),
+                         abs(wrap_angle(est[2] - true[2]))))
+
+    runner.tap(tap)
+    runner.run_until(lambda: bool(rows) and rows[-1][0] >= SHOVE_AT_S, 1000)
+    x, y, yaw = sim.sim.pose
+    sim.sim.teleport((x + 0.3, y + 0.3, yaw + 0.4))
+    runner.run_until(lambda: False, round(12.0 / sim.params.dt))
+    runner.close()
+    return np.array(rows)
+
+
+def test_a_shoved_standing_robot_is_doubted_then_found_again(room_map):
+    rows = shoved_run(room_map, temporal_update=0.2, recovery_reset_after_injection=False, recovery_local_share=0.5)
+    t, fit, position, heading = rows.T
+    before, after = t < SHOVE_AT_S, t > SHOVE_AT_S
+    assert fit[before].min() > 0.9 and position[before].max() < 0.05
+    assert fit[after][:3].max() < 0.3 and position[after][0] > 0.4     # the scans disagree at once
+    found = t > SHOVE_AT_S + 6.0
+    assert position[found].max() < 0.05 and np.degrees(heading[found].max()) < 2.0 and fit[found].min() > 0.9
+
+
+def test_amcl_does_not_update_a_standing_robot_so_the_shove_stays_doubted(room_map):
+    rows = shoved_run(room_map)     # amcl's behaviour: updates need motion
+    t, fit, position, _ = rows.T
+    after = t > SHOVE_AT_S
+    assert position[after].min() > 0.4 and fit[after].max() < 0.3
+
+
 # ---------------------------------------------------------------- live, then replayed byte for byte
 
 SCRIPT = "0.3,0,0,3;0,0,0.5,2;0,-0.15,0,2"

@@ -34,7 +34,7 @@ the whole set's (x, y block and −2 ln R for the angle, R the mean resultant le
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -176,6 +176,18 @@ def _random_pose(out, j, free_xy, col_step, row_step, rng):
 
 
 @njit(cache=True)
+def _recovery_pose(out, j, free_xy, col_step, row_step, rng, centre, local_share, local_std_xy, local_std_a):
+    """A random pose for recovery: with probability local_share near `centre` (a Gaussian), else
+    uniform over the free cells."""
+    if local_share > 0.0 and rng.random() < local_share:
+        out[j, 0] = centre[0] + rng.normal(0.0, local_std_xy)
+        out[j, 1] = centre[1] + rng.normal(0.0, local_std_xy)
+        out[j, 2] = (centre[2] + rng.normal(0.0, local_std_a) + math.pi) % (2.0 * math.pi) - math.pi
+    else:
+        _random_pose(out, j, free_xy, col_step, row_step, rng)
+
+
+@njit(cache=True)
 def _random_poses(out, count, free_xy, col_step, row_step, rng):
     for j in range(count):
         _random_pose(out, j, free_xy, col_step, row_step, rng)
@@ -220,8 +232,9 @@ def systematic_indices(cum, n, count, u0, out):
 
 
 @njit(cache=True)
-def _kld_count(poses, weights, n, w_diff, rng, free_xy, col_step, row_step, random_out, keys, values, stamps,
-               stamp, bin_cum, seen, kld_err, kld_z, min_particles, max_particles):
+def _kld_count(poses, weights, n, w_diff, rng, free_xy, col_step, row_step, centre, local_share, local_std_xy,
+               local_std_a, random_out, keys, values, stamps, stamp, bin_cum, seen, kld_err, kld_z, min_particles,
+               max_particles):
     """How many particles KLD sampling draws, and the random poses among them (in random_out).
 
     Only a draw's bin matters for the count, so the particles' weights are first summed per bin
@@ -244,7 +257,8 @@ def _kld_count(poses, weights, n, w_diff, rng, free_xy, col_step, row_step, rand
     count = 0
     while count < max_particles:
         if w_diff > 0.0 and rng.random() < w_diff:
-            _random_pose(random_out, randoms, free_xy, col_step, row_step, rng)
+            _recovery_pose(random_out, randoms, free_xy, col_step, row_step, rng, centre, local_share, local_std_xy,
+                           local_std_a)
             key = _bin_key(random_out[randoms, 0], random_out[randoms, 1], random_out[randoms, 2])
             randoms += 1
             b, new = _insert(keys, values, stamps, stamp, key, ids)
@@ -455,8 +469,10 @@ class Amcl:
         w_diff = max(0.0, 1.0 - self.w_fast / self.w_slow) if self.w_slow > 0.0 else 0.0
         _cumulative(weights, self.n, self._cum)
         self._stamp += 1
+        centre = self.estimate().pose if w_diff > 0.0 and p.recovery_local_share > 0.0 else np.zeros(3)
         count, randoms = _kld_count(poses, weights, self.n, w_diff, self.rng, self._free_xy, self._col_step,
-                                    self._row_step, self._randoms, self._keys, self._values, self._stamps,
+                                    self._row_step, centre, p.recovery_local_share, p.recovery_local_std_xy,
+                                    p.recovery_local_std_a, self._randoms, self._keys, self._values, self._stamps,
                                     self._stamp, self._bin_cum, self._seen, p.kld_err, p.kld_z,
                                     p.min_particles, p.max_particles)
         drawn = count - randoms
@@ -519,6 +535,9 @@ def warm_up() -> None:
     scan = sensor.prepare_scan(np.ones(3), -1.0, 1.0, 0.05, 5.0, amcl.params)
     amcl.update((0.0, 0.0, 0.0), scan)
     amcl.w_slow, amcl.w_fast = 1.0, 0.5  # make the injection path compile too
+    amcl.resample()
+    amcl.params = replace(amcl.params, recovery_local_share=0.5)
+    amcl.w_slow, amcl.w_fast = 1.0, 0.5
     amcl.resample()
     amcl.estimate()
     amcl.global_localization()

@@ -35,6 +35,9 @@ class AmclParams:
     recovery_alpha_fast: float = 0.0    # decay of the fast average weight (0: off; ROS suggests 0.1)
     # ---- not in ROS amcl: recovery as Probabilistic Robotics' Augmented_MCL (Table 8.3) has it
     recovery_reset_after_injection: bool = True  # zero w_slow and w_fast after injecting (amcl); false: keep them
+    recovery_local_share: float = 0.0   # share of injected poses drawn near the estimate, not over the map (amcl: 0)
+    recovery_local_std_xy: float = 0.5  # m, their spread around the estimate: a shove moves the robot a little
+    recovery_local_std_a: float = 0.5   # rad
     # ---- not in ROS amcl: updates without motion (named after slam_gmapping's temporalUpdate)
     temporal_update: float = -1.0       # s: also update when this long passed without enough motion; ≤ 0: never (amcl)
     temporal_update_jitter_xy: float = 0.02  # m, std of the noise such an update adds to every particle
@@ -98,10 +101,11 @@ class AmclParams:
         need(self.update_min_a >= 0, "update_min_a", "≥ 0")
         need(self.resample_interval >= 1, "resample_interval", "at least 1")
         need(self.transform_tolerance >= 0, "transform_tolerance", "≥ 0")
-        for name in ("recovery_alpha_slow", "recovery_alpha_fast"):
+        for name in ("recovery_alpha_slow", "recovery_alpha_fast", "recovery_local_share"):
             need(0 <= getattr(self, name) <= 1, name, "in [0, 1]")
         for name in ("temporal_update_jitter_xy", "temporal_update_jitter_a", "initial_cov_xx", "initial_cov_yy",
                      "initial_cov_aa", "std_warn_level_x", "beam_fit_distance",
+                     "recovery_local_std_xy", "recovery_local_std_a",
                      "std_warn_level_y", "std_warn_level_yaw", "beam_skip_distance"):
             need(getattr(self, name) >= 0, name, "≥ 0")
         need(self.laser_max_beams >= 2, "laser_max_beams", "at least 2 (amcl skips the laser update below 2)")

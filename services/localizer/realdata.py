@@ -39,7 +39,7 @@ from scipy import ndimage
 from ...schemas import MessageError, decode
 from ...schemas.codec import encode
 from ...schemas.keys import KeyLayout
-from ...schemas.messages import LaserScan, OccupancyGrid, Odometry, Transform
+from ...schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, PoseWithCovariance, Transform
 from ...schemas.registry import type_info
 from ..map_server.mapio import MapError, cell_to_world, load_map
 from ..recorder.mcap_io import Record, read_records
@@ -59,6 +59,7 @@ SEARCH_CLEARANCE_M = 0.15    # the car's centre is at least this far from obstac
 SEARCH_CANDIDATES = 40
 SEARCH_SCANS = 3              # few: the racecar's odometry heading drifts fast
 SEARCH_BEAMS = 120
+AMBIGUOUS_FIT_GAP = 0.1     # a start is ambiguous when a pose > 1 m away fits the first scans nearly as well
 END_SEARCH_M, END_SEARCH_A = 1.0, math.radians(10.0)   # where the end's best fit is looked for, around the localizer
 START_COV = (0.1 ** 2, 0.1 ** 2, 0.05 ** 2)   # m², m², rad²: a good start, not an exact one
 
@@ -205,6 +206,25 @@ def search_start(grid: OccupancyGrid, scans: list[LaserScan], history: OdomHisto
             "runner_up": None if far is None else {"pose": fine[far], "score": float(total[far])}}
 
 
+def judge_start(search: dict, agreement: Agreement, scans: list[LaserScan], history: OdomHistory) -> dict:
+    """Adds to a search_start result each candidate's scan fit (the mean share of the first scans'
+    returns on mapped walls, each scan seen from where the odometry says the robot went) and
+    whether the start is ambiguous: the best pose more than 1 m away fits within AMBIGUOUS_FIT_GAP."""
+    used = scans[:SEARCH_SCANS]
+    first = history.at(used[0].header.stamp_ns)
+    views = [(relative(first, history.at(s.header.stamp_ns)), agreement.end_points(s)) for s in used]
+
+    def fit(pose) -> float:
+        return float(np.mean([agreement.share(compose(pose, move), points) for move, points in views]))
+
+    search["fit"] = fit(search["pose"])
+    other = search["runner_up"]
+    if other is not None:
+        other["fit"] = fit(other["pose"])
+    search["ambiguous"] = other is not None and other["fit"] >= search["fit"] - AMBIGUOUS_FIT_GAP
+    return search
+
+
 def best_fit_near(grid: OccupancyGrid, scans: list[LaserScan], history: OdomHistory, laser_pose, pose) -> np.ndarray:
     """The pose at scans[0], within END_SEARCH_M and END_SEARCH_A of `pose`, that the scans fit best."""
     fit = ScanFit(grid, scans, history, laser_pose)
@@ -227,11 +247,16 @@ def racecar_params(params_file: str | None, overrides: dict, map_file: str, lase
     return load_params(LocalizerParams, {**values, **overrides, **fixed}, params_file or "racecar amcl settings")
 
 
-def localize(run: Run, params: LocalizerParams) -> list[Transform]:
-    """The localizer's map→odom transforms, one per scan it used, from its live code."""
+def localize(run: Run, params: LocalizerParams, start_global: bool = False) -> list[Transform]:
+    """The localizer's map→odom transforms, one per scan it used, from its live code; with
+    start_global, a global_localization request takes effect at the first scan."""
     node = LocalizerNode(params)
+    requests = []
+    if start_global:
+        due = run.scans[0].header.stamp_ns - round(params.request_delay_s * NS_PER_S) - 1
+        requests.append(PoseWithCovariance(header=Header(stamp_ns=due, frame_id=params.global_frame_id)))
     records = []
-    for key, messages in (("odom", run.odometry), ("scan", run.scans)):
+    for key, messages in (("odom", run.odometry), ("scan", run.scans), ("global_localization", requests)):
         full = node.keys.robot(key)
         for seq, msg in enumerate(messages):
             records.append(Record(full, type_info(type(msg))[0], encode(msg), seq, msg.header.stamp_ns,
@@ -242,17 +267,18 @@ def localize(run: Run, params: LocalizerParams) -> list[Transform]:
 
 
 def score_run(run: Run, grid: OccupancyGrid, map_file: str, laser_pose, params_file: str | None,
-              overrides: dict, seed: int, initial_pose=None) -> dict:
+              overrides: dict, seed: int, initial_pose=None, start_global: bool = False) -> dict:
     history = odometry_history(run.odometry)
     scans = usable_scans(run, history)
     if len(scans) < SEARCH_SCANS:
         raise RealDataError(f"only {len(scans)} scans lie within the odometry's time span")
     search = None
     if initial_pose is None:
-        search = search_start(grid, scans, history, laser_pose)
+        search = judge_start(search_start(grid, scans, history, laser_pose), Agreement(grid, laser_pose), scans,
+                             history)
         initial_pose = search["pose"]
     params = racecar_params(params_file, overrides, map_file, laser_pose, seed, initial_pose)
-    transforms = localize(Run(scans, run.odometry), params)
+    transforms = localize(Run(scans, run.odometry), params, start_global)
     tolerance = round(params.transform_tolerance * NS_PER_S)
     by_stamp = {tf.header.stamp_ns - tolerance: tf.transform for tf in transforms}
     agreement = Agreement(grid, laser_pose)
@@ -278,6 +304,7 @@ def score_run(run: Run, grid: OccupancyGrid, map_file: str, laser_pose, params_f
             "laser_pose": [float(v) for v in laser_pose],
             "start": {"pose": [round(float(v), 4) for v in initial_pose],
                       "how": "given" if search is None else "searched",
+                      "localizer": "global localization" if start_global else "at the start pose",
                       **({} if search is None else _search_summary(search))},
             "near_m": NEAR_M,
             "localizer": _summary(t, amcl), "raw_odometry": _summary(t, raw), "end": end,
@@ -303,10 +330,11 @@ def _end_of_run(grid, scans, history, laser_pose, estimate, agreement: Agreement
 
 
 def _search_summary(search: dict) -> dict:
-    out = {"score": round(search["score"], 2)}
+    out = {"score": round(search["score"], 2), "fit": round(search["fit"], 4), "ambiguous": search["ambiguous"]}
     if search["runner_up"] is not None:
         other = search["runner_up"]
         out["runner_up"] = {"pose": [round(float(v), 4) for v in other["pose"]], "score": round(other["score"], 2),
+                            "fit": round(other["fit"], 4),
                             "distance_m": round(float(np.hypot(*(other["pose"][:2] - search["pose"][:2]))), 2)}
     return out
 
@@ -336,6 +364,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--laser-y", type=float, default=0.0, help="m, the laser left of base_link (default 0)")
     group.add_argument("--laser-yaw", type=float, default=0.0, help="rad, the laser's turn (default 0)")
     group.add_argument("--initial-pose", metavar="X,Y,YAW", help="the start pose in the map (default: searched)")
+    group.add_argument("--global-localization", action="store_true",
+                       help="start the localizer with particles over all free space (amcl's global_localization), "
+                            "not at the start pose (which still places raw odometry)")
     group.add_argument("--plot", metavar="PNG", help="draw the paths on the map and the shares over time")
 
 
@@ -348,7 +379,7 @@ def main(args: argparse.Namespace) -> int:
         grid = load_map(args.map)
         run = load_run(args.bag, args.scan_topic, args.odom_topic)
         result = score_run(run, grid, args.map, (args.laser_x, args.laser_y, args.laser_yaw), args.params,
-                           parse_overrides(args.set), args.seed, initial)
+                           parse_overrides(args.set), args.seed, initial, args.global_localization)
     except (RealDataError, MapError, ParamError, ValueError) as exc:
         print(f"omninav localize-eval: {exc}", file=sys.stderr)
         return 2
@@ -375,11 +406,15 @@ def format_result(r: dict, source: str) -> str:
     s = r["start"]
     lines = [f"{source}: {r['scans']} scans, {r['odometry']} odometry messages, {r['scans_scored']} scans scored "
              f"over {r['duration_s']:.2f} s; laser at {r['laser_pose']} in base_link",
-             f"start pose ({s['how']}): x {s['pose'][0]:.3f} m, y {s['pose'][1]:.3f} m, yaw {s['pose'][2]:.3f} rad"]
+             f"start pose ({s['how']}): x {s['pose'][0]:.3f} m, y {s['pose'][1]:.3f} m, yaw {s['pose'][2]:.3f} rad; "
+             f"the localizer starts {s['localizer']}"]
     if "runner_up" in s:
         u = s["runner_up"]
-        lines.append(f"  search score {s['score']:.1f}; best pose more than 1 m away: {u['score']:.1f} "
-                     f"({u['distance_m']:.1f} m off)")
+        lines.append(f"  search score {s['score']:.1f}, scan fit {s['fit']:.3f}; best pose more than 1 m away: "
+                     f"{u['score']:.1f}, scan fit {u['fit']:.3f} ({u['distance_m']:.1f} m off)")
+    if s.get("ambiguous"):
+        lines.append(f"  AMBIGUOUS START: a pose {s['runner_up']['distance_m']:.1f} m away fits the first scans nearly "
+                     f"as well; give --initial-pose if you know which")
     lines.append(f"share of beam end points within {r['near_m']} m of an occupied cell:")
     lines.append(f"  {'':14}{'mean':>7}{'median':>7}{'p10':>7}{'min':>7}{'last 1 s':>10}   per second")
     for name, label in (("localizer", "localizer"), ("raw_odometry", "raw odometry")):
