@@ -31,8 +31,10 @@ SUCCEEDED | ABORTED(reason) | CANCELED(reason). The move_base rules kept:
 Not move_base's: the goal never succeeds on a pose the localizer doubts. While the latest beam fit
 (the share of a scan's returns on mapped obstacles at the localizer's pose) is below
 min_pose_beam_fit, arrival waits with the reason WAITING_FOR_CONFIDENT_POSE and the goal stays
-active (control, oscillation and recovery go on as before). Without any beam fit (a pose from SLAM
-or the simulator's truth) nothing is doubted.
+active (control, oscillation and recovery go on as before). When the fit comes back while
+controlling, the plan is made afresh from the pose the localizer has found (the local planner may
+have stopped at the old plan's end, where the doubted pose put the goal). Without any beam fit (a
+pose from SLAM or the simulator's truth) nothing is doubted.
 """
 from __future__ import annotations
 
@@ -158,7 +160,10 @@ class Navigator:
         if inputs.velocity is not None:
             self.velocity = np.asarray(inputs.velocity, dtype=float).reshape(3)
         if inputs.beam_fit is not None:
+            was_doubted = self._pose_doubted()
             self.beam_fit = float(inputs.beam_fit)
+            if was_doubted and not self._pose_doubted() and self.state is State.CONTROLLING:
+                self._want_plan = True   # the pose the plan started from was wrong: plan from the found one
         if inputs.cancel is not None and self._cancel(inputs.cancel, out) and inputs.goal is not None:
             out.statuses.append(self.status())
         if inputs.goal is not None:
