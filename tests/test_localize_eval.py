@@ -216,6 +216,20 @@ def test_on_the_racecar_bag_the_localizer_agrees_with_the_map_better_than_odomet
 
 
 @needs_the_bag
+def test_on_the_racecar_bag_global_localization_finds_the_searched_start(racecar_run):
+    tracked = racecar_run[0]
+    assert not tracked["start"]["ambiguous"]                     # the runner-up fits the first scans far worse
+    assert tracked["start"]["runner_up"]["fit"] < tracked["start"]["fit"] - 0.2
+    ours = _run_quietly("--bag", str(BAG), "--map", str(BASEMENT), "--global-localization")
+    assert ours["start"]["localizer"] == "global localization"
+    # particles over the whole basement at the first scan; from the second second on, the same corridor
+    assert min(ours["localizer"]["per_second"][1:]) > 0.45
+    gaps = np.hypot(*(np.array(ours["paths"]["localizer"]) - np.array(tracked["paths"]["localizer"]))[:, :2].T)
+    t = np.array(ours["series"]["t"])
+    assert gaps[t > 1.0].max() < 0.3 and gaps[-1] < 0.1
+
+
+@needs_the_bag
 def test_on_the_racecar_bag_temporal_updates_end_where_the_scans_fit(racecar_run):
     # amcl: the car brakes, stands for 2.5 s, and the estimate stays where the last update left it
     ros = racecar_run[0]["end"]

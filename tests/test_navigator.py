@@ -128,6 +128,16 @@ def test_no_success_on_a_pose_the_localizer_doubts():
                                                  beam_fit=news)[0])
 
 
+def test_a_plan_is_made_afresh_when_the_doubted_pose_is_trusted_again():
+    nav = Navigator()
+    request = nav.step(0.0, NavInputs(pose=(0, 0, 0), goal=goal(5.0, 0.0, 0.0), beam_fit=0.9)).plan_request
+    nav.step(2 * DT, NavInputs(pose=(0, 0, 0), plan=straight_planner(request)))
+    assert nav.state is State.CONTROLLING
+    steps = [nav.step((3 + k) * DT, NavInputs(pose=(0.1, 0, 0), beam_fit=fit)) for k, fit in
+             enumerate([0.2, None, 0.3, 0.8, 0.9])]
+    assert [a.plan_request is not None for a in steps] == [False, False, False, True, False]
+
+
 def test_cancel_stops_the_robot_and_ignores_other_ids():
     nav = Navigator()
     events = {0: (goal(5.0, 0.0, 0.0), None), 10: (None, CancelGoal(goal_id="someone-else")),
