@@ -221,7 +221,7 @@ def test_on_the_racecar_bag_global_localization_finds_the_searched_start(racecar
     assert not tracked["start"]["ambiguous"]                     # the runner-up fits the first scans far worse
     assert tracked["start"]["runner_up"]["fit"] < tracked["start"]["fit"] - 0.2
     ours = _run_quietly("--bag", str(BAG), "--map", str(BASEMENT), "--global-localization")
-    assert ours["start"]["localizer"] == "global localization"
+    assert "global localization" in ours["start"]["localizer"]
     # particles over the whole basement at the first scan; from the second second on, the same corridor
     assert min(ours["localizer"]["per_second"][1:]) > 0.45
     gaps = np.hypot(*(np.array(ours["paths"]["localizer"]) - np.array(tracked["paths"]["localizer"]))[:, :2].T)

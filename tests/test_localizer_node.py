@@ -269,17 +269,28 @@ def test_the_saved_pose_lets_a_restarted_localizer_resume(room, room_map, tmp_pa
 # ---------------------------------------------------------------- the whole pipeline in process
 
 class Script(Node):
-    """Publishes a twist at every ground truth: forward, a turn, sideways."""
+    """Publishes at every ground truth the twist (vx, vy, wz) that twist_at gives for its sim time."""
     service = "script"
+
+    def __init__(self, twist_at, **kwargs):
+        self.twist_at = twist_at
+        super().__init__(**kwargs)
 
     def setup(self):
         self.pub = self.publisher("cmd_vel")
         self.subscribe("sim/truth", self.on_truth)
 
     def on_truth(self, msg):
-        t = msg.header.stamp_ns / NS_PER_S
-        vx, vy, wz = (0.3, 0.0, 0.0) if t < 8 else (0.0, 0.0, 0.4) if t < 11 else (0.0, -0.2, 0.0)
+        vx, vy, wz = self.twist_at(msg.header.stamp_ns / NS_PER_S)
         self.pub.publish(Twist(header=self.header("base_link"), linear_x=vx, linear_y=vy, angular_z=wz))
+
+
+def forward_turn_sideways(t):
+    return (0.3, 0.0, 0.0) if t < 8 else (0.0, 0.0, 0.4) if t < 11 else (0.0, -0.2, 0.0)
+
+
+def drive_then_stand(t):
+    return (0.3, 0.0, 0.0) if t < 3 else (0.0, 0.0, 0.0)
 
 
 def test_the_pipeline_in_process_converges_on_the_truth(room_map):
@@ -287,7 +298,7 @@ def test_the_pipeline_in_process_converges_on_the_truth(room_map):
                                               initial_pose_a=0.2, gui_publish_rate=1.0))
     sim = SimNode(SimNodeParams(world="room"))
     runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams()), LidarNode(LidarNodeParams(world="room")),
-                              localizer, Script()])
+                              localizer, Script(forward_turn_sideways)])
     seen = {"truth": {}, "odom": {}, "tf": [], "cloud": 0, "scans": 0}
 
     def tap(key, payload, stamp):
@@ -314,18 +325,6 @@ def test_the_pipeline_in_process_converges_on_the_truth(room_map):
     assert localizer.counters.get("sync_timeouts", 0) == 0 and not any(k.startswith("late/") for k in localizer.counters)
 
 
-class DriveThenStop(Node):
-    """Forward at 0.3 m/s for 3 s, then standing."""
-    service = "script"
-
-    def setup(self):
-        self.pub = self.publisher("cmd_vel")
-        self.subscribe("sim/truth", self.on_truth)
-
-    def on_truth(self, msg):
-        self.pub.publish(Twist(header=self.header("base_link"), linear_x=0.3 if msg.header.stamp_ns < 3 * NS_PER_S else 0.0))
-
-
 SHOVE_AT_S = 5.0
 
 
@@ -339,7 +338,7 @@ def shoved_run(room_map, **params):
                                                  "initial_pose_y": START[1], **params}))
     sim = SimNode(SimNodeParams(world="room"))
     runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams()), LidarNode(LidarNodeParams(world="room")),
-                              localizer, DriveThenStop()])
+                              localizer, Script(drive_then_stand)])
     truth, odometry, fits, rows = {}, {}, {}, []
 
     def tap(key, payload, stamp):

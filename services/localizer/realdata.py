@@ -10,13 +10,22 @@ whose end point lies within 0.1 m of an occupied map cell, under
   - raw odometry from the same start: the start pose ⊕ the odometry's motion since the first scan.
 
 The localizer runs exactly its live code: the recording's messages are fed to LocalizerNode in
-stamp order, as `replay --into` feeds a service.
+stamp order, as `replay --into` feeds a service. With --global-localization a global_localization
+request, due at the first scan, spreads its particles over all free space instead of starting it
+at the start pose.
+
+At the end: the pose near the localizer's last one (within END_SEARCH_M and END_SEARCH_A) where the
+last SEARCH_SCANS scans fit the map best (best_fit_near, the same scoring as the start search), its
+distance from the localizer's pose, and both shares. A robot that stopped on a stale estimate
+shows there (amcl makes no update without motion; see temporal_update).
 
 The start pose is not in the recording. Unless --initial-pose gives it, it is searched for over
 the whole map with the first scans (search_start): every free pose on a 0.25 m × 4° grid is scored
 with the AMCL likelihood field on the first scan, the best candidates are refined on a 0.05 m × 1°
 grid with the first SEARCH_SCANS scans (carried by the odometry), and the best one is the start.
-The runner-up more than a metre away is reported too, so an ambiguous start shows.
+The runner-up more than a metre away is reported too, with each one's scan fit (judge_start: the
+figure above, over the first scans); when the runner-up fits within AMBIGUOUS_FIT_GAP of the best,
+the start is ambiguous and the report says so.
 
 The laser's mounting on the car (there is no /tf in the bag) is --laser-x/-y/-yaw; the default
 0.285 m ahead of base_link (the rear axle) is the MIT racecar's base_link→laser transform
@@ -304,7 +313,8 @@ def score_run(run: Run, grid: OccupancyGrid, map_file: str, laser_pose, params_f
             "laser_pose": [float(v) for v in laser_pose],
             "start": {"pose": [round(float(v), 4) for v in initial_pose],
                       "how": "given" if search is None else "searched",
-                      "localizer": "global localization" if start_global else "at the start pose",
+                      "localizer": "from particles over all free space (global localization)" if start_global
+                      else "at the start pose",
                       **({} if search is None else _search_summary(search))},
             "near_m": NEAR_M,
             "localizer": _summary(t, amcl), "raw_odometry": _summary(t, raw), "end": end,
