@@ -36,7 +36,8 @@ ROS1_DEFAULTS = {
 }
 # ours, not amcl's; their defaults leave amcl's behaviour unchanged (docs/localizer.md)
 EXTENSIONS = {"temporal_update": -1.0, "temporal_update_jitter_xy": 0.02, "temporal_update_jitter_a": 0.02,
-              "recovery_reset_after_injection": True, "beam_fit_distance": 0.1}
+              "recovery_reset_after_injection": True, "recovery_local_share": 0.0, "recovery_local_std_xy": 0.5,
+              "recovery_local_std_a": 0.5, "beam_fit_distance": 0.1}
 
 # a mecanum robot's amcl settings, as such papers print them (ROS 1 names)
 MECANUM_AMCL = """\

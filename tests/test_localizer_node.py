@@ -14,7 +14,8 @@ from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.localizer.node import LocalizerNode, LocalizerParams, read_saved_pose
 from omninav.services.map_server.mapio import save_map
-from omninav.services.recorder.mcap_io import read_records
+from omninav.services.recorder.mcap_io import Record, read_records
+from omninav.services.replay.into import compare, replay_into
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
 from omninav.services.runtime.run import build_node
@@ -331,17 +332,22 @@ SHOVE_AT_S = 5.0
 def shoved_run(room_map, **params):
     """The room pipeline in lockstep; at SHOVE_AT_S the standing robot is pushed 0.3 m, 0.3 m and
     0.4 rad (a teleport: wheels and gyro do not see it). Returns per scan (s, beam fit, position
-    error m, heading error rad)."""
-    localizer = LocalizerNode(LocalizerParams(**{**QUICK, "max_particles": 5000, "laser_sigma_hit": 0.2,
-                                                 "recovery_alpha_slow": 0.01, "recovery_alpha_fast": 0.5,
-                                                 "map_file": room_map, "initial_pose_x": START[0],
-                                                 "initial_pose_y": START[1], **params}))
+    error m, heading error rad), the localizer's parameters and its inputs and outputs as records."""
+    params = LocalizerParams(**{**QUICK, "max_particles": 5000, "laser_sigma_hit": 0.2, "recovery_alpha_slow": 0.01,
+                                "recovery_alpha_fast": 0.5, "map_file": room_map, "initial_pose_x": START[0],
+                                "initial_pose_y": START[1], **params})
+    localizer = LocalizerNode(params)
+    watched = {inp.key for inp in localizer.inputs} | set(localizer.outputs)
+    records = []
     sim = SimNode(SimNodeParams(world="room"))
     runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams()), LidarNode(LidarNodeParams(world="room")),
                               localizer, Script(drive_then_stand)])
     truth, odometry, fits, rows = {}, {}, {}, []
 
     def tap(key, payload, stamp):
+        if key in watched:
+            msg = decode(payload)
+            records.append(Record(key, type(msg).__name__, payload, msg.header.seq, stamp, stamp))
         if key.endswith("/truth") or key.endswith("/odom"):
             pose = decode(payload).pose
             (truth if key.endswith("/truth") else odometry)[stamp] = (pose.x, pose.y, pose.theta)
@@ -360,22 +366,27 @@ def shoved_run(room_map, **params):
     sim.sim.teleport((x + 0.3, y + 0.3, yaw + 0.4))
     runner.run_until(lambda: False, round(12.0 / sim.params.dt))
     runner.close()
-    return np.array(rows)
+    return np.array(rows), params, records
 
 
 def test_a_shoved_standing_robot_is_doubted_then_found_again(room_map):
-    rows = shoved_run(room_map, temporal_update=0.2, recovery_reset_after_injection=False, recovery_local_share=0.5)
+    rows, params, records = shoved_run(room_map, temporal_update=0.2, recovery_reset_after_injection=False,
+                                       recovery_local_share=0.5)
     t, fit, position, heading = rows.T
     before, after = t < SHOVE_AT_S, t > SHOVE_AT_S
     assert fit[before].min() > 0.9 and position[before].max() < 0.05
     assert fit[after][:3].max() < 0.3 and position[after][0] > 0.4     # the scans disagree at once
     found = t > SHOVE_AT_S + 6.0
     assert position[found].max() < 0.05 and np.degrees(heading[found].max()) < 2.0 and fit[found].min() > 0.9
+    # updates while standing and the recovery's draws replay byte for byte, as `replay --into` feeds them
+    node = LocalizerNode(params)
+    outputs = [r for r in records if r.key in node.outputs]
+    comparison = compare(outputs, replay_into(node, [r for r in records if r.key not in node.outputs], None).outputs)
+    assert comparison.ok and comparison.compared == len(outputs) > 300, comparison.first
 
 
 def test_amcl_does_not_update_a_standing_robot_so_the_shove_stays_doubted(room_map):
-    rows = shoved_run(room_map)     # amcl's behaviour: updates need motion
-    t, fit, position, _ = rows.T
+    t, fit, position, _ = shoved_run(room_map)[0].T     # amcl's behaviour: updates need motion
     after = t > SHOVE_AT_S
     assert position[after].min() > 0.4 and fit[after].max() < 0.3
 

@@ -8,9 +8,12 @@ It runs as ROS amcl's laser callback does (amcl_node.cpp, pf.c):
   track the average weight w_avg with a slow and a fast exponential filter;
 - every resample_interval-th update resamples (unless selective_resampling finds the effective
   sample size above N/2).
-Not in amcl: with temporal_update > 0, a scan that comes that long after the last update updates
-the filter without motion too, after spreading the particles by temporal_update_jitter_* (see
-_jitter), so a robot that stopped on a wrong estimate still converges to what its scans say.
+Not in amcl (each off by default): with temporal_update > 0, a scan that comes that long after the
+last update updates the filter without motion too, after spreading the particles by
+temporal_update_jitter_* (see _jitter), so a robot that stopped on a wrong estimate still converges
+to what its scans say; recovery_reset_after_injection false keeps w_slow and w_fast after an
+injection (Augmented_MCL as Probabilistic Robotics has it), and recovery_local_share draws that
+share of the random poses near the estimate, where a shoved robot is.
 
 Resampling draws N particles, N chosen by KLD sampling (Fox 2003): samples are drawn one by one,
 the 0.5 m × 0.5 m × 10° bins they fall in are counted (k), and drawing stops once the count
@@ -467,9 +470,10 @@ class Amcl:
             return
         poses, weights = self._poses[self._current], self._weights[self._current]
         w_diff = max(0.0, 1.0 - self.w_fast / self.w_slow) if self.w_slow > 0.0 else 0.0
+        # before taking a fresh stamp: the estimate fills the bin table under its own
+        centre = self.estimate().pose if w_diff > 0.0 and p.recovery_local_share > 0.0 else np.zeros(3)
         _cumulative(weights, self.n, self._cum)
         self._stamp += 1
-        centre = self.estimate().pose if w_diff > 0.0 and p.recovery_local_share > 0.0 else np.zeros(3)
         count, randoms = _kld_count(poses, weights, self.n, w_diff, self.rng, self._free_xy, self._col_step,
                                     self._row_step, centre, p.recovery_local_share, p.recovery_local_std_xy,
                                     p.recovery_local_std_a, self._randoms, self._keys, self._values, self._stamps,
