@@ -92,11 +92,13 @@ def test_a_kidnapping_is_scored_against_the_injections_while_tracking():
         series.position.append(0.02 if k < 20 else 2.0)
         series.heading.append(0.01)
         series.injected.append(3 * (k >= 10) if k < 20 else 3 + 50 * (k - 19))
+        series.beam_fit.append(0.5 if k < 5 else 0.95 if k < 20 else 0.2 + 0.01 * k)   # 0.5: before converging
     k = kidnap_result(series, {"at_s": 1.95, "from": [0.0, 0.0, 0.0], "to": [3.0, 4.0, 0.0]}, 0.5)
     assert k["jump_m"] == 5.0 and k["error_after_m"] == 2.0
     assert k["detected"] and k["detected_after_s"] == pytest.approx(0.05)
     assert k["random_poses_per_s_before"] == pytest.approx(3 / 1.4, abs=0.05)   # 0.5 s to 1.9 s
     assert k["random_poses_first_s_after"] == 500                              # scans at 2.0 … 2.9 s
+    assert k["beam_fit_min_before"] == 0.95 and k["beam_fit_min_first_s_after"] == 0.4
     assert not k["recovered"]
 
 
@@ -175,6 +177,7 @@ def test_a_kidnapping_in_the_room_is_detected(capsys):
     (["--set", "laser_max_beem=30"], "laser_max_beem"),
     (["--params", "/nonexistent/amcl.yaml"], "no such file"),
     (["--bag", "x.bag"], "--bag needs --map"),
+    (["--mode", "kidnap", "--shove", "0.3,0.3"], "--shove '0.3,0.3': expected X,Y,YAW"),
 ])
 def test_user_errors_are_one_line(capsys, args, message):
     assert omninav(["localize-eval", *args]) == 2

@@ -385,7 +385,7 @@ def main(args: argparse.Namespace) -> int:
         print("omninav localize-eval: --bag needs --map (the map_server YAML of the building)", file=sys.stderr)
         return 2
     try:
-        initial = _parse_pose(args.initial_pose) if args.initial_pose else None
+        initial = parse_pose(args.initial_pose) if args.initial_pose else None
         grid = load_map(args.map)
         run = load_run(args.bag, args.scan_topic, args.odom_topic)
         result = score_run(run, grid, args.map, (args.laser_x, args.laser_y, args.laser_yaw), args.params,
@@ -402,13 +402,13 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def _parse_pose(text: str) -> tuple[float, float, float]:
+def parse_pose(text: str, option: str = "--initial-pose") -> tuple[float, float, float]:
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
     if len(values) != 3 or not all(map(math.isfinite, values)):
-        raise ValueError(f"--initial-pose {text!r}: expected X,Y,YAW (m, m, rad)")
+        raise ValueError(f"{option} {text!r}: expected X,Y,YAW (m, m, rad)")
     return values
 
 
