@@ -28,6 +28,7 @@ ROBOT_TOPICS: dict[str, type] = {
     "initialpose": m.PoseWithCovariance,
     "global_localization": m.PoseWithCovariance,  # request: particles over all free space (only the stamp counts)
     "particlecloud": m.ParticleCloud,
+    "pose_fit": m.PoseFit,              # localizer: how well each scan fits the map at its pose
     "tf/map_odom": m.Transform,
     "tf/odom_base": m.Transform,
     "costmap/global": m.Costmap,

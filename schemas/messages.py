@@ -206,6 +206,16 @@ class PoseWithCovariance:
         return covariance_problem("covariance", self.covariance)
 
 
+@message("PoseFit", 1)
+@dataclass(slots=True)
+class PoseFit:
+    """How well a scan agrees with the map at the localizer's pose (no ROS equivalent): a pose the
+    scans do not fit is one the localizer doubts, whatever its covariance says."""
+    header: Header = field(default_factory=Header)   # the scan's stamp, the map frame
+    beam_fit: float = 0.0      # share of the scan's used returns within beam_fit_distance of a mapped obstacle
+    beams: int = 0             # returns counted
+
+
 @message("ParticleCloud", 1)
 @dataclass(slots=True)
 class ParticleCloud:

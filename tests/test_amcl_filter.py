@@ -96,6 +96,53 @@ def test_updates_only_after_enough_motion_as_amcl_measures_it(room):
     assert amcl.update((5.0, 5.0, 0.0), beams) and not amcl.update((5.0, 5.0, 0.0), beams)
 
 
+def test_temporal_updates_come_at_their_period_without_motion_and_never_by_default(room):
+    world, grid = room
+    beams = _beams(world, (1.2, 1.0, 0.0), AmclParams(), np.random.default_rng(1))
+    stamps = np.arange(0.0, 2.05, 0.1)
+    ros = Amcl(AmclParams(min_particles=50, max_particles=200), grid, np.random.default_rng(0))
+    assert [ros.update((0.0, 0.0, 0.0), beams, t) for t in stamps].count(True) == 1   # the first scan only
+    params = AmclParams(min_particles=50, max_particles=200, temporal_update=0.5)
+    amcl = Amcl(params, grid, np.random.default_rng(0))
+    updated = [t for t in stamps if amcl.update((0.0, 0.0, 0.0), beams, t)]
+    assert updated == pytest.approx([0.0, 0.5, 1.0, 1.5, 2.0])
+    assert amcl.update((0.3, 0.0, 0.0), beams, 2.1)                     # motion updates as before ...
+    assert not amcl.update((0.3, 0.0, 0.0), beams, 2.5)                 # ... and restart the period
+    assert not amcl.update((0.3, 0.0, 0.0), beams)                      # no stamp: no temporal update
+
+
+def _stopped_behind(grid, world, temporal_update, jitter):
+    """The robot stands at (1.6, 1.0) but the filter believes it 0.3 m behind, all its particles
+    within a few cm of that: 5 s of scans without motion."""
+    params = AmclParams(min_particles=200, max_particles=500, laser_max_beams=60, resample_interval=1,
+                        laser_model_type="likelihood_field_prob", initial_pose_x=1.3, initial_pose_y=1.0,
+                        initial_cov_xx=0.03 ** 2, initial_cov_yy=0.03 ** 2, initial_cov_aa=0.01 ** 2,
+                        temporal_update=temporal_update, temporal_update_jitter_xy=jitter,
+                        temporal_update_jitter_a=jitter)
+    amcl = Amcl(params, grid, np.random.default_rng(SEED))
+    rng = np.random.default_rng(SEED + 1)
+    for t in np.arange(0.0, 5.0, 0.1):
+        amcl.update((0.0, 0.0, 0.0), _beams(world, (1.6, 1.0, 0.0), params, rng), t)
+    return amcl
+
+
+def test_without_motion_temporal_updates_bring_the_estimate_to_what_the_scans_say(room):
+    world, grid = room
+    amcl = _stopped_behind(grid, world, 0.1, 0.02)
+    x, y, theta = amcl.estimate().pose
+    assert math.hypot(x - 1.6, y - 1.0) < 0.03 and abs(theta) < 0.02
+    assert len(np.unique(amcl.poses, axis=0)) > 0.3 * amcl.n        # still a cloud, not copies of a few
+    ros = _stopped_behind(grid, world, -1.0, 0.02)                      # amcl: no update without motion
+    assert math.hypot(ros.estimate().pose[0] - 1.6, ros.estimate().pose[1] - 1.0) > 0.2
+
+
+def test_without_jitter_repeated_updates_collapse_the_particles(room):
+    world, grid = room
+    amcl = _stopped_behind(grid, world, 0.1, 0.0)
+    assert len(np.unique(amcl.poses, axis=0)) < 10                      # particle deprivation
+    assert math.hypot(amcl.estimate().pose[0] - 1.6, amcl.estimate().pose[1] - 1.0) > 0.15
+
+
 def test_force_update_after_initialpose(room):
     world, grid = room
     params = AmclParams(min_particles=50, max_particles=200, force_update_after_initialpose=True)

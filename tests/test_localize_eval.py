@@ -1,5 +1,7 @@
 """`omninav localize-eval`: the routes, the harness's driving, the scoring, short runs in the simulator
 (tracking, a kidnapping), and the real racecar bag against raw odometry."""
+import contextlib
+import io
 import json
 import math
 
@@ -11,8 +13,10 @@ from omninav.schemas.codec import encode
 from omninav.services.localizer.evaluate import (PARAMS_FILE, ROUTES, Route, Series, kidnap_result, route_command,
                                                  route_problems)
 from omninav.services.localizer.params import AmclParams
-from omninav.services.localizer.realdata import load_run
+from omninav.services.localizer.node import OdomHistory
+from omninav.services.localizer.realdata import Agreement, judge_start, load_run, search_start
 from omninav.services.runtime.params import load_params_file
+from omninav.sim.raycast import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path
 
 from conftest import SHARED_DATA
@@ -88,12 +92,55 @@ def test_a_kidnapping_is_scored_against_the_injections_while_tracking():
         series.position.append(0.02 if k < 20 else 2.0)
         series.heading.append(0.01)
         series.injected.append(3 * (k >= 10) if k < 20 else 3 + 50 * (k - 19))
+        series.beam_fit.append(0.5 if k < 5 else 0.95 if k < 20 else 0.2 + 0.01 * k)   # 0.5: before converging
     k = kidnap_result(series, {"at_s": 1.95, "from": [0.0, 0.0, 0.0], "to": [3.0, 4.0, 0.0]}, 0.5)
     assert k["jump_m"] == 5.0 and k["error_after_m"] == 2.0
     assert k["detected"] and k["detected_after_s"] == pytest.approx(0.05)
     assert k["random_poses_per_s_before"] == pytest.approx(3 / 1.4, abs=0.05)   # 0.5 s to 1.9 s
     assert k["random_poses_first_s_after"] == 500                              # scans at 2.0 … 2.9 s
+    assert k["beam_fit_min_before"] == 0.95 and k["beam_fit_min_first_s_after"] == 0.4
     assert not k["recovered"]
+
+
+SYMMETRIC_ROOM = """\
+name: symmetric
+bounds: [6.0, 4.0]
+boxes:                 # the same about the centre (3, 2) turned half a turn
+  - {center: [1.5, 1.0], size: [0.8, 0.5]}
+  - {center: [4.5, 3.0], size: [0.8, 0.5]}
+robot:
+  start: [2.0, 2.6, 0.3]
+"""
+
+
+def _scans_from(world, pose, count=3):
+    lidar = LidarParams(beams=360, range_max=10.0, noise_std=0.01)
+    rng = np.random.default_rng(0)
+    scans = [make_scan(lidar, scan(world, pose, None, lidar, rng), k * 100_000_000) for k in range(count)]
+    history = OdomHistory(keep_ns=10 ** 12)
+    for k in range(count):
+        history.add(k * 100_000_000, np.zeros(3))
+    return scans, history
+
+
+@pytest.mark.parametrize("second_box, ambiguous", [("[4.5, 3.0]", True), ("[4.5, 1.0]", False)])
+def test_a_start_that_a_point_symmetric_room_cannot_tell_apart_is_reported_ambiguous(tmp_path, second_box, ambiguous):
+    path = tmp_path / "symmetric.yaml"
+    path.write_text(SYMMETRIC_ROOM.replace("[4.5, 3.0]", second_box))   # [4.5, 1.0]: no longer symmetric
+    world = load_world(path)
+    grid = world.rasterize(0.05)
+    scans, history = _scans_from(world, world.robot.start)
+    search = judge_start(search_start(grid, scans, history, (0.0, 0.0, 0.0)), Agreement(grid, (0.0, 0.0, 0.0)),
+                         scans, history)
+    found = [search["pose"], search["runner_up"]["pose"]]
+    mirror = (6.0 - world.robot.start[0], 4.0 - world.robot.start[1])
+    assert min(math.hypot(p[0] - world.robot.start[0], p[1] - world.robot.start[1]) for p in found) < 0.1
+    assert search["ambiguous"] is ambiguous and search["fit"] > 0.9
+    if ambiguous:   # the other candidate is the mirror image, fitting as well
+        assert min(math.hypot(p[0] - mirror[0], p[1] - mirror[1]) for p in found) < 0.1
+        assert search["runner_up"]["fit"] > 0.9
+    else:
+        assert search["runner_up"]["fit"] < search["fit"] - 0.1
 
 
 def _run(capsys, *args):
@@ -130,6 +177,7 @@ def test_a_kidnapping_in_the_room_is_detected(capsys):
     (["--set", "laser_max_beem=30"], "laser_max_beem"),
     (["--params", "/nonexistent/amcl.yaml"], "no such file"),
     (["--bag", "x.bag"], "--bag needs --map"),
+    (["--mode", "kidnap", "--shove", "0.3,0.3"], "--shove '0.3,0.3': expected X,Y,YAW"),
 ])
 def test_user_errors_are_one_line(capsys, args, message):
     assert omninav(["localize-eval", *args]) == 2
@@ -137,11 +185,29 @@ def test_user_errors_are_one_line(capsys, args, message):
     assert message in err and "Traceback" not in err
 
 
-@pytest.mark.skipif(not HAVE_ROSBAGS, reason="the optional rosbags package is not installed (pip install '.[rosbag]')")
-@pytest.mark.skipif(not (BAG.is_file() and BASEMENT.is_file()), reason="no shared data (bag and basement map)")
-def test_on_the_racecar_bag_the_localizer_agrees_with_the_map_better_than_odometry(capsys, tmp_path):
-    picture = tmp_path / "real.png"
-    r = _run(capsys, "--bag", str(BAG), "--map", str(BASEMENT), "--plot", str(picture))
+def needs_the_bag(test):
+    test = pytest.mark.skipif(not HAVE_ROSBAGS,
+                              reason="the optional rosbags package is not installed (pip install '.[rosbag]')")(test)
+    return pytest.mark.skipif(not (BAG.is_file() and BASEMENT.is_file()), reason="no shared data (bag and basement map)")(test)
+
+
+@pytest.fixture(scope="module")
+def racecar_run(tmp_path_factory):
+    """localize-eval on the racecar bag with amcl's behaviour (no update without motion), and its figure."""
+    picture = tmp_path_factory.mktemp("real") / "real.png"
+    return _run_quietly("--bag", str(BAG), "--map", str(BASEMENT), "--plot", str(picture)), picture
+
+
+def _run_quietly(*args):
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert omninav(["localize-eval", *args, "--json"]) == 0
+    return json.loads(out.getvalue())
+
+
+@needs_the_bag
+def test_on_the_racecar_bag_the_localizer_agrees_with_the_map_better_than_odometry(racecar_run):
+    r, picture = racecar_run
     assert r["scans"] == 281 and r["odometry"] == 350 and r["scans_scored"] > 270
     assert r["start"]["how"] == "searched" and r["laser_pose"] == [0.285, 0.0, 0.0]
     ours, odometry = r["localizer"], r["raw_odometry"]
@@ -150,6 +216,35 @@ def test_on_the_racecar_bag_the_localizer_agrees_with_the_map_better_than_odomet
     assert min(ours["per_second"]) > 0.3                    # never lost for a whole second
     assert np.mean(r["series"]["raw_odometry"][-40:]) < 0.2  # while odometry ends up in a wall
     assert picture.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+@needs_the_bag
+def test_on_the_racecar_bag_global_localization_finds_the_searched_start(racecar_run):
+    tracked = racecar_run[0]
+    assert not tracked["start"]["ambiguous"]                     # the runner-up fits the first scans far worse
+    assert tracked["start"]["runner_up"]["fit"] < tracked["start"]["fit"] - 0.2
+    ours = _run_quietly("--bag", str(BAG), "--map", str(BASEMENT), "--global-localization")
+    assert "global localization" in ours["start"]["localizer"]
+    # particles over the whole basement at the first scan; from the second second on, the same corridor
+    assert min(ours["localizer"]["per_second"][1:]) > 0.45
+    gaps = np.hypot(*(np.array(ours["paths"]["localizer"]) - np.array(tracked["paths"]["localizer"]))[:, :2].T)
+    t = np.array(ours["series"]["t"])
+    assert gaps[t > 1.0].max() < 0.3 and gaps[-1] < 0.1
+
+
+@needs_the_bag
+def test_on_the_racecar_bag_temporal_updates_end_where_the_scans_fit(racecar_run):
+    # amcl: the car brakes, stands for 2.5 s, and the estimate stays where the last update left it
+    ros = racecar_run[0]["end"]
+    assert ros["distance_m"] > 0.3 and ros["localizer_share"] < ros["best_fit_share"] - 0.3
+    # an update at every scan while it stands (the racecar's lidar: 40 Hz)
+    ours = _run_quietly("--bag", str(BAG), "--map", str(BASEMENT), "--set", "temporal_update=0.025")
+    end = ours["end"]
+    assert end["distance_m"] < 0.05 and end["heading_deg"] < 1.5
+    assert end["localizer_share"] > end["best_fit_share"] - 0.02 and end["best_fit_share"] > 0.85
+    # while it drives, updates come from motion nearly always: no worse than amcl's
+    assert np.all(np.array(ours["localizer"]["per_second"][:4])
+                  > np.array(racecar_run[0]["localizer"]["per_second"][:4]) - 0.03)
 
 
 @pytest.mark.skipif(not HAVE_ROSBAGS, reason="the optional rosbags package is not installed (pip install '.[rosbag]')")

@@ -14,7 +14,8 @@ from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.localizer.node import LocalizerNode, LocalizerParams, read_saved_pose
 from omninav.services.map_server.mapio import save_map
-from omninav.services.recorder.mcap_io import read_records
+from omninav.services.recorder.mcap_io import Record, read_records
+from omninav.services.replay.into import compare, replay_into
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
 from omninav.services.runtime.run import build_node
@@ -269,17 +270,28 @@ def test_the_saved_pose_lets_a_restarted_localizer_resume(room, room_map, tmp_pa
 # ---------------------------------------------------------------- the whole pipeline in process
 
 class Script(Node):
-    """Publishes a twist at every ground truth: forward, a turn, sideways."""
+    """Publishes at every ground truth the twist (vx, vy, wz) that twist_at gives for its sim time."""
     service = "script"
+
+    def __init__(self, twist_at, **kwargs):
+        self.twist_at = twist_at
+        super().__init__(**kwargs)
 
     def setup(self):
         self.pub = self.publisher("cmd_vel")
         self.subscribe("sim/truth", self.on_truth)
 
     def on_truth(self, msg):
-        t = msg.header.stamp_ns / NS_PER_S
-        vx, vy, wz = (0.3, 0.0, 0.0) if t < 8 else (0.0, 0.0, 0.4) if t < 11 else (0.0, -0.2, 0.0)
+        vx, vy, wz = self.twist_at(msg.header.stamp_ns / NS_PER_S)
         self.pub.publish(Twist(header=self.header("base_link"), linear_x=vx, linear_y=vy, angular_z=wz))
+
+
+def forward_turn_sideways(t):
+    return (0.3, 0.0, 0.0) if t < 8 else (0.0, 0.0, 0.4) if t < 11 else (0.0, -0.2, 0.0)
+
+
+def drive_then_stand(t):
+    return (0.3, 0.0, 0.0) if t < 3 else (0.0, 0.0, 0.0)
 
 
 def test_the_pipeline_in_process_converges_on_the_truth(room_map):
@@ -287,7 +299,7 @@ def test_the_pipeline_in_process_converges_on_the_truth(room_map):
                                               initial_pose_a=0.2, gui_publish_rate=1.0))
     sim = SimNode(SimNodeParams(world="room"))
     runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams()), LidarNode(LidarNodeParams(world="room")),
-                              localizer, Script()])
+                              localizer, Script(forward_turn_sideways)])
     seen = {"truth": {}, "odom": {}, "tf": [], "cloud": 0, "scans": 0}
 
     def tap(key, payload, stamp):
@@ -312,6 +324,71 @@ def test_the_pipeline_in_process_converges_on_the_truth(room_map):
     errors = np.array(errors)                          # it started 0.36 m and 11° off
     assert errors[10:, 0].max() < 0.1 and np.degrees(errors[10:, 1].max()) < 3.0
     assert localizer.counters.get("sync_timeouts", 0) == 0 and not any(k.startswith("late/") for k in localizer.counters)
+
+
+SHOVE_AT_S = 5.0
+
+
+def shoved_run(room_map, **params):
+    """The room pipeline in lockstep; at SHOVE_AT_S the standing robot is pushed 0.3 m, 0.3 m and
+    0.4 rad (a teleport: wheels and gyro do not see it). Returns per scan (s, beam fit, position
+    error m, heading error rad), the localizer's parameters and its inputs and outputs as records."""
+    params = LocalizerParams(**{**QUICK, "max_particles": 5000, "laser_sigma_hit": 0.2, "recovery_alpha_slow": 0.01,
+                                "recovery_alpha_fast": 0.5, "map_file": room_map, "initial_pose_x": START[0],
+                                "initial_pose_y": START[1], **params})
+    localizer = LocalizerNode(params)
+    watched = {inp.key for inp in localizer.inputs} | set(localizer.outputs)
+    records = []
+    sim = SimNode(SimNodeParams(world="room"))
+    runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams()), LidarNode(LidarNodeParams(world="room")),
+                              localizer, Script(drive_then_stand)])
+    truth, odometry, fits, rows = {}, {}, {}, []
+
+    def tap(key, payload, stamp):
+        if key in watched:
+            msg = decode(payload)
+            records.append(Record(key, type(msg).__name__, payload, msg.header.seq, stamp, stamp))
+        if key.endswith("/truth") or key.endswith("/odom"):
+            pose = decode(payload).pose
+            (truth if key.endswith("/truth") else odometry)[stamp] = (pose.x, pose.y, pose.theta)
+        elif key.endswith("/pose_fit"):
+            fits[stamp] = decode(payload).beam_fit
+        elif key.endswith("/tf/map_odom"):
+            tf = decode(payload)
+            stamp = tf.header.stamp_ns - round(localizer.params.transform_tolerance * NS_PER_S)
+            est, true = estimate_at(tf, odometry[stamp]), truth[stamp]
+            rows.append((stamp / NS_PER_S, fits[stamp], math.hypot(est[0] - true[0], est[1] - true[1]),
+                         abs(wrap_angle(est[2] - true[2]))))
+
+    runner.tap(tap)
+    runner.run_until(lambda: bool(rows) and rows[-1][0] >= SHOVE_AT_S, 1000)
+    x, y, yaw = sim.sim.pose
+    sim.sim.teleport((x + 0.3, y + 0.3, yaw + 0.4))
+    runner.run_until(lambda: False, round(12.0 / sim.params.dt))
+    runner.close()
+    return np.array(rows), params, records
+
+
+def test_a_shoved_standing_robot_is_doubted_then_found_again(room_map):
+    rows, params, records = shoved_run(room_map, temporal_update=0.2, recovery_reset_after_injection=False,
+                                       recovery_local_share=0.5)
+    t, fit, position, heading = rows.T
+    before, after = t < SHOVE_AT_S, t > SHOVE_AT_S
+    assert fit[before].min() > 0.9 and position[before].max() < 0.05
+    assert fit[after][:3].max() < 0.3 and position[after][0] > 0.4     # the scans disagree at once
+    found = t > SHOVE_AT_S + 6.0
+    assert position[found].max() < 0.05 and np.degrees(heading[found].max()) < 2.0 and fit[found].min() > 0.9
+    # updates while standing and the recovery's draws replay byte for byte, as `replay --into` feeds them
+    node = LocalizerNode(params)
+    outputs = [r for r in records if r.key in node.outputs]
+    comparison = compare(outputs, replay_into(node, [r for r in records if r.key not in node.outputs], None).outputs)
+    assert comparison.ok and comparison.compared == len(outputs) > 300, comparison.first
+
+
+def test_amcl_does_not_update_a_standing_robot_so_the_shove_stays_doubted(room_map):
+    t, fit, position, _ = shoved_run(room_map)[0].T     # amcl's behaviour: updates need motion
+    after = t > SHOVE_AT_S
+    assert position[after].min() > 0.4 and fit[after].max() < 0.3
 
 
 # ---------------------------------------------------------------- live, then replayed byte for byte

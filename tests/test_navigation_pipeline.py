@@ -6,6 +6,7 @@ aborted, naming why."""
 import math
 
 import numpy as np
+import pytest
 
 from conftest import REPO
 from omninav.cli.navigate import map_for
@@ -19,10 +20,13 @@ from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
 from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from omninav.services.map_server.node import MapServerNode, MapServerParams
+from omninav.services.localizer.node import LocalizerNode, LocalizerParams
+from omninav.services.navigator.core import WAITING_FOR_CONFIDENT_POSE
 from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
 from omninav.services.navigator.truth_pose import TruthPoseNode
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
+from omninav.services.runtime.params import read_params_mapping
 from omninav.services.se2 import wrap_angle
 from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.world import load_world, world_path
@@ -53,19 +57,21 @@ class GoalAt(Node):
 
 
 def navigate(x: float, y: float, yaw: float, goal_id: str, max_sim_s: float, world_name: str = "room",
-             map_folder=None):
+             map_folder=None, localizer=None, after_step=None, **navigator_params):
     """Run the stack until the goal ends (or max_sim_s); returns (sim node, the statuses).
-    A world without a shipped map is rasterized into map_folder, as `omninav navigate` does."""
+    A world without a shipped map is rasterized into map_folder, as `omninav navigate` does. The
+    pose comes from the simulator's truth unless `localizer(map_file, start)` makes a localizer node;
+    after_step(sim, statuses) is called after every step."""
     world = load_world(world_path(world_name))
     start = dict(zip(("initial_pose_x", "initial_pose_y", "initial_pose_a"), map(float, world.robot.start)))
     sim = SimNode(SimNodeParams(world=world_name, dt=0.02))   # 50 Hz physics: the control loop runs at 20 Hz
-    navigator = NavigatorNode(NavigatorNodeParams(xy_goal_tolerance=0.03, yaw_goal_tolerance=0.025,
-                                                  planner_patience=2.0, recovery_behaviors=("clear_costmaps",),
-                                                  **start))
+    navigator = NavigatorNode(NavigatorNodeParams(**{"xy_goal_tolerance": 0.03, "yaw_goal_tolerance": 0.025,
+                                                     "planner_patience": 2.0, "recovery_behaviors": ("clear_costmaps",),
+                                                     **start, **navigator_params}))
+    map_file = str(map_for(world, world_name, map_folder))
     nodes = [sim, ChassisNode(), LidarNode(LidarNodeParams(world=world_name)),
-             MapServerNode(MapServerParams(yaml_filename=str(map_for(world, world_name, map_folder)),
-                                           publish_period_s=1.0)),
-             TruthPoseNode(),
+             MapServerNode(MapServerParams(yaml_filename=map_file, publish_period_s=1.0)),
+             TruthPoseNode() if localizer is None else localizer(map_file, start),
              CostmapNode(CostmapNodeParams(
                  global_costmap_files=(str(PARAMS / "costmap_common_params.yaml"),
                                        str(PARAMS / "costmap_global_params.yaml")),
@@ -81,7 +87,12 @@ def navigate(x: float, y: float, yaw: float, goal_id: str, max_sim_s: float, wor
     runner.tap(lambda key, payload, stamp: statuses.append(decode(payload))
                if key == KEYS.robot("nav_status") else None)
     ended = lambda: bool(statuses) and statuses[-1].status in ("succeeded", "aborted", "canceled")
-    runner.run_until(ended, round(max_sim_s / sim.params.dt))
+    for _ in range(round(max_sim_s / sim.params.dt)):
+        runner.step()
+        if after_step is not None:
+            after_step(sim, statuses)
+        if ended():
+            break
     runner.run_until(lambda: False, round(1.0 / sim.params.dt))     # the robot comes to rest
     runner.close()
     return sim, statuses
@@ -117,3 +128,57 @@ def test_people_crossing_the_planned_path_are_avoided_and_the_goal_is_reached(tm
     assert 0.0 < sim.sim.min_clearance < 1.0
     truth = sim.last_truth.pose
     assert math.hypot(truth.x - goal[0], truth.y - goal[1]) <= 0.05
+
+
+# ---------------------------------------------------------------- a shove at the goal, with AMCL
+
+def amcl_localizer(**params):
+    """amcl_paper.yaml with `params`, as the navigate() pose source."""
+    def make(map_file: str, start: dict) -> LocalizerNode:
+        values = read_params_mapping(PARAMS / "amcl_paper.yaml", "amcl")
+        return LocalizerNode(LocalizerParams(**{**values, "map_file": map_file, **start, **params}))
+    return make
+
+
+# updates while standing, and a recovery that keeps its averages and searches near the estimate too
+RECOVERING = dict(temporal_update=0.2, recovery_reset_after_injection=False, recovery_local_share=0.5)
+NOT_RECOVERING = dict(recovery_alpha_slow=0.0, recovery_alpha_fast=0.0)
+
+
+def shove_near(goal, offset, within_m):
+    """Teleport the robot by `offset` (x, y, yaw) once it is within within_m of the goal."""
+    done = []
+
+    def after_step(sim, statuses):
+        x, y, yaw = sim.sim.pose
+        if not done and math.hypot(x - goal[0], y - goal[1]) < within_m:
+            sim.sim.teleport((x + offset[0], y + offset[1], yaw + offset[2]))
+            done.append(sim.last_truth.header.stamp_ns)
+    return after_step, done
+
+
+GOAL = (3.0, 4.0, 0.0)
+SHOVE = (0.0, 0.35, 0.3)
+
+
+def test_a_robot_shoved_near_the_goal_succeeds_once_the_localizer_has_found_it_again():
+    after_step, shoved = shove_near(GOAL, SHOVE, within_m=0.12)
+    sim, statuses = navigate(*GOAL, goal_id="shoved", max_sim_s=40.0, localizer=amcl_localizer(**RECOVERING),
+                             after_step=after_step)
+    assert shoved and statuses[-1].status == "succeeded", statuses[-1].reason
+    truth = sim.last_truth.pose
+    assert math.hypot(truth.x - GOAL[0], truth.y - GOAL[1]) <= 0.08 and sim.sim.collisions == 0
+
+
+@pytest.mark.parametrize("min_pose_beam_fit", [0.5, 0.0])
+def test_the_navigator_does_not_succeed_on_a_pose_whose_scans_do_not_fit(min_pose_beam_fit):
+    # AMCL without recovery: after the shove its pose stays where the odometry carries it, at the goal
+    after_step, shoved = shove_near(GOAL, SHOVE, within_m=0.3)
+    sim, statuses = navigate(*GOAL, goal_id="doubted", max_sim_s=25.0, localizer=amcl_localizer(**NOT_RECOVERING),
+                             after_step=after_step, min_pose_beam_fit=min_pose_beam_fit)
+    truth = sim.last_truth.pose
+    assert shoved and math.hypot(truth.x - GOAL[0], truth.y - GOAL[1]) > 0.25     # truly not there
+    if min_pose_beam_fit > 0:
+        assert statuses[-1].status == "active" and statuses[-1].reason == WAITING_FOR_CONFIDENT_POSE
+    else:   # move_base's rule: the pose says it is there
+        assert statuses[-1].status == "succeeded"

@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 from omninav.schemas.messages import CancelGoal, Goal, Header, Pose2D
-from omninav.services.navigator.core import (ControlResult, Navigator, NavInputs, PlanResult, State)
+from omninav.services.navigator.core import (WAITING_FOR_CONFIDENT_POSE, ControlResult, Navigator, NavInputs,
+                                             PlanResult, State)
 from omninav.services.navigator.params import NavigatorParams
 from omninav.services.navigator.recovery import back_up, behaviour, clear_costmaps, rotate, wait
 from omninav.services.runtime.params import ParamError
@@ -41,16 +42,19 @@ def holonomic_controller(pose, path, turn=True):
     return ControlResult(True, (float(v[0]), float(v[1]), wz))
 
 
-def run(nav, steps, planner=straight_planner, controller=holonomic_controller, events=None, start=(0, 0, 0)):
+def run(nav, steps, planner=straight_planner, controller=holonomic_controller, events=None, start=(0, 0, 0),
+        beam_fit=lambda k: None):
     """Close the loop: the planner answers a request one step later, the controller answers every
-    step from the pose the last command produced. Returns (log of actions, poses)."""
+    step from the pose the last command produced; beam_fit(k) is the localizer's news at step k.
+    Returns (log of actions, poses)."""
     events = events or {}
     pose = np.array(start, dtype=float)
     path, plan, control = None, None, None
     log, poses = [], []
     for k in range(steps):
         g, c = events.get(k, (None, None))
-        act = nav.step(k * DT, NavInputs(pose=pose, plan=plan, control=control, goal=g, cancel=c))
+        act = nav.step(k * DT, NavInputs(pose=pose, plan=plan, control=control, goal=g, cancel=c,
+                                         beam_fit=beam_fit(k)))
         log.append(act)
         plan = planner(act.plan_request) if act.plan_request else None
         if act.controller_plan is not None:
@@ -103,6 +107,35 @@ def test_happy_path_reaches_goal_within_tolerances_then_stops():
     assert distances[0] == pytest.approx(math.hypot(2.0, 1.0))
     assert distances[end // 2] < distances[0] and log[end].statuses[-1].distance_remaining == 0.0
     assert not recoveries(log)
+
+
+def test_no_success_on_a_pose_the_localizer_doubts():
+    # the scans stop fitting the map at step 20 (a shove) and fit again from step 300 (recovered)
+    def fit(k):
+        return 0.95 if k < 20 else 0.2 if k < 300 else 0.9 if k % 10 == 0 else None
+    nav = Navigator()
+    log, poses = run(nav, 400, events={0: (goal(2.0, 1.0, 0.0), None)}, beam_fit=fit)
+    statuses = current_status(log)
+    arrived = next(k for k, p in enumerate(poses) if math.hypot(p[0] - 2.0, p[1] - 1.0) <= 0.1)
+    assert arrived < 250                                       # long before the pose is trusted again
+    assert statuses.index("succeeded") == 300
+    waiting = [a.statuses[-1].reason for a in log[arrived + 5:300]]
+    assert set(waiting) == {WAITING_FOR_CONFIDENT_POSE} and set(statuses[:300]) == {"active"}
+    assert log[299].cmd is not None and not recoveries(log)
+    # off, or without a localizer's beam fit at all, the goal succeeds as move_base's would
+    for params, news in ((NavigatorParams(min_pose_beam_fit=0.0), fit), (NavigatorParams(), lambda k: None)):
+        assert "succeeded" in current_status(run(Navigator(params), 300, events={0: (goal(2.0, 1.0, 0.0), None)},
+                                                 beam_fit=news)[0])
+
+
+def test_a_plan_is_made_afresh_when_the_doubted_pose_is_trusted_again():
+    nav = Navigator()
+    request = nav.step(0.0, NavInputs(pose=(0, 0, 0), goal=goal(5.0, 0.0, 0.0), beam_fit=0.9)).plan_request
+    nav.step(2 * DT, NavInputs(pose=(0, 0, 0), plan=straight_planner(request)))
+    assert nav.state is State.CONTROLLING
+    steps = [nav.step((3 + k) * DT, NavInputs(pose=(0.1, 0, 0), beam_fit=fit)) for k, fit in
+             enumerate([0.2, None, 0.3, 0.8, 0.9])]
+    assert [a.plan_request is not None for a in steps] == [False, False, False, True, False]
 
 
 def test_cancel_stops_the_robot_and_ignores_other_ids():

@@ -11,8 +11,10 @@ Modes:
   to the end.
 - global: no initial pose, global localization at the start.
 - kidnap: as track; once converged and past --kidnap-at, the robot is teleported (Simulation.teleport:
-  the wheels and the gyro do not see it) to a far waypoint of the route. Detected = the first filter
-  update after it that injected random poses (recovery_alpha_*); recovered = converged again.
+  the wheels and the gyro do not see it) to a far waypoint of the route, or with --shove DX,DY,DYAW
+  pushed by that much (m, m in the map frame, rad: a collision, not a kidnapping). Detected = the
+  first filter update after it that injected random poses (recovery_alpha_*); recovered = converged
+  again. The localizer's beam fit (pose_fit) is reported before and just after the jump.
 
 The pose the localizer gives at a scan is its map→odom transform (published at every scan) composed
 with the odometry at the scan's stamp: what a consumer of the transform sees. Converged at time t
@@ -30,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ...schemas import decode
-from ...schemas.messages import Header, Odometry, Pose2D, PoseWithCovariance, Transform, Twist
+from ...schemas.messages import Header, Odometry, Pose2D, PoseFit, PoseWithCovariance, Transform, Twist
 from ...sim.node import SimNode, SimNodeParams
 from ...sim.world import World, WorldError
 from ..chassis.kinematics import DRIVES
@@ -190,6 +192,7 @@ class Series:
     position: list[float] = field(default_factory=list)      # m
     heading: list[float] = field(default_factory=list)       # rad
     injected: list[int] = field(default_factory=list)        # random poses injected so far
+    beam_fit: list[float] = field(default_factory=list)      # the localizer's pose_fit
 
     def converged_at(self, start_s: float = 0.0, end_s: float = math.inf) -> float | None:
         """The first scan time ≥ start_s from which the error stays < CONVERGED_M for CONVERGED_HOLD_S."""
@@ -222,7 +225,7 @@ def localizer_params(params_file: str | None, overrides: dict, seed: int) -> Loc
 
 def evaluate(world_name: str = "room", drive: str = "", mode: str = "track", seed: int = 0,
              params: LocalizerParams | None = None, duration_s: float = 120.0, kidnap_at_s: float = 40.0,
-             route: Route | None = None) -> dict:
+             route: Route | None = None, shove: tuple[float, float, float] | None = None) -> dict:
     """Run the pipeline in lockstep and score the localizer against the ground truth."""
     if mode not in MODES:
         raise ValueError(f"mode must be one of {MODES}, got {mode!r}")
@@ -241,14 +244,16 @@ def evaluate(world_name: str = "room", drive: str = "", mode: str = "track", see
                       world.rasterize(MAP_RESOLUTION))
     runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams(drive=drive)),
                               LidarNode(LidarNodeParams(world=world_name, seed=seed + 1)), localizer, harness])
-    keys = {name: localizer.keys.resolve(name) for name in ("sim/truth", "odom", "tf/map_odom")}
-    truth, odom, series = {}, {}, Series()
+    keys = {name: localizer.keys.resolve(name) for name in ("sim/truth", "odom", "tf/map_odom", "pose_fit")}
+    truth, odom, fits, series = {}, {}, {}, Series()
     tolerance_ns = round(params.transform_tolerance * NS_PER_S)
 
     def tap(key: str, payload: bytes, stamp_ns: int) -> None:
         if key == keys["sim/truth"] or key == keys["odom"]:
             msg = decode(payload, Odometry)
             (truth if key == keys["sim/truth"] else odom)[stamp_ns] = (msg.pose.x, msg.pose.y, msg.pose.theta)
+        elif key == keys["pose_fit"]:
+            fits[stamp_ns] = decode(payload, PoseFit).beam_fit
         elif key == keys["tf/map_odom"]:
             scan_ns = stamp_ns - tolerance_ns
             tf = decode(payload, Transform).transform
@@ -258,6 +263,7 @@ def evaluate(world_name: str = "room", drive: str = "", mode: str = "track", see
             series.position.append(math.hypot(estimate[0] - true[0], estimate[1] - true[1]))
             series.heading.append(abs(float(wrap_angle(estimate[2] - true[2]))))
             series.injected.append(localizer.counters["random_poses_injected"])
+            series.beam_fit.append(fits.pop(scan_ns, math.nan))
             for old in [s for s in truth if s < scan_ns]:   # older stamps are never asked for again
                 truth.pop(old), odom.pop(old, None)
 
@@ -268,7 +274,7 @@ def evaluate(world_name: str = "room", drive: str = "", mode: str = "track", see
         runner.step()
         if mode == "kidnap" and kidnap is None and series.t and series.t[-1] >= kidnap_at_s \
                 and series.converged_at(series.t[-1] - CONVERGED_HOLD_S) is not None:
-            kidnap = _kidnap(sim, harness, route, series.t[-1])
+            kidnap = _kidnap(sim, harness, route, series.t[-1]) if shove is None else _shove(sim, shove, series.t[-1])
     runner.close()
 
     result = {"world": world.name, "drive": drive, "mode": mode, "seed": seed, "duration_s": duration_s,
@@ -298,6 +304,14 @@ def _kidnap(sim: SimNode, harness: Harness, route: Route, now_s: float) -> dict:
     return {"at_s": now_s, "from": [round(float(v), 3) for v in here], "to": [round(float(v), 3) for v in pose]}
 
 
+def _shove(sim: SimNode, offset, now_s: float) -> dict:
+    """Push the robot by `offset` (x, y in the map frame, yaw), the route going on from there."""
+    here = sim.sim.pose
+    pose = (here[0] + offset[0], here[1] + offset[1], float(wrap_angle(here[2] + offset[2])))
+    sim.sim.teleport(pose)
+    return {"at_s": now_s, "from": [round(float(v), 3) for v in here], "to": [round(float(v), 3) for v in pose]}
+
+
 def kidnap_result(series: Series, kidnap: dict | None, converged_s: float) -> dict:
     if kidnap is None:
         return {"done": False, "why": "the filter had not converged by the end of the run"}
@@ -318,11 +332,18 @@ def kidnap_result(series: Series, kidnap: dict | None, converged_s: float) -> di
            "random_poses_per_s_before": round(float(injected[tracking][-1] - injected[tracking][0]) / tracked_s, 1)
            if tracked_s > 0 else None,
            "random_poses_first_s_after": int(first_second[-1] - injected_before) if len(first_second) else 0,
+           "beam_fit_min_before": _min_fit(series, (t >= converged_s) & (t <= at)),
+           "beam_fit_min_first_s_after": _min_fit(series, (t > at) & (t <= at + 1.0)),
            "recovered": recovered is not None,
            "recovered_after_s": None if recovered is None else round(recovered - at, 2)}
     if recovered is not None:
         out["after_recovery"] = series.stats(recovered)
     return out
+
+
+def _min_fit(series: Series, use: np.ndarray) -> float | None:
+    fits = np.asarray(series.beam_fit)[use]
+    return round(float(np.nanmin(fits)), 3) if np.any(np.isfinite(fits)) else None
 
 
 # ---------------------------------------------------------------- the command
@@ -338,6 +359,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--duration", type=float, default=120.0, help="sim seconds to drive (default 120)")
     parser.add_argument("--kidnap-at", type=float, default=40.0,
                         help="kidnap: sim s after which the converged robot is teleported (default 40)")
+    parser.add_argument("--shove", metavar="DX,DY,DYAW",
+                        help="kidnap: push the robot by this much (m, m, rad) instead of teleporting it far")
     parser.add_argument("--route", help="waypoints 'x,y;x,y;…' to loop through (default: the world's route)")
     parser.add_argument("--json", action="store_true", help="print one JSON object")
     realdata.add_arguments(parser)
@@ -367,7 +390,9 @@ def main(args: argparse.Namespace) -> int:
     try:
         route = Route(parse_waypoints(args.route, "--route")) if args.route else None
         params = localizer_params(args.params, parse_overrides(args.set), args.seed)
-        result = evaluate(args.world, args.drive, args.mode, args.seed, params, args.duration, args.kidnap_at, route)
+        shove = realdata.parse_pose(args.shove, "--shove") if args.shove else None
+        result = evaluate(args.world, args.drive, args.mode, args.seed, params, args.duration, args.kidnap_at, route,
+                          shove)
     except (ParamError, WorldError, ValueError) as exc:
         print(f"omninav localize-eval: {exc}", file=sys.stderr)
         return 2
@@ -404,7 +429,9 @@ def format_result(r: dict) -> str:
                          f"{k['error_after_m']} m); detected: "
                          + (f"after {k['detected_after_s']:.1f} s" if k["detected"] else "no")
                          + f" ({k['random_poses_first_s_after']} random poses in the first second, "
-                         f"{k['random_poses_per_s_before']}/s while tracking before); recovered: "
+                         f"{k['random_poses_per_s_before']}/s while tracking before; beam fit at least "
+                         f"{k['beam_fit_min_before']} before, down to {k['beam_fit_min_first_s_after']} in the "
+                         f"first second); recovered: "
                          + (f"after {k['recovered_after_s']:.1f} s; then " + _stats_line(k["after_recovery"])
                             if k["recovered"] else "no"))
     return "\n".join(lines)

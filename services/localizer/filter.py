@@ -8,6 +8,12 @@ It runs as ROS amcl's laser callback does (amcl_node.cpp, pf.c):
   track the average weight w_avg with a slow and a fast exponential filter;
 - every resample_interval-th update resamples (unless selective_resampling finds the effective
   sample size above N/2).
+Not in amcl (each off by default): with temporal_update > 0, a scan that comes that long after the
+last update updates the filter without motion too, after spreading the particles by
+temporal_update_jitter_* (see _jitter), so a robot that stopped on a wrong estimate still converges
+to what its scans say; recovery_reset_after_injection false keeps w_slow and w_fast after an
+injection (Augmented_MCL as Probabilistic Robotics has it), and recovery_local_share draws that
+share of the random poses near the estimate, where a shoved robot is.
 
 Resampling draws N particles, N chosen by KLD sampling (Fox 2003): samples are drawn one by one,
 the 0.5 m × 0.5 m × 10° bins they fall in are counted (k), and drawing stops once the count
@@ -31,7 +37,7 @@ the whole set's (x, y block and −2 ln R for the angle, R the mean resultant le
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
@@ -173,6 +179,18 @@ def _random_pose(out, j, free_xy, col_step, row_step, rng):
 
 
 @njit(cache=True)
+def _recovery_pose(out, j, free_xy, col_step, row_step, rng, centre, local_share, local_std_xy, local_std_a):
+    """A random pose for recovery: with probability local_share near `centre` (a Gaussian), else
+    uniform over the free cells."""
+    if local_share > 0.0 and rng.random() < local_share:
+        out[j, 0] = centre[0] + rng.normal(0.0, local_std_xy)
+        out[j, 1] = centre[1] + rng.normal(0.0, local_std_xy)
+        out[j, 2] = (centre[2] + rng.normal(0.0, local_std_a) + math.pi) % (2.0 * math.pi) - math.pi
+    else:
+        _random_pose(out, j, free_xy, col_step, row_step, rng)
+
+
+@njit(cache=True)
 def _random_poses(out, count, free_xy, col_step, row_step, rng):
     for j in range(count):
         _random_pose(out, j, free_xy, col_step, row_step, rng)
@@ -217,8 +235,9 @@ def systematic_indices(cum, n, count, u0, out):
 
 
 @njit(cache=True)
-def _kld_count(poses, weights, n, w_diff, rng, free_xy, col_step, row_step, random_out, keys, values, stamps,
-               stamp, bin_cum, seen, kld_err, kld_z, min_particles, max_particles):
+def _kld_count(poses, weights, n, w_diff, rng, free_xy, col_step, row_step, centre, local_share, local_std_xy,
+               local_std_a, random_out, keys, values, stamps, stamp, bin_cum, seen, kld_err, kld_z, min_particles,
+               max_particles):
     """How many particles KLD sampling draws, and the random poses among them (in random_out).
 
     Only a draw's bin matters for the count, so the particles' weights are first summed per bin
@@ -241,7 +260,8 @@ def _kld_count(poses, weights, n, w_diff, rng, free_xy, col_step, row_step, rand
     count = 0
     while count < max_particles:
         if w_diff > 0.0 and rng.random() < w_diff:
-            _random_pose(random_out, randoms, free_xy, col_step, row_step, rng)
+            _recovery_pose(random_out, randoms, free_xy, col_step, row_step, rng, centre, local_share, local_std_xy,
+                           local_std_a)
             key = _bin_key(random_out[randoms, 0], random_out[randoms, 1], random_out[randoms, 2])
             randoms += 1
             b, new = _insert(keys, values, stamps, stamp, key, ids)
@@ -341,6 +361,7 @@ class Amcl:
         self.resampled = False            # whether the last update resampled
         self.injected = 0                 # random poses among the particles of the last resampling
         self._odom = None                 # odometry pose at the last update; None: next scan starts
+        self._update_s: float | None = None   # sim time of the last update (for temporal_update)
         self._updates = 0
         self._force_update = False
         self._estimate: PoseEstimate | None = None
@@ -387,8 +408,9 @@ class Amcl:
         self._force_update = True
 
     # ---- the update
-    def update(self, odom_pose, scan: ScanBeams) -> bool:
-        """Process one scan taken at odometry pose `odom_pose`; True when the filter updated."""
+    def update(self, odom_pose, scan: ScanBeams, stamp_s: float | None = None) -> bool:
+        """Process one scan taken at odometry pose `odom_pose` (sim time `stamp_s`, needed only for
+        temporal updates); True when the filter updated."""
         p = self.params
         odom_pose = np.asarray(odom_pose, np.float64)
         self.resampled = False
@@ -396,18 +418,37 @@ class Amcl:
             self._odom = odom_pose.copy()
         else:
             dx, dy, da = motion.odom_delta(self._odom, odom_pose)
-            if not (abs(dx) > p.update_min_d or abs(dy) > p.update_min_d or abs(da) > p.update_min_a
-                    or self._force_update):
+            moved = abs(dx) > p.update_min_d or abs(dy) > p.update_min_d or abs(da) > p.update_min_a
+            temporal = not (moved or self._force_update) and self._temporal_update_due(stamp_s)
+            if not (moved or self._force_update or temporal):
                 return False
             self._force_update = False  # as in amcl, only a scan after the first one uses it up
             step = motion.decompose(p.odom_model_type, self._odom, odom_pose, p.odom_alphas)
             motion.sample_motion(self._poses[self._current], self.n, step, self.rng)
+            if temporal:
+                self._jitter()
         self._weigh(scan)
         self._odom = odom_pose.copy()
+        self._update_s = stamp_s
         self._updates += 1
         if self._updates % p.resample_interval == 0:
             self.resample()
         return True
+
+    def _temporal_update_due(self, stamp_s: float | None) -> bool:
+        p = self.params
+        return (p.temporal_update > 0 and stamp_s is not None and self._update_s is not None
+                and stamp_s - self._update_s >= p.temporal_update)
+
+    def _jitter(self) -> None:
+        """Spread the particles a little: the motion model adds (almost) no noise without motion, so
+        weighing the same view again and resampling would otherwise shrink the set onto the few
+        particles that fit it best (particle deprivation), and no particle would move towards a
+        better pose between them."""
+        p, poses = self.params, self._poses[self._current][:self.n]
+        noise = self.rng.standard_normal((self.n, 3))
+        poses[:, :2] += noise[:, :2] * p.temporal_update_jitter_xy
+        poses[:, 2] = wrap_angle(poses[:, 2] + noise[:, 2] * p.temporal_update_jitter_a)
 
     def _weigh(self, scan: ScanBeams) -> None:
         poses, weights = self._poses[self._current], self._weights[self._current]
@@ -429,10 +470,13 @@ class Amcl:
             return
         poses, weights = self._poses[self._current], self._weights[self._current]
         w_diff = max(0.0, 1.0 - self.w_fast / self.w_slow) if self.w_slow > 0.0 else 0.0
+        # before taking a fresh stamp: the estimate fills the bin table under its own
+        centre = self.estimate().pose if w_diff > 0.0 and p.recovery_local_share > 0.0 else np.zeros(3)
         _cumulative(weights, self.n, self._cum)
         self._stamp += 1
         count, randoms = _kld_count(poses, weights, self.n, w_diff, self.rng, self._free_xy, self._col_step,
-                                    self._row_step, self._randoms, self._keys, self._values, self._stamps,
+                                    self._row_step, centre, p.recovery_local_share, p.recovery_local_std_xy,
+                                    p.recovery_local_std_a, self._randoms, self._keys, self._values, self._stamps,
                                     self._stamp, self._bin_cum, self._seen, p.kld_err, p.kld_z,
                                     p.min_particles, p.max_particles)
         drawn = count - randoms
@@ -442,7 +486,7 @@ class Amcl:
         self._poses[target][drawn:count] = self._randoms[:randoms]
         self._weights[target][:count] = 1.0 / count
         self._current, self.n = target, count
-        if w_diff > 0.0:
+        if w_diff > 0.0 and p.recovery_reset_after_injection:
             self.w_slow = self.w_fast = 0.0
         self.converged = _converged(self._poses[target], count, CONVERGED_DISTANCE)
         self.resampled = True
@@ -495,6 +539,9 @@ def warm_up() -> None:
     scan = sensor.prepare_scan(np.ones(3), -1.0, 1.0, 0.05, 5.0, amcl.params)
     amcl.update((0.0, 0.0, 0.0), scan)
     amcl.w_slow, amcl.w_fast = 1.0, 0.5  # make the injection path compile too
+    amcl.resample()
+    amcl.params = replace(amcl.params, recovery_local_share=0.5)
+    amcl.w_slow, amcl.w_fast = 1.0, 0.5
     amcl.resample()
     amcl.estimate()
     amcl.global_localization()

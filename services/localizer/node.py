@@ -11,8 +11,9 @@ the chassis defers cmd_vel): whether it reached the node before or after the sca
 the pose at its stamp and is carried to the scan by the odometry in between, as amcl does.
 
 Outputs, all stamped with the scan's time: `pose` (PoseWithCovariance in the map frame) after each
-filter update, `particlecloud` after updates at most gui_publish_rate times per sim second, and
-`tf/map_odom` (post-dated by transform_tolerance, as amcl's tf) on every scan. `get` on the pose
+filter update, `particlecloud` after updates at most gui_publish_rate times per sim second, and on
+every scan `pose_fit` (PoseFit: the share of the scan's returns on mapped obstacles at the pose)
+and `tf/map_odom` (post-dated by transform_tolerance, as amcl's tf). `get` on the pose
 key answers the last pose. With pose_file set, the pose is written there at most save_pose_rate
 times per sim second as amcl parameters (initial_pose_*, initial_cov_*), and a localizer started
 with that file resumes from it.
@@ -35,7 +36,7 @@ import yaml
 
 from ...schemas import MessageError
 from ...schemas.messages import (Diagnostic, Header, LaserScan, OccupancyGrid, Odometry, ParticleCloud, Pose2D,
-                                 PoseWithCovariance, Transform)
+                                 PoseFit, PoseWithCovariance, Transform)
 from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
@@ -150,6 +151,8 @@ class LocalizerNode(Node):
         self.pose_pub = self.publisher("pose")
         self.cloud_pub = self.publisher("particlecloud")
         self.tf_pub = self.publisher("tf/map_odom")
+        self.fit_pub = self.publisher("pose_fit")
+        self.beam_fit: float | None = None   # of the last scan
         self.keys_in = {name: self.keys.resolve(name) for name in ("odom", "scan", "map")}
         self.subscribe("odom", self.on_odom)
         self.subscribe("scan", self.on_scan)
@@ -287,7 +290,7 @@ class LocalizerNode(Node):
             self.counters["scans_without_map"] += 1
             return
         amcl, p = self.amcl, self.params
-        if amcl.update(odom, beams):
+        if amcl.update(odom, beams, stamp_ns / NS_PER_S):
             self.counters["filter_updates"] += 1
             if amcl.resampled and amcl.injected:
                 self.counters["random_poses_injected"] += amcl.injected
@@ -297,11 +300,22 @@ class LocalizerNode(Node):
                 self.last_cloud_ns = stamp_ns
                 self.cloud_pub.publish(ParticleCloud(header=Header(stamp_ns=stamp_ns, frame_id=p.global_frame_id),
                                                      poses=amcl.poses.copy(), weights=amcl.weights.copy()))
+        self._publish_fit(stamp_ns, beams, amcl.pose_at(odom))
         if p.tf_broadcast:
             x, y, theta = (float(v) for v in amcl.map_to_odom())
             self.tf_pub.publish(Transform(
                 header=Header(stamp_ns=stamp_ns + round(p.transform_tolerance * NS_PER_S), frame_id=p.global_frame_id),
                 child_frame_id=p.odom_frame_id, transform=Pose2D(x, y, theta)))
+
+    def _publish_fit(self, stamp_ns: int, beams: ScanBeams, pose: np.ndarray) -> None:
+        """How well this scan fits the map where the localizer puts the robot now (the estimate
+        carried by the odometry), so a shove shows at the next scan, filter update or not."""
+        fit, count = self.amcl.laser.beam_fit(pose, beams)
+        if not count:
+            return
+        self.beam_fit = fit
+        self.fit_pub.publish(PoseFit(header=Header(stamp_ns=stamp_ns, frame_id=self.params.global_frame_id),
+                                     beam_fit=fit, beams=count))
 
     def _publish_pose(self, stamp_ns: int) -> None:
         p, estimate = self.params, self.amcl.estimate()
@@ -332,4 +346,6 @@ class LocalizerNode(Node):
         diag = super().diagnostic()
         if self.amcl is not None:
             diag.values.update(particles=self.amcl.n, w_slow=self.amcl.w_slow, w_fast=self.amcl.w_fast)
+        if self.beam_fit is not None:
+            diag.values["beam_fit"] = self.beam_fit
         return diag

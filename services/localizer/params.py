@@ -6,6 +6,9 @@ loads unchanged through `load_params_file(AmclParams, path)`. Two ROS 1 defaults
 its documentation (wiki and AMCL.cfg: 0.0) and amcl_node.cpp (0.001 and 0.1):
 recovery_alpha_slow / recovery_alpha_fast. We take the documented 0.0 (recovery off), which Nav2
 also uses. Nav2's amcl renames many parameters and changes defaults; docs/localizer.md lists them.
+
+One group is not amcl's: temporal_update (off by default, so amcl's behaviour is the default) keeps
+the filter updating while the robot stands still; docs/localizer.md says why and how.
 """
 from __future__ import annotations
 
@@ -30,6 +33,17 @@ class AmclParams:
     transform_tolerance: float = 0.1    # s by which the published map→odom is post-dated
     recovery_alpha_slow: float = 0.0    # decay of the slow average weight (0: off; ROS suggests 0.001)
     recovery_alpha_fast: float = 0.0    # decay of the fast average weight (0: off; ROS suggests 0.1)
+    # ---- not in ROS amcl: recovery as Probabilistic Robotics' Augmented_MCL (Table 8.3) has it
+    recovery_reset_after_injection: bool = True  # zero w_slow and w_fast after injecting (amcl); false: keep them
+    recovery_local_share: float = 0.0   # share of injected poses drawn near the estimate, not over the map (amcl: 0)
+    recovery_local_std_xy: float = 0.5  # m, their spread around the estimate: a shove moves the robot a little
+    recovery_local_std_a: float = 0.5   # rad
+    # ---- not in ROS amcl: updates without motion (named after slam_gmapping's temporalUpdate)
+    temporal_update: float = -1.0       # s: also update when this long passed without enough motion; ≤ 0: never (amcl)
+    temporal_update_jitter_xy: float = 0.02  # m, std of the noise such an update adds to every particle
+    temporal_update_jitter_a: float = 0.02   # rad, likewise for the heading
+    # ---- not in ROS amcl: how well the scans fit the map at the estimate (the published beam fit)
+    beam_fit_distance: float = 0.1      # m: a beam's end point this close to an obstacle fits the map
     initial_pose_x: float = 0.0         # m, mean of the initial Gaussian
     initial_pose_y: float = 0.0
     initial_pose_a: float = 0.0         # rad
@@ -87,9 +101,11 @@ class AmclParams:
         need(self.update_min_a >= 0, "update_min_a", "≥ 0")
         need(self.resample_interval >= 1, "resample_interval", "at least 1")
         need(self.transform_tolerance >= 0, "transform_tolerance", "≥ 0")
-        for name in ("recovery_alpha_slow", "recovery_alpha_fast"):
+        for name in ("recovery_alpha_slow", "recovery_alpha_fast", "recovery_local_share"):
             need(0 <= getattr(self, name) <= 1, name, "in [0, 1]")
-        for name in ("initial_cov_xx", "initial_cov_yy", "initial_cov_aa", "std_warn_level_x",
+        for name in ("temporal_update_jitter_xy", "temporal_update_jitter_a", "initial_cov_xx", "initial_cov_yy",
+                     "initial_cov_aa", "std_warn_level_x", "beam_fit_distance",
+                     "recovery_local_std_xy", "recovery_local_std_a",
                      "std_warn_level_y", "std_warn_level_yaw", "beam_skip_distance"):
             need(getattr(self, name) >= 0, name, "≥ 0")
         need(self.laser_max_beams >= 2, "laser_max_beams", "at least 2 (amcl skips the laser update below 2)")
@@ -98,6 +114,8 @@ class AmclParams:
         need(self.laser_z_hit + self.laser_z_rand > 0, "laser_z_hit", "positive when laser_z_rand is 0")
         need(self.laser_sigma_hit > 0, "laser_sigma_hit", "positive")
         need(self.laser_likelihood_max_dist > 0, "laser_likelihood_max_dist", "positive")
+        need(self.beam_fit_distance < self.laser_likelihood_max_dist, "beam_fit_distance",
+             f"below laser_likelihood_max_dist ({self.laser_likelihood_max_dist}), where distances are clipped")
         need(self.laser_model_type in LASER_MODELS, "laser_model_type", " | ".join(LASER_MODELS))
         for name in ("beam_skip_threshold", "beam_skip_error_threshold"):
             need(0 <= getattr(self, name) <= 1, name, "in [0, 1]")

@@ -10,13 +10,22 @@ whose end point lies within 0.1 m of an occupied map cell, under
   - raw odometry from the same start: the start pose ⊕ the odometry's motion since the first scan.
 
 The localizer runs exactly its live code: the recording's messages are fed to LocalizerNode in
-stamp order, as `replay --into` feeds a service.
+stamp order, as `replay --into` feeds a service. With --global-localization a global_localization
+request, due at the first scan, spreads its particles over all free space instead of starting it
+at the start pose.
+
+At the end: the pose near the localizer's last one (within END_SEARCH_M and END_SEARCH_A) where the
+last SEARCH_SCANS scans fit the map best (best_fit_near, the same scoring as the start search), its
+distance from the localizer's pose, and both shares. A robot that stopped on a stale estimate
+shows there (amcl makes no update without motion; see temporal_update).
 
 The start pose is not in the recording. Unless --initial-pose gives it, it is searched for over
 the whole map with the first scans (search_start): every free pose on a 0.25 m × 4° grid is scored
 with the AMCL likelihood field on the first scan, the best candidates are refined on a 0.05 m × 1°
 grid with the first SEARCH_SCANS scans (carried by the odometry), and the best one is the start.
-The runner-up more than a metre away is reported too, so an ambiguous start shows.
+The runner-up more than a metre away is reported too, with each one's scan fit (judge_start: the
+figure above, over the first scans); when the runner-up fits within AMBIGUOUS_FIT_GAP of the best,
+the start is ambiguous and the report says so.
 
 The laser's mounting on the car (there is no /tf in the bag) is --laser-x/-y/-yaw; the default
 0.285 m ahead of base_link (the rear axle) is the MIT racecar's base_link→laser transform
@@ -38,17 +47,17 @@ from scipy import ndimage
 from ...schemas import MessageError, decode
 from ...schemas.codec import encode
 from ...schemas.keys import KeyLayout
-from ...schemas.messages import LaserScan, OccupancyGrid, Odometry, Transform
+from ...schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, PoseWithCovariance, Transform
 from ...schemas.registry import type_info
 from ..map_server.mapio import MapError, cell_to_world, load_map
 from ..recorder.mcap_io import Record, RecordingError, read_records
 from ..replay.into import replay_into
 from ..runtime.node import NS_PER_S
 from ..runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
-from ..se2 import compose, relative
+from ..se2 import compose, relative, wrap_angle
 from .node import LocalizerNode, LocalizerParams, OdomHistory
 from .params import AmclParams
-from .sensor import FREE, OCCUPIED, GridFrame, LaserModel, prepare_scan
+from .sensor import FREE, OCCUPIED, GridFrame, LaserModel, prepare_scan, share_near_obstacles
 
 NEAR_M = 0.1                 # an end point this close to an occupied cell agrees with the map
 RACECAR_LASER_X = 0.285      # m, base_link → laser on the MIT racecar (see the module docstring)
@@ -58,6 +67,8 @@ SEARCH_CLEARANCE_M = 0.15    # the car's centre is at least this far from obstac
 SEARCH_CANDIDATES = 40
 SEARCH_SCANS = 3              # few: the racecar's odometry heading drifts fast
 SEARCH_BEAMS = 120
+AMBIGUOUS_FIT_GAP = 0.1     # a start is ambiguous when a pose > 1 m away fits the first scans nearly as well
+END_SEARCH_M, END_SEARCH_A = 1.0, math.radians(10.0)   # where the end's best fit is looked for, around the localizer
 START_COV = (0.1 ** 2, 0.1 ** 2, 0.05 ** 2)   # m², m², rad²: a good start, not an exact one
 
 # amcl for the racecar (Ackermann steering, VESC odometry, 1081-beam 270° lidar, about 2 m/s); the rest
@@ -126,7 +137,7 @@ class Agreement:
 
     def __init__(self, grid: OccupancyGrid, laser_pose):
         occupied = np.asarray(grid.data) == OCCUPIED
-        self.near = ndimage.distance_transform_edt(~occupied) * grid.info.resolution <= NEAR_M
+        self.distance = ndimage.distance_transform_edt(~occupied) * grid.info.resolution
         self.affine = GridFrame.of(grid).affine
         self.laser_pose = laser_pose
 
@@ -141,16 +152,7 @@ class Agreement:
         return np.column_stack([lx + r[valid] * np.cos(a), ly + r[valid] * np.sin(a)])
 
     def share(self, pose, points: np.ndarray) -> float:
-        if len(points) == 0:
-            return float("nan")
-        world = compose(pose, np.column_stack([points, np.zeros(len(points))]))[:, :2]
-        u = self.affine[0, 0] * world[:, 0] + self.affine[0, 1] * world[:, 1] + self.affine[0, 2]
-        v = self.affine[1, 0] * world[:, 0] + self.affine[1, 1] * world[:, 1] + self.affine[1, 2]
-        col, row = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
-        height, width = self.near.shape
-        inside = (row >= 0) & (row < height) & (col >= 0) & (col < width)
-        hits = self.near[np.clip(row, 0, height - 1), np.clip(col, 0, width - 1)] & inside
-        return float(hits.mean())
+        return share_near_obstacles(self.distance, self.affine, pose, points[:, 0], points[:, 1], NEAR_M)
 
 
 # ---------------------------------------------------------------- the start pose
@@ -163,15 +165,41 @@ def _weigh(laser: LaserModel, poses: np.ndarray, beams) -> np.ndarray:
     return weights
 
 
+class ScanFit:
+    """Scores robot poses by how well a few consecutive scans fit the map (AMCL's likelihood field,
+    SEARCH_BEAMS beams, σ 0.1 m), each scan seen from where the odometry says the robot went."""
+
+    def __init__(self, grid: OccupancyGrid, scans: list[LaserScan], history: OdomHistory, laser_pose):
+        params = AmclParams(laser_max_beams=SEARCH_BEAMS, laser_sigma_hit=0.1)
+        self.laser = LaserModel(grid, params)
+        self.beams = [prepare_scan(s.ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max, params,
+                                   laser_pose) for s in scans]
+        first = history.at(scans[0].header.stamp_ns)
+        self.moves = [relative(first, history.at(s.header.stamp_ns)) for s in scans]
+
+    def first_scan(self, poses: np.ndarray) -> np.ndarray:
+        return _weigh(self.laser, poses, self.beams[0])
+
+    def log_likelihood(self, poses: np.ndarray) -> np.ndarray:
+        total = np.zeros(len(poses))
+        for move, beams in zip(self.moves, self.beams):
+            total += np.log(_weigh(self.laser, compose(poses, move), beams))
+        return total
+
+    def refine(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Every pose within REFINE_CELLS steps of the candidates, best first, with its score."""
+        steps = np.arange(-REFINE_CELLS, REFINE_CELLS + 1)
+        offsets = np.stack(np.meshgrid(steps * REFINE_STEP_M, steps * REFINE_STEP_M, steps * REFINE_STEP_A,
+                                       indexing="ij"), axis=-1).reshape(-1, 3)
+        fine = (np.asarray(candidates)[:, None, :] + offsets[None, :, :]).reshape(-1, 3)
+        total = self.log_likelihood(fine)
+        order = np.argsort(total)[::-1]
+        return fine[order], total[order]
+
+
 def search_start(grid: OccupancyGrid, scans: list[LaserScan], history: OdomHistory, laser_pose) -> dict:
     """The pose at scans[0] that best explains the first scans (see the module docstring)."""
-    params = AmclParams(laser_max_beams=SEARCH_BEAMS, laser_sigma_hit=0.1)
-    laser = LaserModel(grid, params)
-    used = scans[:SEARCH_SCANS]
-    beams = [prepare_scan(s.ranges, s.angle_min, s.angle_increment, s.range_min, s.range_max, params, laser_pose)
-             for s in used]
-    first = history.at(used[0].header.stamp_ns)
-    moves = [relative(first, history.at(s.header.stamp_ns)) for s in used]
+    fit = ScanFit(grid, scans[:SEARCH_SCANS], history, laser_pose)
     # free poses: on free cells, SEARCH_CLEARANCE_M from obstacles and unknown space
     data = np.asarray(grid.data)
     clear = ndimage.distance_transform_edt(data == FREE) * grid.info.resolution >= SEARCH_CLEARANCE_M
@@ -180,20 +208,41 @@ def search_start(grid: OccupancyGrid, scans: list[LaserScan], history: OdomHisto
     xs, ys = cell_to_world(grid.info, rows * stride, cols * stride)
     yaws = np.arange(-math.pi, math.pi, SEARCH_STEP_A)
     coarse = np.column_stack([np.repeat(xs, len(yaws)), np.repeat(ys, len(yaws)), np.tile(yaws, len(xs))])
-    scores = _weigh(laser, coarse, beams[0])
-    best = coarse[np.argsort(scores)[::-1][:SEARCH_CANDIDATES]]
-    steps = np.arange(-REFINE_CELLS, REFINE_CELLS + 1)
-    grid_offsets = np.stack(np.meshgrid(steps * REFINE_STEP_M, steps * REFINE_STEP_M, steps * REFINE_STEP_A,
-                                        indexing="ij"), axis=-1).reshape(-1, 3)
-    fine = (best[:, None, :] + grid_offsets[None, :, :]).reshape(-1, 3)
-    total = np.zeros(len(fine))
-    for move, b in zip(moves, beams):   # the same candidate seen from where the odometry says it went
-        total += np.log(_weigh(laser, compose(fine, move), b))
-    order = np.argsort(total)[::-1]
-    start = fine[order[0]]
-    far = next((i for i in order if math.hypot(*(fine[i, :2] - start[:2])) > 1.0), None)
-    return {"pose": start, "score": float(total[order[0]]),
+    best = coarse[np.argsort(fit.first_scan(coarse))[::-1][:SEARCH_CANDIDATES]]
+    fine, total = fit.refine(best)
+    start = fine[0]
+    far = next((i for i in range(len(fine)) if math.hypot(*(fine[i, :2] - start[:2])) > 1.0), None)
+    return {"pose": start, "score": float(total[0]),
             "runner_up": None if far is None else {"pose": fine[far], "score": float(total[far])}}
+
+
+def judge_start(search: dict, agreement: Agreement, scans: list[LaserScan], history: OdomHistory) -> dict:
+    """Adds to a search_start result each candidate's scan fit (the mean share of the first scans'
+    returns on mapped walls, each scan seen from where the odometry says the robot went) and
+    whether the start is ambiguous: the best pose more than 1 m away fits within AMBIGUOUS_FIT_GAP."""
+    used = scans[:SEARCH_SCANS]
+    first = history.at(used[0].header.stamp_ns)
+    views = [(relative(first, history.at(s.header.stamp_ns)), agreement.end_points(s)) for s in used]
+
+    def fit(pose) -> float:
+        return float(np.mean([agreement.share(compose(pose, move), points) for move, points in views]))
+
+    search["fit"] = fit(search["pose"])
+    other = search["runner_up"]
+    if other is not None:
+        other["fit"] = fit(other["pose"])
+    search["ambiguous"] = other is not None and other["fit"] >= search["fit"] - AMBIGUOUS_FIT_GAP
+    return search
+
+
+def best_fit_near(grid: OccupancyGrid, scans: list[LaserScan], history: OdomHistory, laser_pose, pose) -> np.ndarray:
+    """The pose at scans[0], within END_SEARCH_M and END_SEARCH_A of `pose`, that the scans fit best."""
+    fit = ScanFit(grid, scans, history, laser_pose)
+    spacing = (2 * REFINE_CELLS + 1) * np.array([REFINE_STEP_M, REFINE_STEP_M, REFINE_STEP_A])
+    reach = np.ceil(np.array([END_SEARCH_M, END_SEARCH_M, END_SEARCH_A]) / spacing).astype(int)
+    centres = np.stack(np.meshgrid(*(np.arange(-k, k + 1) * d for k, d in zip(reach, spacing)), indexing="ij"),
+                       axis=-1).reshape(-1, 3)
+    return fit.refine(np.asarray(pose, float) + centres)[0][0]
 
 
 # ---------------------------------------------------------------- the run
@@ -208,11 +257,16 @@ def racecar_params(params_file: str | None, overrides: dict, map_file: str, lase
     return load_params(LocalizerParams, {**values, **overrides, **fixed}, params_file or "racecar amcl settings")
 
 
-def localize(run: Run, params: LocalizerParams) -> list[Transform]:
-    """The localizer's map→odom transforms, one per scan it used, from its live code."""
+def localize(run: Run, params: LocalizerParams, start_global: bool = False) -> list[Transform]:
+    """The localizer's map→odom transforms, one per scan it used, from its live code; with
+    start_global, a global_localization request takes effect at the first scan."""
     node = LocalizerNode(params)
+    requests = []
+    if start_global:
+        due = run.scans[0].header.stamp_ns - round(params.request_delay_s * NS_PER_S) - 1
+        requests.append(PoseWithCovariance(header=Header(stamp_ns=due, frame_id=params.global_frame_id)))
     records = []
-    for key, messages in (("odom", run.odometry), ("scan", run.scans)):
+    for key, messages in (("odom", run.odometry), ("scan", run.scans), ("global_localization", requests)):
         full = node.keys.robot(key)
         for seq, msg in enumerate(messages):
             records.append(Record(full, type_info(type(msg))[0], encode(msg), seq, msg.header.stamp_ns,
@@ -223,17 +277,18 @@ def localize(run: Run, params: LocalizerParams) -> list[Transform]:
 
 
 def score_run(run: Run, grid: OccupancyGrid, map_file: str, laser_pose, params_file: str | None,
-              overrides: dict, seed: int, initial_pose=None) -> dict:
+              overrides: dict, seed: int, initial_pose=None, start_global: bool = False) -> dict:
     history = odometry_history(run.odometry)
     scans = usable_scans(run, history)
     if len(scans) < SEARCH_SCANS:
         raise RealDataError(f"only {len(scans)} scans lie within the odometry's time span")
     search = None
     if initial_pose is None:
-        search = search_start(grid, scans, history, laser_pose)
+        search = judge_start(search_start(grid, scans, history, laser_pose), Agreement(grid, laser_pose), scans,
+                             history)
         initial_pose = search["pose"]
     params = racecar_params(params_file, overrides, map_file, laser_pose, seed, initial_pose)
-    transforms = localize(Run(scans, run.odometry), params)
+    transforms = localize(Run(scans, run.odometry), params, start_global)
     tolerance = round(params.transform_tolerance * NS_PER_S)
     by_stamp = {tf.header.stamp_ns - tolerance: tf.transform for tf in transforms}
     agreement = Agreement(grid, laser_pose)
@@ -253,25 +308,44 @@ def score_run(run: Run, grid: OccupancyGrid, map_file: str, laser_pose, params_f
                      estimate, raw))
     t = np.array([r[0] for r in rows])
     amcl, raw = np.array([r[1] for r in rows]), np.array([r[2] for r in rows])
+    end = _end_of_run(grid, scans, history, laser_pose, rows[-1][3], agreement)
     return {"scans": len(run.scans), "odometry": len(run.odometry), "scans_scored": len(rows),
             "duration_s": round(float(t[-1]), 3) if len(t) else 0.0,
             "laser_pose": [float(v) for v in laser_pose],
             "start": {"pose": [round(float(v), 4) for v in initial_pose],
                       "how": "given" if search is None else "searched",
+                      "localizer": "from particles over all free space (global localization)" if start_global
+                      else "at the start pose",
                       **({} if search is None else _search_summary(search))},
             "near_m": NEAR_M,
-            "localizer": _summary(t, amcl), "raw_odometry": _summary(t, raw),
+            "localizer": _summary(t, amcl), "raw_odometry": _summary(t, raw), "end": end,
             "series": {"t": [round(float(v), 4) for v in t], "localizer": [round(float(v), 4) for v in amcl],
                        "raw_odometry": [round(float(v), 4) for v in raw]},
             "paths": {"localizer": [list(map(float, r[3])) for r in rows],
                       "raw_odometry": [list(map(float, r[4])) for r in rows]}}
 
 
+def _end_of_run(grid, scans, history, laser_pose, estimate, agreement: Agreement) -> dict:
+    """Where the last scans fit the map best near the localizer's last pose, and how far that is."""
+    last = scans[-SEARCH_SCANS:]
+    at_last = compose(estimate, relative(history.at(scans[-1].header.stamp_ns), history.at(last[0].header.stamp_ns)))
+    best = best_fit_near(grid, last, history, laser_pose, at_last)
+    best_last = compose(best, relative(history.at(last[0].header.stamp_ns), history.at(scans[-1].header.stamp_ns)))
+    points = agreement.end_points(scans[-1])
+    return {"localizer_pose": [round(float(v), 4) for v in estimate],
+            "best_fit_pose": [round(float(v), 4) for v in best_last],
+            "distance_m": round(math.hypot(*(best_last[:2] - np.asarray(estimate)[:2])), 3),
+            "heading_deg": round(math.degrees(abs(float(wrap_angle(best_last[2] - estimate[2])))), 2),
+            "localizer_share": round(agreement.share(estimate, points), 4),
+            "best_fit_share": round(agreement.share(best_last, points), 4)}
+
+
 def _search_summary(search: dict) -> dict:
-    out = {"score": round(search["score"], 2)}
+    out = {"score": round(search["score"], 2), "fit": round(search["fit"], 4), "ambiguous": search["ambiguous"]}
     if search["runner_up"] is not None:
         other = search["runner_up"]
         out["runner_up"] = {"pose": [round(float(v), 4) for v in other["pose"]], "score": round(other["score"], 2),
+                            "fit": round(other["fit"], 4),
                             "distance_m": round(float(np.hypot(*(other["pose"][:2] - search["pose"][:2]))), 2)}
     return out
 
@@ -301,6 +375,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group.add_argument("--laser-y", type=float, default=0.0, help="m, the laser left of base_link (default 0)")
     group.add_argument("--laser-yaw", type=float, default=0.0, help="rad, the laser's turn (default 0)")
     group.add_argument("--initial-pose", metavar="X,Y,YAW", help="the start pose in the map (default: searched)")
+    group.add_argument("--global-localization", action="store_true",
+                       help="start the localizer with particles over all free space (amcl's global_localization), "
+                            "not at the start pose (which still places raw odometry)")
     group.add_argument("--plot", metavar="PNG", help="draw the paths on the map and the shares over time")
 
 
@@ -309,11 +386,11 @@ def main(args: argparse.Namespace) -> int:
         print("omninav localize-eval: --bag needs --map (the map_server YAML of the building)", file=sys.stderr)
         return 2
     try:
-        initial = _parse_pose(args.initial_pose) if args.initial_pose else None
+        initial = parse_pose(args.initial_pose) if args.initial_pose else None
         grid = load_map(args.map)
         run = load_run(args.bag, args.scan_topic, args.odom_topic)
         result = score_run(run, grid, args.map, (args.laser_x, args.laser_y, args.laser_yaw), args.params,
-                           parse_overrides(args.set), args.seed, initial)
+                           parse_overrides(args.set), args.seed, initial, args.global_localization)
     except (RealDataError, MapError, ParamError, ValueError) as exc:
         print(f"omninav localize-eval: {exc}", file=sys.stderr)
         return 2
@@ -326,13 +403,13 @@ def main(args: argparse.Namespace) -> int:
     return 0
 
 
-def _parse_pose(text: str) -> tuple[float, float, float]:
+def parse_pose(text: str, option: str = "--initial-pose") -> tuple[float, float, float]:
     try:
         values = tuple(float(v) for v in text.split(","))
     except ValueError:
         values = ()
     if len(values) != 3 or not all(map(math.isfinite, values)):
-        raise ValueError(f"--initial-pose {text!r}: expected X,Y,YAW (m, m, rad)")
+        raise ValueError(f"{option} {text!r}: expected X,Y,YAW (m, m, rad)")
     return values
 
 
@@ -340,11 +417,15 @@ def format_result(r: dict, source: str) -> str:
     s = r["start"]
     lines = [f"{source}: {r['scans']} scans, {r['odometry']} odometry messages, {r['scans_scored']} scans scored "
              f"over {r['duration_s']:.2f} s; laser at {r['laser_pose']} in base_link",
-             f"start pose ({s['how']}): x {s['pose'][0]:.3f} m, y {s['pose'][1]:.3f} m, yaw {s['pose'][2]:.3f} rad"]
+             f"start pose ({s['how']}): x {s['pose'][0]:.3f} m, y {s['pose'][1]:.3f} m, yaw {s['pose'][2]:.3f} rad; "
+             f"the localizer starts {s['localizer']}"]
     if "runner_up" in s:
         u = s["runner_up"]
-        lines.append(f"  search score {s['score']:.1f}; best pose more than 1 m away: {u['score']:.1f} "
-                     f"({u['distance_m']:.1f} m off)")
+        lines.append(f"  search score {s['score']:.1f}, scan fit {s['fit']:.3f}; best pose more than 1 m away: "
+                     f"{u['score']:.1f}, scan fit {u['fit']:.3f} ({u['distance_m']:.1f} m off)")
+    if s.get("ambiguous"):
+        lines.append(f"  AMBIGUOUS START: a pose {s['runner_up']['distance_m']:.1f} m away fits the first scans nearly "
+                     f"as well; give --initial-pose if you know which")
     lines.append(f"share of beam end points within {r['near_m']} m of an occupied cell:")
     lines.append(f"  {'':14}{'mean':>7}{'median':>7}{'p10':>7}{'min':>7}{'last 1 s':>10}   per second")
     for name, label in (("localizer", "localizer"), ("raw_odometry", "raw odometry")):
@@ -352,6 +433,9 @@ def format_result(r: dict, source: str) -> str:
         lines.append(f"  {label:14}{f['mean']:7.3f}{f['median']:7.3f}{f['p10']:7.3f}{f['min']:7.3f}"
                      f"{f['last_second']:10.3f}   "
                      + " ".join(f"{v:.3f}" for v in f["per_second"]))
+    e = r["end"]
+    lines.append(f"at the end: the last scans fit best {e['distance_m']:.3f} m and {e['heading_deg']:.1f}° from the "
+                 f"localizer's pose (share {e['best_fit_share']:.3f} there, {e['localizer_share']:.3f} at the localizer's)")
     return "\n".join(lines)
 
 

@@ -101,6 +101,23 @@ def scan_beams(scan: LaserScan, params: AmclParams, laser_pose=(0.0, 0.0, 0.0)) 
                         params, laser_pose)
 
 
+def share_near_obstacles(distance: np.ndarray, affine: np.ndarray, pose, end_x: np.ndarray, end_y: np.ndarray,
+                         near_m: float) -> float:
+    """The share of base-frame end points that lie, for a robot at `pose`, on a cell whose `distance`
+    (m to the nearest obstacle) is at most near_m; off the map counts as not near. NaN without points."""
+    if len(end_x) == 0:
+        return float("nan")
+    x, y, theta = pose
+    c, s = math.cos(theta), math.sin(theta)
+    wx, wy = x + c * end_x - s * end_y, y + s * end_x + c * end_y
+    col = np.floor(affine[0, 0] * wx + affine[0, 1] * wy + affine[0, 2]).astype(np.int64)
+    row = np.floor(affine[1, 0] * wx + affine[1, 1] * wy + affine[1, 2]).astype(np.int64)
+    height, width = distance.shape
+    inside = (row >= 0) & (row < height) & (col >= 0) & (col < width)
+    near = distance[np.clip(row, 0, height - 1), np.clip(col, 0, width - 1)] <= near_m
+    return float(np.mean(near & inside))
+
+
 # ---------------------------------------------------------------- kernels
 
 @njit(cache=True)
@@ -249,6 +266,13 @@ class LaserModel:
         self.blocked = np.ascontiguousarray(data != FREE)   # what stops a cast ray (beam model)
         self._scratch = np.empty(0)
         self.beams_skipped = 0   # by the last likelihood_field_prob update with beam skipping
+
+    def beam_fit(self, pose, scan: ScanBeams) -> tuple[float, int]:
+        """The share of the scan's end points within beam_fit_distance of an obstacle, seen from `pose`
+        (how well the scan agrees with the map there; NaN when no beam returned), and their count."""
+        end_x, end_y = scan.end_points()
+        return (share_near_obstacles(self.distance, self.frame.affine, pose, end_x, end_y,
+                                     self.params.beam_fit_distance), len(end_x))
 
     def _hit_term(self, distance):
         return np.exp(-np.square(distance) / (2.0 * self.params.laser_sigma_hit ** 2))

@@ -27,6 +27,14 @@ SUCCEEDED | ABORTED(reason) | CANCELED(reason). The move_base rules kept:
 - arrival: within xy_goal_tolerance of an intermediate waypoint (no yaw check), and within
   xy_goal_tolerance and yaw_goal_tolerance of the final pose, moving no faster than
   trans_stopped_vel / rot_stopped_vel (when the velocity is known).
+
+Not move_base's: the goal never succeeds on a pose the localizer doubts. While the latest beam fit
+(the share of a scan's returns on mapped obstacles at the localizer's pose) is below
+min_pose_beam_fit, arrival waits with the reason WAITING_FOR_CONFIDENT_POSE and the goal stays
+active (control, oscillation and recovery go on as before). When the fit comes back while
+controlling, the plan is made afresh from the pose the localizer has found (the local planner may
+have stopped at the old plan's end, where the doubted pose put the goal). Without any beam fit (a
+pose from SLAM or the simulator's truth) nothing is doubted.
 """
 from __future__ import annotations
 
@@ -42,6 +50,7 @@ from .params import NavigatorParams
 from .recovery import ZERO, Behaviour, Twist3, behaviour
 
 GOAL_FRAMES = ("", "map")
+WAITING_FOR_CONFIDENT_POSE = "at the goal, waiting for a pose the scans agree with (beam fit below min_pose_beam_fit)"
 
 
 class State(enum.Enum):
@@ -93,6 +102,7 @@ class ControlResult:
 class NavInputs:
     pose: tuple[float, float, float] | np.ndarray | None = None   # robot pose, map frame
     velocity: tuple[float, float, float] | np.ndarray | None = None   # body twist (odometry); None: unknown
+    beam_fit: float | None = None           # the localizer's latest beam fit; None: no news
     plan: PlanResult | None = None
     control: ControlResult | None = None   # the local planner's answer for this control cycle
     goal: Goal | None = None
@@ -119,6 +129,7 @@ class Navigator:
         self.target_index = 0
         self.pose: np.ndarray | None = None
         self.velocity: np.ndarray | None = None
+        self.beam_fit: float | None = None    # None: no localizer says how well its scans fit
         self.path: np.ndarray | None = None
         self._now: float | None = None
         self._next_request_id = 1
@@ -148,6 +159,11 @@ class Navigator:
             self.pose = np.asarray(inputs.pose, dtype=float).reshape(3)
         if inputs.velocity is not None:
             self.velocity = np.asarray(inputs.velocity, dtype=float).reshape(3)
+        if inputs.beam_fit is not None:
+            was_doubted = self._pose_doubted()
+            self.beam_fit = float(inputs.beam_fit)
+            if was_doubted and not self._pose_doubted() and self.state is State.CONTROLLING:
+                self._want_plan = True   # the pose the plan started from was wrong: plan from the found one
         if inputs.cancel is not None and self._cancel(inputs.cancel, out) and inputs.goal is not None:
             out.statuses.append(self.status())
         if inputs.goal is not None:
@@ -226,6 +242,7 @@ class Navigator:
 
     def _check_arrival(self, out: NavActions) -> None:
         p = self.params
+        self.reason = ""   # an active goal's only reason is the wait below, decided afresh each step
         last = len(self.targets) - 1
         while True:
             target = self.targets[self.target_index]
@@ -237,8 +254,14 @@ class Navigator:
                 self._begin_target()
                 continue
             if abs(float(wrap_angle(target[2] - self.pose[2]))) <= p.yaw_goal_tolerance and self._stopped():
-                self._finish(State.SUCCEEDED, "", out)
+                if self._pose_doubted():
+                    self.reason = WAITING_FOR_CONFIDENT_POSE
+                else:
+                    self._finish(State.SUCCEEDED, "", out)
             return
+
+    def _pose_doubted(self) -> bool:
+        return self.beam_fit is not None and self.beam_fit < self.params.min_pose_beam_fit
 
     def _stopped(self) -> bool:
         """As base_local_planner's goal check: at the goal only once the robot has (nearly) stopped,

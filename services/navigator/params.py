@@ -1,6 +1,8 @@
 """Navigator parameters with move_base's names and defaults (ROS 1 noetic move_base.cpp).
 
-xy_goal_tolerance, yaw_goal_tolerance and escape_vel are base_local_planner's (in ROS the local
+min_pose_beam_fit is not move_base's: move_base trusts any pose; this one waits at the goal while the
+localizer's scans do not fit the map (docs/navigator.md). xy_goal_tolerance, yaw_goal_tolerance and
+escape_vel are base_local_planner's (in ROS the local
 planner decides arrival; here the navigator does, so both see the same numbers). The recovery
 behaviours' own settings (rotate_angle, max_rotational_vel, backup_dist, wait_duration) carry the
 names of rotate_recovery and Nav2's BackUp/Wait behaviours.
@@ -47,6 +49,7 @@ class NavigatorParams:
     yaw_goal_tolerance: float = 0.05      # rad (final pose only; waypoints check xy only)
     trans_stopped_vel: float = 0.1        # m/s: at the final pose, success only below this (dwa_local_planner)
     rot_stopped_vel: float = 0.1          # rad/s: likewise
+    min_pose_beam_fit: float = 0.5        # success only while the localizer's latest beam fit is at least this; 0 = off
     escape_vel: float = -0.1              # m/s along x while backing up (negative: backwards)
     rotate_angle: float = 2 * math.pi     # rad: rotate_recovery turns a full circle
     max_rotational_vel: float = 1.0       # rad/s for rotate
@@ -63,7 +66,7 @@ class NavigatorParams:
         require_at_least(self, -1, "max_planning_retries")
         require_nonnegative(self, "planner_frequency", "planner_patience", "controller_patience",
                             "oscillation_timeout", "oscillation_distance", "conservative_reset_dist",
-                            "xy_goal_tolerance", "yaw_goal_tolerance", "trans_stopped_vel", "rot_stopped_vel",
+                            "xy_goal_tolerance", "yaw_goal_tolerance", "trans_stopped_vel", "rot_stopped_vel", "min_pose_beam_fit",
                             "backup_dist", "wait_duration")
 
     @property
