@@ -56,6 +56,10 @@ LOCALIZATIONS = ("amcl", "slam", "truth")
 # a robot that stands still for 10 s (move_base's oscillation check, off by default) recovers
 NAVIGATOR = {"xy_goal_tolerance": 0.03, "yaw_goal_tolerance": 0.03, "trans_stopped_vel": 0.02,
              "rot_stopped_vel": 0.02, "oscillation_timeout": 10.0, "oscillation_distance": 0.2}
+# where a mission's localizer departs from ROS amcl (docs/localizer.md): it keeps converging while
+# the robot stands (a shove or a late correction is not left standing), and its recovery keeps its
+# weight averages and draws half its random poses near the estimate (a shove moves the robot a little)
+LOCALIZER_BEYOND_ROS = {"temporal_update": 0.2, "recovery_reset_after_injection": False, "recovery_local_share": 0.5}
 SETTLE_S = 1.0          # sim s after the last goal ends: the robot comes to rest before the stop
 CANCEL_WAIT_S = 2.0     # sim s to wait for the navigator to confirm a cancel
 POLL_S = 0.1
@@ -126,7 +130,7 @@ def localization_service(kind: str, start: dict, map_file: Path, seed: int) -> d
     if kind == "slam":
         return {"name": "slam", "service": "slam", "params": {**start, "seed": seed}}
     return {"name": "localizer", "service": "localizer", "params_file": str(PARAMS / "amcl_paper.yaml"),
-            "params": {"map_file": str(map_file), **start, "seed": seed,
+            "params": {"map_file": str(map_file), **start, "seed": seed, **LOCALIZER_BEYOND_ROS,
                        "initial_cov_xx": 0.0025, "initial_cov_yy": 0.0025, "initial_cov_aa": 0.0025}}
 
 

@@ -215,6 +215,11 @@ class PoseFit:
     beam_fit: float = 0.0      # share of the scan's used returns within beam_fit_distance of a mapped obstacle
     beams: int = 0             # returns counted
 
+    def problem(self) -> Problem:
+        if not 0.0 <= self.beam_fit <= 1.0:
+            return "beam_fit", f"{self.beam_fit} is not a share between 0 and 1"
+        return None if self.beams >= 0 else ("beams", f"{self.beams} returns is negative")
+
 
 @message("ParticleCloud", 1)
 @dataclass(slots=True)
