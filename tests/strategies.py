@@ -84,6 +84,9 @@ def sound(msg):
         msg.circles[:, 2] = np.abs(msg.circles[:, 2])
     elif kind == "Clock":
         msg.rate = abs(msg.rate) + 1.0
+    elif kind == "PoseFit":
+        msg.beam_fit = min(abs(msg.beam_fit), 1.0)
+        msg.beams = abs(msg.beams)
     elif kind == "ClearCostmaps":
         msg.reset_distance = abs(msg.reset_distance)
     return msg
