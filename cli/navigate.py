@@ -158,6 +158,7 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "global_planner", "service": "global_planner",
          "params": {"goal_topic": "plan_request", "planner_frequency": 0.0, "use_dijkstra": False, **start}},
         {"name": "local_planner", "service": "local_planner", "params": {**drive_params(drive), **start}},
+        {"name": "cmd_vel_mux", "service": "cmd_vel_mux"},
         {"name": "velocity_smoother", "service": "velocity_smoother"},
         {"name": "collision_monitor", "service": "collision_monitor"},
         {"name": "navigator", "service": "navigator", "params": {**start, **NAVIGATOR}},
