@@ -9,8 +9,11 @@ import ipaddress
 import json
 import os
 import socket
+from pathlib import Path
 
 import zenoh
+
+from .acl import CREDENTIALS_ENV, auth_json, read_credentials
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 ROUTER_ENV = "OMNINAV_ROUTER"
@@ -62,15 +65,25 @@ def _base(mode: str) -> zenoh.Config:
     return conf
 
 
-def router_config(listen: str) -> zenoh.Config:
+def router_config(listen: str, dictionary: Path | None = None, access_control: dict | None = None) -> zenoh.Config:
+    """A router; with a dictionary file ("user:password" lines) only those users can connect, and
+    with an access_control section (acl.py) they may do only what it allows."""
     conf = _base("router")
     conf.insert_json5("listen/endpoints", json.dumps([check_loopback(listen)]))
+    if dictionary is not None:
+        conf.insert_json5("transport/auth/usrpwd", json.dumps({"dictionary_file": str(dictionary)}))
+    if access_control is not None:
+        conf.insert_json5("access_control", json.dumps(access_control))
     return conf
 
 
-def client_config(router: str | None = None) -> zenoh.Config:
-    """A client that connects to the router and waits for it (start order does not matter)."""
+def client_config(router: str | None = None, credentials: str | None = None) -> zenoh.Config:
+    """A client that connects to the router and waits for it (start order does not matter); it
+    authenticates with the credentials file given, else $OMNINAV_CREDENTIALS's, if any."""
     conf = _base("client")
+    credentials = credentials or os.environ.get(CREDENTIALS_ENV)
+    if credentials:
+        conf.insert_json5("transport/auth/usrpwd", auth_json(*read_credentials(credentials)))
     conf.insert_json5("listen/endpoints", "[]")
     conf.insert_json5("connect/endpoints", json.dumps([router_endpoint(router)]))
     conf.insert_json5("connect/timeout_ms", "-1")
@@ -78,9 +91,10 @@ def client_config(router: str | None = None) -> zenoh.Config:
     return conf
 
 
-def open_client(router: str | None = None) -> zenoh.Session:
-    return zenoh.open(client_config(router))
+def open_client(router: str | None = None, credentials: str | None = None) -> zenoh.Session:
+    return zenoh.open(client_config(router, credentials))
 
 
-def open_router(listen: str | None = None) -> zenoh.Session:
-    return zenoh.open(router_config(router_endpoint(listen)))
+def open_router(listen: str | None = None, dictionary: Path | None = None,
+                access_control: dict | None = None) -> zenoh.Session:
+    return zenoh.open(router_config(router_endpoint(listen), dictionary, access_control))
