@@ -20,6 +20,9 @@ ROUTER_ENV = "OMNINAV_ROUTER"
 # Zenoh's shared memory is on by default (a 16 MiB pool per process in /dev/shm); "off" disables it
 # for every session of a run (a mix of on and off is slower than either), e.g. where /dev/shm is small
 SHM_ENV = "OMNINAV_SHM"
+# the largest message a session receives (zenoh's default, 1 GiB: a 4000 x 4000 map of 16 MB passes);
+# LiveRunner refuses to publish anything bigger, naming the key and the size
+MAX_MESSAGE_SIZE = "transport/link/rx/max_message_size"
 _SWITCH = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": False}
 
 
