@@ -14,8 +14,8 @@ from omninav.schemas import decode
 from omninav.schemas.codec import encode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Header, Twist
-from omninav.services.runtime.acl import (OPERATOR, TELEOP, TOOL, access_control, read_credentials,
-                                          write_credentials)
+from omninav.services.runtime.acl import (OPERATOR, TELEOP, TOOL, Grants, access_control, publishers_of,
+                                          read_credentials, write_credentials)
 from omninav.services.runtime.compose import load_compose
 from omninav.services.runtime.launcher import identities
 from omninav.services.runtime.zenoh_config import client_config, free_loopback_endpoint, open_client, open_router
@@ -54,7 +54,7 @@ def shipped_and_mission_composes(tmp_path: Path) -> list[Path]:
 def test_every_shipped_compose_file_and_a_mission_build_an_acl_the_router_accepts(tmp_path):
     for path in shipped_and_mission_composes(tmp_path):
         grants = identities(load_compose(path))
-        dictionary = write_credentials(tmp_path / path.stem, list(grants))
+        dictionary = write_credentials(tmp_path / path.stem, grants)
         with open_router(free_loopback_endpoint(), dictionary, access_control(grants)):
             pass
         assert not grants[TOOL].put, "tools are read-only"
@@ -68,7 +68,7 @@ def test_every_shipped_compose_file_and_a_mission_build_an_acl_the_router_accept
 
 
 def test_identity_files_are_private_and_unreadable_ones_give_one_line(tmp_path):
-    dictionary = write_credentials(tmp_path / "ids", ["sim", TOOL])
+    dictionary = write_credentials(tmp_path / "ids", {"sim": Grants(put=(KEYS.sim("clock"),)), TOOL: Grants()})
     assert oct((tmp_path / "ids").stat().st_mode & 0o777) == "0o700"
     for path in (dictionary, tmp_path / "ids" / "sim", tmp_path / "ids" / TOOL):
         assert oct(path.stat().st_mode & 0o777) == "0o600"
@@ -79,6 +79,9 @@ def test_identity_files_are_private_and_unreadable_ones_give_one_line(tmp_path):
         read_credentials(tmp_path / "bad")
     with pytest.raises(ValueError, match="cannot read it"):
         read_credentials(tmp_path / "missing")
+    assert publishers_of(tmp_path / "ids", {KEYS.sim("clock")}) == {KEYS.sim("clock"): tmp_path / "ids" / "sim"}
+    with pytest.raises(ValueError, match="no identity of this run may put omninav/r1/cmd_vel"):
+        publishers_of(tmp_path / "ids", {KEYS.sim("clock"), KEYS.robot("cmd_vel")})
 
 
 def _try_connect(endpoint: str, credentials: Path | None) -> bool:
@@ -94,7 +97,7 @@ def _try_connect(endpoint: str, credentials: Path | None) -> bool:
 def test_without_credentials_or_with_a_wrong_password_nothing_connects(tmp_path, monkeypatch):
     monkeypatch.delenv("OMNINAV_CREDENTIALS", raising=False)
     grants = identities(load_compose(REPO / "compose" / "demo.yaml"))
-    dictionary = write_credentials(tmp_path / "ids", list(grants))
+    dictionary = write_credentials(tmp_path / "ids", grants)
     (tmp_path / "forged").write_text("talker:not-its-password\n")
     endpoint = free_loopback_endpoint()
     with open_router(endpoint, dictionary, access_control(grants)):

@@ -5,8 +5,11 @@ router checks them against a dictionary file and applies `access_control` with
 default_permission "deny". The rules are built from what each Node declares: it may put on its
 outputs and its diagnostics key, subscribe to its inputs, answer its queryables and declare its
 liveliness token — nothing else. Measured on zenoh 1.10 (tests/test_acl.py):
-- a publisher must be allowed to *learn* of the subscribers (egress declare_subscriber on its
-  keys), or its puts are never sent: without that rule a put is dropped without a word;
+- a publisher must be allowed to *learn* of the subscribers (egress declare_subscriber), or its
+  puts are never sent: without that rule a put is dropped without a word. A rule matches a
+  declaration only if it includes the declared expression, so a publisher of omninav/r1/odom learns
+  of the recorder's omninav/** only through a rule on omninav/**: every publisher may learn of
+  every subscription (who listens to what, not a right to send);
 - a put reaches a subscriber only through an egress put rule on the subscriber's identity;
 - the launcher's own session lives inside the router and is not subject to the rules.
 """
@@ -23,6 +26,7 @@ from .node import Node
 
 CREDENTIALS_ENV = "OMNINAV_CREDENTIALS"     # path of a file "user:password", readable by its owner only
 DICTIONARY = "router.dict"                  # the router's user:password list, in the credentials folder
+PUTS = "puts.json"                          # identity -> the keys it may put: replay picks its identities by it
 TOOL, TELEOP, OPERATOR = "tool", "teleop", "operator"
 
 
@@ -58,10 +62,11 @@ def client_grants(robot: str) -> dict[str, Grants]:
     }
 
 
-# (grant field, flow, zenoh message kinds): each grant becomes these rules on the router
+# (grant field, flow, zenoh message kinds): each grant becomes these rules on the router, on its key
+# expressions, or on every key where the field name is followed by "*"
 _RULES = (
     ("put", "ingress", ("put",)),
-    ("put", "egress", ("declare_subscriber",)),      # a publisher sends only to subscribers it knows of
+    ("put*", "egress", ("declare_subscriber",)),     # a publisher sends only to subscribers it knows of
     ("subscribe", "ingress", ("declare_subscriber",)),
     ("subscribe", "egress", ("put",)),
     ("queryable", "ingress", ("declare_queryable", "reply")),
@@ -80,7 +85,9 @@ def access_control(identities: dict[str, Grants]) -> dict:
     for user, grants in identities.items():
         ids = []
         for field, flow, messages in _RULES:
-            key_exprs = getattr(grants, field)
+            key_exprs = getattr(grants, field.rstrip("*"))
+            if key_exprs and field.endswith("*"):
+                key_exprs = (ALL,)
             if key_exprs:
                 ids.append(f"{user}/{field}/{flow}")
                 rules.append({"id": ids[-1], "permission": "allow", "flows": [flow], "messages": list(messages),
@@ -91,19 +98,35 @@ def access_control(identities: dict[str, Grants]) -> dict:
             "policies": policies}
 
 
-def write_credentials(folder: Path, users: list[str]) -> Path:
-    """A fresh password per user: one file per user (for its process) and the router's dictionary,
-    all readable by this user only; returns the dictionary's path."""
+def write_credentials(folder: Path, identities: dict[str, Grants]) -> Path:
+    """A fresh password per identity: one file per identity (for its process), the router's
+    dictionary and what each may put, all readable by this user only; returns the dictionary's path."""
     folder.mkdir(mode=0o700, parents=True, exist_ok=True)
     os.chmod(folder, 0o700)
+    _write_private(folder / PUTS, json.dumps({user: list(g.put) for user, g in identities.items()}, indent=1))
     lines = []
-    for user in users:
+    for user in identities:
         line = f"{user}:{secrets.token_urlsafe(24)}\n"
         _write_private(folder / user, line)
         lines.append(line)
     dictionary = folder / DICTIONARY
     _write_private(dictionary, "".join(lines))
     return dictionary
+
+
+def publishers_of(folder: Path, keys: set[str]) -> dict[str, Path]:
+    """key -> the credentials file of the run's identity that may put it (a replay plays each key
+    as the service that published it); ValueError naming the keys no identity may put."""
+    try:
+        puts = json.loads((folder / PUTS).read_text())
+    except (OSError, ValueError) as exc:
+        raise ValueError(f"{folder}: not the identities folder of an `omninav up` run ({exc})") from None
+    owners = {key: user for user, allowed in puts.items() for key in allowed}
+    orphans = sorted(keys - owners.keys())
+    if orphans:
+        raise ValueError(f"no identity of this run may put {', '.join(orphans)} (replay only keys one of its "
+                         f"services publishes, with --keys)")
+    return {key: folder / owners[key] for key in keys}
 
 
 def _write_private(path: Path, text: str) -> None:

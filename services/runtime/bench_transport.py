@@ -349,7 +349,7 @@ def run_bench(size: BenchSize, acl: bool = False) -> dict:
 def _run_bench(size: BenchSize, credentials: Path | None) -> dict:
     router = free_loopback_endpoint()
     grants = bench_grants()
-    dictionary = write_credentials(credentials, list(grants)) if credentials else None
+    dictionary = write_credentials(credentials, grants) if credentials else None
     with open_router(router, dictionary, access_control(grants) if credentials else None):
         peer = _start_peer(router, credentials / "peer" if credentials else None)
         try:

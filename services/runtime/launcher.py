@@ -249,7 +249,7 @@ def main(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="omninav-up-") as params_dir:
         credentials = Path(args.credentials or Path(params_dir) / "credentials")
         try:
-            dictionary = write_credentials(credentials, list(grants))
+            dictionary = write_credentials(credentials, grants)
             router = open_router(endpoint, dictionary, access_control(grants))
         except OSError as exc:
             out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
