@@ -21,6 +21,7 @@ import json
 import math
 import os
 import queue
+import shutil
 import signal
 import subprocess
 import sys
@@ -37,6 +38,7 @@ from ..schemas.messages import CancelGoal, Clock, Goal, Header, NavStatus, Pose2
 from ..services.chassis.kinematics import DRIVES
 from ..services.map_server.mapio import save_map
 from ..services.navigator.mission import TERMINAL, load_mission, summarize_mission, summary_lines
+from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
 from ..services.runtime.compose import ComposeError, load_compose
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..services.runtime.live import LiveRunner
@@ -163,6 +165,7 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "global_planner", "service": "global_planner",
          "params": {"goal_topic": "plan_request", "planner_frequency": 0.0, "use_dijkstra": False, **start}},
         {"name": "local_planner", "service": "local_planner", "params": {**drive_params(drive), **start}},
+        {"name": "cmd_vel_mux", "service": "cmd_vel_mux"},
         {"name": "velocity_smoother", "service": "velocity_smoother"},
         {"name": "collision_monitor", "service": "collision_monitor"},
         {"name": "navigator", "service": "navigator", "params": {**start, **NAVIGATOR}},
@@ -301,6 +304,10 @@ def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot:
     """Until every service of the compose file has declared its liveliness token (or up died)."""
     keys = KeyLayout(robot)
     deadline = time.monotonic() + READY_TIMEOUT_S
+    while not Path(os.environ[CREDENTIALS_ENV]).exists():     # `up` writes the run's identities first
+        if up.poll() is not None or time.monotonic() > deadline:
+            return False
+        time.sleep(POLL_S)
     with open_client(router) as session:
         while time.monotonic() < deadline and up.poll() is None:
             if all(any(r.ok is not None for r in session.liveliness().get(keys.alive(n), timeout=0.2)) for n in names):
@@ -310,8 +317,13 @@ def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot:
 
 
 def start_stack(compose_file: Path, router: str, log: Path) -> subprocess.Popen:
+    """`up` with the ACL on; this process's sessions use the run's operator identity (goals, cancels)."""
+    credentials = compose_file.parent / "credentials"
+    shutil.rmtree(credentials, ignore_errors=True)     # a previous run's passwords are not this run's
+    os.environ[CREDENTIALS_ENV] = str(credentials / OPERATOR)
     with open(log, "wb") as sink:
-        return subprocess.Popen([sys.executable, "-m", "omninav.cli.main", "up", str(compose_file), "--router", router],
+        return subprocess.Popen([sys.executable, "-m", "omninav.cli.main", "up", str(compose_file), "--router", router,
+                                 "--credentials", str(credentials)],
                                 cwd=REPO, stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
 
 

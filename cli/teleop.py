@@ -6,9 +6,12 @@ sets its axis to the full speed in its direction and keeps the other axes. Termi
 releases, only key repeats while a key is held, so the whole command drops to zero when no key
 came for --key-timeout (wall) seconds; the chassis's acceleration limits turn that into a ramp.
 
-cmd_vel is published at 10 Hz of wall time, stamped with the latest sim time seen on the clock key,
-by a Node driven by the ordinary LiveRunner: the same publishers (BLOCK, the omninav attachment
-with seq and stamp) as every service, so recordings of teleop runs replay like any other.
+cmd_vel_teleop is published at 10 Hz of wall time, stamped with the latest sim time seen on the clock
+key, by a Node driven by the ordinary LiveRunner: the same publishers (BLOCK, the omninav attachment
+with seq and stamp) as every service, so recordings of teleop runs replay like any other. It goes
+into the command mux, which puts it ahead of navigation, then through the velocity smoother and the
+collision monitor, which alone may send cmd_vel: a robot driven by hand still stops before an
+obstacle. Under `omninav up` teleop needs the run's teleop identity: OMNINAV_CREDENTIALS=FOLDER/teleop.
 """
 from __future__ import annotations
 
@@ -150,7 +153,7 @@ class TeleopNode(Node):
         super().__init__(params, robot)
 
     def setup(self) -> None:
-        self.cmd_vel = self.publisher("cmd_vel")
+        self.cmd_vel = self.publisher("cmd_vel_teleop")
         self.subscribe("sim/clock", self.on_clock)
 
     def on_clock(self, _msg: Clock) -> None:

@@ -15,8 +15,10 @@ ALL = f"{ROOT}/**"
 
 # topic -> message type, for keys under omninav/<robot>/
 ROBOT_TOPICS: dict[str, type] = {
-    "cmd_vel": m.Twist,                 # from the local planner / teleop, to the chassis
-    "cmd_vel_nav": m.Twist,             # the navigator's command, before the velocity smoother
+    "cmd_vel": m.Twist,                 # collision monitor -> chassis (the only one allowed to put it)
+    "cmd_vel_nav": m.Twist,             # the navigator's command, into the command mux
+    "cmd_vel_teleop": m.Twist,          # teleop's command, into the command mux (it wins over navigation)
+    "cmd_vel_mux": m.Twist,             # command mux -> velocity smoother
     "cmd_vel_smoothed": m.Twist,        # velocity smoother -> collision monitor (which sends cmd_vel)
     "wheel_cmd": m.WheelCommand,        # chassis -> sim
     "wheel_state": m.WheelState,        # sim -> chassis

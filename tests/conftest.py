@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from omninav.schemas.keys import KeyLayout
+from omninav.services.runtime.acl import CREDENTIALS_ENV, DICTIONARY, TOOL
 from omninav.services.runtime.zenoh_config import ROUTER_ENV, open_client, open_router
 
 from launching import processes_using
@@ -127,11 +128,21 @@ def endpoint():
 
 
 @pytest.fixture
-def up(endpoint, processes_no_router, tmp_path):
-    """Start `omninav up` on a compose text; `processes_no_router` stops it at the end."""
+def up(endpoint, processes_no_router, tmp_path, monkeypatch):
+    """Start `omninav up` on a compose text; `processes_no_router` stops it at the end. The run's
+    identities go to `start.credentials`; this test's own sessions use the read-only tool one."""
+    credentials = tmp_path / "credentials"
+
     def start(compose_text: str, *extra: str, env: dict | None = None):
         compose = tmp_path / "compose.yaml"
         compose.write_text(textwrap.dedent(compose_text))
-        return processes_no_router.omninav("up", str(compose), "--router", endpoint, *extra, env=env)
+        launcher = processes_no_router.omninav("up", str(compose), "--router", endpoint, "--credentials",
+                                               str(credentials), *extra, env=env)
+        # written before the router starts; a compose file that fails validation writes none
+        wait_until(lambda: (credentials / DICTIONARY).exists() or launcher.poll() is not None, 60,
+                   what="up writing the run's identities")
+        return launcher
+    monkeypatch.setenv(CREDENTIALS_ENV, str(credentials / TOOL))
     start.procs = processes_no_router
+    start.credentials = credentials
     return start

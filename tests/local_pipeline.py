@@ -12,6 +12,7 @@ from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Header, Path, Twist
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
+from omninav.services.cmd_vel_mux.node import CmdVelMuxNode
 from omninav.services.costmap.node import CostmapNode, CostmapNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
@@ -96,14 +97,14 @@ class Pipeline:
 
 def pipeline(world: str, drive: str, schedule: list[tuple[float, object]], *, topic: str = "follow_path",
              local_planner: dict | None = None, watch=()) -> Pipeline:
-    """sim, chassis, lidar, costmap, local_planner, the navigator stand-in, velocity_smoother and
-    collision_monitor, with `schedule` published on `topic` (follow_path; or cmd_vel_nav, without
-    the local planner and the stand-in)."""
+    """sim, chassis, lidar, costmap, local_planner, the navigator stand-in, cmd_vel_mux,
+    velocity_smoother and collision_monitor, with `schedule` published on `topic` (follow_path; or
+    cmd_vel_nav or cmd_vel_teleop into the mux, without the local planner and the stand-in)."""
     x, y, yaw = (float(v) for v in load_world(world_path(world)).robot.start)
     sim = SimNode(SimNodeParams(world=world, drive=drive))
     monitor = CollisionMonitorNode()
     nodes = [sim, ChassisNode(ChassisNodeParams(drive=drive)), LidarNode(LidarNodeParams(world=world)),
-             VelocitySmootherNode(), monitor, Scheduled(topic, schedule)]
+             CmdVelMuxNode(), VelocitySmootherNode(), monitor, Scheduled(topic, schedule)]
     planner = None
     if topic == "follow_path":
         planner = LocalPlannerNode(LocalPlannerNodeParams.from_mapping(

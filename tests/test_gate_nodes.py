@@ -10,6 +10,8 @@ import pytest
 from local_pipeline import KEYS, pipeline
 from omninav.schemas import decode
 from omninav.schemas.messages import Clock, Header, LaserScan, Twist
+from omninav.services.cmd_vel_mux.mux import CommandMux, Source
+from omninav.services.cmd_vel_mux.node import CmdVelMuxNode
 from omninav.services.local_planner.gate_nodes import (CollisionMonitorNode, CollisionMonitorNodeParams,
                                                        VelocitySmootherNode, VelocitySmootherNodeParams)
 from omninav.services.runtime.node import NS_PER_S
@@ -47,7 +49,7 @@ def clocks(until_s: float, step_ms: int = 10):
 def test_the_smoother_limits_acceleration_waits_one_period_and_times_out_to_zero():
     node = VelocitySmootherNode(VelocitySmootherNodeParams(velocity_timeout=0.5))
     out = outputs(node)
-    commands = [("cmd_vel_nav", twist(k * 50 * MS, vx=0.5, vy=-0.3, wz=1.0, seq=k)) for k in range(1, 21)]  # to 1 s
+    commands = [("cmd_vel_mux", twist(k * 50 * MS, vx=0.5, vy=-0.3, wz=1.0, seq=k)) for k in range(1, 21)]  # to 1 s
     feed(node, clocks(3.0) + commands)
     stamps = [m.header.stamp_ns for m in out]
     assert stamps == [k * 50 * MS for k in range(61)]                    # every tick, on multiples of 50 ms
@@ -111,12 +113,13 @@ def test_the_monitor_stops_slows_or_passes_on_the_scan_in_effect_and_stops_witho
     assert (out[-1].linear_x, node.counters["action/no_scan"]) == (0.0, 4)
 
 
-def test_driven_straight_at_a_box_the_robot_is_slowed_and_stopped_short_of_it(tmp_path):
+@pytest.mark.parametrize("topic", ["cmd_vel_nav", "cmd_vel_teleop"])   # navigation, or a human by hand
+def test_driven_straight_at_a_box_the_robot_is_slowed_and_stopped_short_of_it(tmp_path, topic):
     world_file = tmp_path / "box.yaml"
     world_file.write_text("name: box\nbounds: [8.0, 3.0]\nboxes:\n  - {center: [4.0, 1.5], size: [0.4, 1.6]}\n"
                           "robot:\n  start: [1.2, 1.5, 0.0]\n  drive: mecanum\n")
     forward = [(0.5 + 0.05 * k, twist(0, vx=0.4)) for k in range(200)]      # 0.4 m/s for 10 s, at 20 Hz
-    run = pipeline(str(world_file), "mecanum", forward, topic="cmd_vel_nav", watch=["cmd_vel_smoothed", "cmd_vel"])
+    run = pipeline(str(world_file), "mecanum", forward, topic=topic, watch=["cmd_vel_smoothed", "cmd_vel"])
     run.run(10.0)
     assert run.sim.sim.collisions == 0 and run.sim.sim.contact_steps == 0
     assert np.abs(run.truths[-1][4:]).max() < 1e-3                          # standing
@@ -129,3 +132,28 @@ def test_driven_straight_at_a_box_the_robot_is_slowed_and_stopped_short_of_it(tm
     slowed = [t for t, v in sent.items() if 0 < v < smoothed[t]]
     assert slowed and all(sent[t] == pytest.approx(0.5 * smoothed[t]) for t in slowed)
     assert max(t for t, v in sent.items() if v > 0) < run.truths[-1][0] * NS_PER_S
+
+
+def test_the_mux_passes_teleop_over_navigation_until_teleop_times_out():
+    mux = CommandMux([Source("teleop", 100, 0.5), Source("navigation", 10, 0.5)])
+    assert mux.offer("navigation", 0)                       # nobody above it spoke
+    assert mux.offer("teleop", 100 * MS)
+    assert not mux.offer("navigation", 200 * MS)            # teleop active until 600 ms
+    assert not mux.offer("navigation", 600 * MS)
+    assert mux.offer("navigation", 601 * MS)                # teleop silent for longer than its timeout
+    assert mux.offer("teleop", 700 * MS)                    # the higher priority always passes
+    with pytest.raises(ValueError, match="timeout must be positive"):
+        Source("teleop", 100, 0.0)
+
+
+def test_the_mux_node_passes_teleop_over_navigation_and_navigation_again_after_the_timeout():
+    node = CmdVelMuxNode()
+    out = outputs(node)
+    teleop = [("cmd_vel_teleop", twist(k * 100 * MS, vx=-0.2, seq=k)) for k in range(1, 4)]   # 0.1 .. 0.3 s
+    navigation = [("cmd_vel_nav", twist(k * 50 * MS, vx=0.4, seq=k)) for k in range(1, 21)]   # to 1 s
+    feed(node, clocks(2.0) + navigation + teleop)
+    passed = [(m.header.stamp_ns // MS, m.linear_x) for m in out]
+    assert passed[:2] == [(50, 0.4), (100, -0.2)]           # navigation until teleop speaks, in stamp order
+    assert all(vx == -0.2 for t, vx in passed if 100 <= t <= 800)   # teleop's last at 0.3 s holds to 0.8 s
+    assert [t for t, vx in passed if vx == 0.4] == [50, 850, 900, 950, 1000]
+    assert node.counters["overridden/navigation"] == 15

@@ -52,11 +52,11 @@ def test_a_bad_parameter_fails_with_exit_2_and_starts_nothing(up, endpoint):
     launcher = up(TALKER_LISTENER.replace("service: listener", "service: listener\n        params: {gian: 2}"))
     assert launcher.wait(60) == 2
     log = up.procs.log_of(launcher)
-    assert "services[1] (listener).params: unknown parameter(s) ['gian']" in log
+    assert "services[1] (listener).params: ListenerParams: unknown parameter 'gian' (did you mean 'gain'?)" in log
     assert "router listening" not in log and "started" not in log
 
 
-def test_a_service_that_crashes_at_start_makes_up_fail_with_its_error(up, endpoint, tmp_path):
+def test_a_service_whose_setup_raises_makes_up_fail_with_its_error_before_starting(up, endpoint, tmp_path):
     (tmp_path / "omninav_test_crasher.py").write_text(textwrap.dedent("""\
         from omninav.services.runtime.node import Node
 
@@ -68,11 +68,10 @@ def test_a_service_that_crashes_at_start_makes_up_fail_with_its_error(up, endpoi
         """))
     launcher = up(TALKER_LISTENER.replace("service: listener", "module: omninav_test_crasher:Crasher")
                   .replace("name: listener", "name: crasher"), env={"PYTHONPATH": str(tmp_path)})
-    assert launcher.wait(60) == 1
+    assert launcher.wait(60) == 2   # up builds every node to make the ACL from its declarations
     log = up.procs.log_of(launcher)
-    assert "[up] error: crasher could not start (exit code 1); its last output:" in log
-    assert "[crasher] RuntimeError: no wheels attached" in log
-    assert "[up] stopping talker" in log
+    assert "crasher cannot be built to read what it declares: RuntimeError: no wheels attached" in log
+    assert "router listening" not in log and "started" not in log
     assert processes_using(endpoint) == []
 
 

@@ -11,7 +11,8 @@ from omninav.schemas.messages import Chatter, Clock, Header
 from omninav.services.recorder.mcap_io import RecordingWriter, read_records
 from omninav.services.runtime.zenoh_config import open_client
 
-from conftest import wait_until
+from conftest import wait_alive, wait_until
+from launching import TALKER_LISTENER
 
 KEYS = KeyLayout()
 CHATTER, ECHO, CLOCK = KEYS.robot("chatter"), KEYS.robot("echo"), KEYS.sim("clock")
@@ -144,3 +145,19 @@ def test_missing_or_damaged_file_is_a_clear_error(processes, tmp_path, content, 
     assert proc.wait(60) == 2
     log = processes.log_of(proc)
     assert error in log and "Traceback" not in log
+
+
+def test_under_acl_replay_puts_each_key_as_its_publisher_and_nothing_without_identities(up, endpoint, tmp_path):
+    path = make_recording(tmp_path / "rec.mcap", n=20)
+    launcher = up(TALKER_LISTENER)
+    wait_alive(endpoint, ["talker", "listener"])
+    played = {(k, p) for k, p, _ in recorded(path)}
+    with Collector(endpoint) as bus:        # the tool identity: it may listen to everything
+        as_tool = up.procs.omninav("replay", str(path), "--router", endpoint)
+        assert as_tool.wait(60) == 0        # its puts are refused by the router, silently
+        as_services = up.procs.omninav("replay", str(path), "--router", endpoint, "--credentials", str(up.credentials))
+        assert as_services.wait(60) == 0, up.procs.log_of(as_services)
+        wait_until(lambda: played <= {(k, p) for k, p, _ in bus.got}, 10, what="the replayed chatter and echo")
+        arrived = [(k, p) for k, p, _ in bus.got if (k, p) in played]
+    assert len(arrived) == len(played)      # once each: from the services' identities, none as the tool
+    assert up.procs.stop(launcher) == 0

@@ -1,5 +1,5 @@
 """omninav teleop: keys to commands and their timeout (pure), scripts, refusing a non-terminal,
-a scripted run against a real clock source publishing stamped, sequenced cmd_vel, and the
+a scripted run against a real clock source publishing stamped, sequenced cmd_vel_teleop, and the
 keyboard in a pseudo-terminal (raw mode undone on exit)."""
 import os
 import pty
@@ -102,7 +102,7 @@ def test_without_a_terminal_or_a_script_it_refuses_clearly():
 def test_a_script_drives_on_sim_time_with_sequenced_stamped_commands(processes, router_endpoint):
     received = []
     with open_client(router_endpoint) as session:
-        sub = session.declare_subscriber("omninav/r1/cmd_vel", lambda s: received.append(
+        sub = session.declare_subscriber("omninav/r1/cmd_vel_teleop", lambda s: received.append(
             (decode(s.payload.to_bytes(), Twist), unpack_attachment(s.attachment.to_bytes() if s.attachment else None))))
         processes.omninav("run", "talker")            # the sim clock at 100 Hz, rate 1
         teleop = processes.omninav("teleop", "--script", "0.3,0,0,0.5;0,0,-0.4,0.3")
@@ -135,7 +135,7 @@ def test_the_keyboard_drives_in_a_terminal_and_gives_it_back(processes, router_e
         return screen.decode(errors="replace")
 
     with open_client(router_endpoint) as session:
-        sub = session.declare_subscriber("omninav/r1/cmd_vel",
+        sub = session.declare_subscriber("omninav/r1/cmd_vel_teleop",
                                          lambda s: received.append(decode(s.payload.to_bytes(), Twist)))
         processes.omninav("run", "talker")
         teleop = subprocess.Popen([sys.executable, "-m", "omninav.cli.main", "teleop", "--key-timeout", "5"],

@@ -1,13 +1,15 @@
 """The two gates between the navigator and the chassis: velocity_smoother and collision_monitor.
 
-    navigator --cmd_vel_nav--> velocity_smoother --cmd_vel_smoothed--> collision_monitor --cmd_vel--> chassis
+    cmd_vel_mux --cmd_vel_mux--> velocity_smoother --cmd_vel_smoothed--> collision_monitor --cmd_vel--> chassis
+
+(the mux takes the navigator's cmd_vel_nav and teleop's cmd_vel_teleop: services/cmd_vel_mux/)
 
 velocity_smoother (VelocitySmoother, smoother.py) runs on the sim clock: a smoothing tick falls on
 the clock stamped at or first after each multiple of 1/smoothing_frequency of sim time, and every
 tick publishes the smoothed command (zeros while there is nothing to do, so the collision monitor
-downstream always has a stream to follow). cmd_vel_nav is sporadic: a command stamped t takes
+downstream always has a stream to follow). cmd_vel_mux is sporadic: a command stamped t takes
 effect at the first tick after t + command_delay_s — the time the navigator's command may take to
-get here, live, behind the clock; whether it arrives before or after the clocks stamped in
+get here (through the mux), live, behind the clock; whether it arrives before or after the clocks stamped in
 (t, t + delay] then cannot change the output. Added latency: with the local planner and the
 smoother both at 20 Hz (ticks on the same multiples of 50 ms) and the default 0.04 s delay, one
 period, 50 ms. No command for velocity_timeout seconds of sim time → the output decelerates to zero.
@@ -72,7 +74,7 @@ class VelocitySmootherNode(Node):
         self.pending = Deferred(p.command_delay_s)   # commands not yet in effect
         self.out_pub = self.publisher("cmd_vel_smoothed")
         self.subscribe("sim/clock", self.on_clock)
-        self.subscribe_deferred("cmd_vel_nav", self.pending)
+        self.subscribe_deferred("cmd_vel_mux", self.pending)
 
     def on_clock(self, msg: Clock) -> None:
         t = msg.header.stamp_ns

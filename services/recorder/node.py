@@ -133,6 +133,9 @@ class RecorderNode(Node):
         self.failed = False
         self._types: dict[str, str] = {}      # key -> type, for samples without our attachment
 
+    def subscriptions(self) -> list[str]:
+        return [str(ke) for ke in self.key_exprs]
+
     def _type_of(self, key: str, payload: bytes) -> str:
         name = self._types.get(key)
         if name is None:

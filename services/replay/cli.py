@@ -13,6 +13,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     live.add_argument("--start-offset", type=float, default=0.0, metavar="S", help="skip the first S seconds")
     live.add_argument("--clock", action="store_true", help="also publish the Clock from message stamps")
     live.add_argument("--router", help="router endpoint (default $OMNINAV_ROUTER or tcp/127.0.0.1:7447)")
+    live.add_argument("--credentials", metavar="FOLDER",
+                      help="the identities folder of the `omninav up` run to replay into: each key is put "
+                           "as the service that publishes it (the router's ACL allows nothing else)")
     into = parser.add_argument_group("deterministic replay into one service")
     into.add_argument("--into", metavar="SERVICE", help="drive this service's code in-process")
     into.add_argument("--params", help="parameter file for the service")

@@ -8,11 +8,14 @@ down instead of losing messages.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import logging
 import signal
 import threading
 import time
 from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
 
 import zenoh
 from mcap.exceptions import McapError
@@ -25,6 +28,7 @@ from ...schemas.registry import type_info
 from ..recorder.mcap_io import Record, read_records, recording_summary
 from ..runtime.node import NS_PER_S
 from ..runtime.run import configure_logging
+from ..runtime.acl import publishers_of
 from ..runtime.zenoh_config import open_client, router_endpoint
 
 log = logging.getLogger("omninav.replay")
@@ -73,8 +77,10 @@ def make_plan(args: argparse.Namespace, summary) -> LivePlan:
 class LivePlayer:
     """Publishes Records at their recorded pace; stop_event stops it between two messages."""
 
-    def __init__(self, session: zenoh.Session, plan: LivePlan, rate: float, stop_event: threading.Event):
-        self.session, self.plan, self.rate, self.stop_event = session, plan, rate, stop_event
+    def __init__(self, session_for: Callable[[str], zenoh.Session], plan: LivePlan, rate: float,
+                 stop_event: threading.Event):
+        """session_for(key): the session that puts key (under an ACL, that of the key's publisher)."""
+        self.session_for, self.plan, self.rate, self.stop_event = session_for, plan, rate, stop_event
         self._publishers: dict[str, zenoh.Publisher] = {}
         self.published = 0
         self._clock_key = KeyLayout.sim("clock")
@@ -85,7 +91,7 @@ class LivePlayer:
     def _publisher(self, key: str) -> zenoh.Publisher:
         pub = self._publishers.get(key)
         if pub is None:
-            pub = self._publishers[key] = self.session.declare_publisher(
+            pub = self._publishers[key] = self.session_for(key).declare_publisher(
                 key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE)
         return pub
 
@@ -122,6 +128,16 @@ class LivePlayer:
             pub.undeclare()
 
 
+def _sessions(router: str, files: dict[str, Path] | None, stack: contextlib.ExitStack):
+    """One session, or given each key's identity (publishers_of) one session per identity: each key
+    goes out as the service that published it, which the router's ACL allows."""
+    if files is None:
+        session = stack.enter_context(open_client(router))
+        return lambda _key: session
+    by_file = {file: stack.enter_context(open_client(router, str(file))) for file in set(files.values())}
+    return lambda key: by_file[files[key]]
+
+
 def main_live(args: argparse.Namespace) -> int:
     configure_logging("replay")
     try:
@@ -131,6 +147,10 @@ def main_live(args: argparse.Namespace) -> int:
             raise ReplayError(f"--start-offset must be >= 0, got {args.start_offset}")
         router = router_endpoint(args.router)
         what = make_plan(args, recording_summary(args.file))
+        files = None
+        if args.credentials is not None:    # every key's publisher, before anything is sent
+            files = publishers_of(Path(args.credentials),
+                                  set(what.keys) | ({KeyLayout.sim("clock")} if what.clock else set()))
     except (ReplayError, FileNotFoundError, McapError, ValueError) as exc:
         log.error("%s", exc)
         return 2
@@ -139,8 +159,9 @@ def main_live(args: argparse.Namespace) -> int:
         signal.signal(sig, lambda *_: stop.set())
     passes = 0
     started = time.monotonic()
-    with open_client(router) as session:
-        player = LivePlayer(session, what, args.rate, stop)
+    with contextlib.ExitStack() as sessions:
+        session_for = _sessions(router, files, sessions)
+        player = LivePlayer(session_for, what, args.rate, stop)
         try:
             while player.play(read_records(args.file)):
                 passes += 1

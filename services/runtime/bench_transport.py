@@ -11,13 +11,16 @@ from __future__ import annotations
 import argparse
 import importlib.metadata
 import json
+import os
 import queue
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 import traceback
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
@@ -28,6 +31,7 @@ from ...schemas.codec import decode, encode
 from ...schemas.keys import KeyLayout
 from ...schemas.messages import Chatter, Header, LaserScan, MapMetaData, OccupancyGrid
 from ...schemas.registry import type_info
+from .acl import CREDENTIALS_ENV, Grants, access_control, write_credentials
 from .zenoh_config import client_config, free_loopback_endpoint, open_client, open_router
 
 BEAMS = 360
@@ -249,10 +253,11 @@ class Client:
             handle.undeclare()
 
 
-def _start_peer(router: str) -> subprocess.Popen:
+def _start_peer(router: str, credentials: Path | None) -> subprocess.Popen:
+    env = {**os.environ, **({CREDENTIALS_ENV: str(credentials)} if credentials else {})}
     peer = subprocess.Popen(
         [sys.executable, "-m", "omninav.cli.bench", "transport", "--role", "peer", "--router", router],
-        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
     line: list[str] = []
     reader = threading.Thread(target=lambda: line.append(peer.stdout.readline()), daemon=True)
     reader.start()
@@ -321,12 +326,34 @@ def measure(client: Client, size: BenchSize) -> dict:
     }
 
 
-def run_bench(size: BenchSize) -> dict:
+def bench_grants() -> dict[str, Grants]:
+    """The two identities of the bench under the ACL: each may use exactly its own keys."""
+    routes = (CODEC, RAW)
+    return {
+        "bench": Grants(put=tuple(k for r in routes for k in (r.ping, r.burst)),
+                        subscribe=tuple(k for r in routes for k in (r.pong, r.ack)), query=tuple(r.grid for r in routes)),
+        "peer": Grants(put=tuple(k for r in routes for k in (r.pong, r.ack)),
+                       subscribe=tuple(k for r in routes for k in (r.ping, r.burst)),
+                       queryable=tuple(r.grid for r in routes)),
+    }
+
+
+def run_bench(size: BenchSize, acl: bool = False) -> dict:
+    """The figures through a router without access control, or (acl) with user/password
+    authentication and the deny-by-default ACL `omninav up` uses (acl.py)."""
+    with tempfile.TemporaryDirectory(prefix="omninav-bench-") as folder:
+        figures = _run_bench(size, Path(folder) if acl else None)
+    return {**figures, "acl": acl}
+
+
+def _run_bench(size: BenchSize, credentials: Path | None) -> dict:
     router = free_loopback_endpoint()
-    with open_router(router):
-        peer = _start_peer(router)
+    grants = bench_grants()
+    dictionary = write_credentials(credentials, grants) if credentials else None
+    with open_router(router, dictionary, access_control(grants) if credentials else None):
+        peer = _start_peer(router, credentials / "peer" if credentials else None)
         try:
-            with open_client(router) as session:
+            with open_client(router, str(credentials / "bench") if credentials else None) as session:
                 client = Client(session)
                 try:
                     figures = measure(client, size)
@@ -344,8 +371,9 @@ def report(fig: dict) -> str:
         return "met" if ok else "NOT met"
 
     shm = "on" if fig["shared_memory"] else "off"
+    acl = "with user/password authentication and ACL" if fig["acl"] else "no access control"
     return "\n".join([
-        f"omninav bench transport: {fig['setup']}; zenoh {fig['zenoh']}, shared memory {shm}",
+        f"omninav bench transport: {fig['setup']}; zenoh {fig['zenoh']}, shared memory {shm}, {acl}",
         f"{'':44s}{'omninav codec':>16s}{'raw bytes (ref)':>18s}",
         f"{'LaserScan round trip, median':44s}{fig['rtt_median_ms']:13.3f} ms{fig['rtt_raw_median_ms']:15.3f} ms"
         f"   ({fig['round_trips']} round trips, {fig['scan_bytes']} B)",
@@ -366,6 +394,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--messages", type=int, default=50000, metavar="N", help="burst of small messages (default 50000)")
     parser.add_argument("--gets", type=int, default=20, metavar="N", help="grid gets (default 20)")
     parser.add_argument("--warmup", type=int, default=50, metavar="N", help="round trips and burst size before measuring")
+    parser.add_argument("--acl", choices=("off", "on", "both"), default="off",
+                        help="through a router with the ACL `up` uses; both: without, then with, and the cost")
     parser.add_argument("--role", choices=("bench", "peer"), default="bench", help=argparse.SUPPRESS)
     parser.add_argument("--router", help=argparse.SUPPRESS)
 
@@ -380,10 +410,24 @@ def main(args: argparse.Namespace) -> int:
     if bad:
         print(f"omninav bench transport: {', '.join(bad)} must be at least 1", file=sys.stderr)
         return 2
+    size = BenchSize(args.round_trips, args.messages, args.gets, args.warmup)
     try:
-        figures = run_bench(BenchSize(args.round_trips, args.messages, args.gets, args.warmup))
+        runs = [run_bench(size, acl) for acl in {"off": [False], "on": [True], "both": [False, True]}[args.acl]]
     except PeerError as exc:
         print(f"omninav bench transport: {exc}", file=sys.stderr)
         return 1
-    print(json.dumps(figures) if args.json else report(figures), flush=True)
+    if args.json:
+        print(json.dumps(runs[0] if len(runs) == 1 else {"without_acl": runs[0], "with_acl": runs[1]}), flush=True)
+        return 0
+    print("\n\n".join(report(figures) for figures in runs), flush=True)
+    if len(runs) == 2:
+        print(acl_cost(*runs), flush=True)
     return 0
+
+
+def acl_cost(without: dict, with_acl: dict) -> str:
+    rtt = with_acl["rtt_median_ms"] - without["rtt_median_ms"]
+    return (f"ACL cost: LaserScan round trip median {rtt:+.3f} ms ({without['rtt_median_ms']:.3f} -> "
+            f"{with_acl['rtt_median_ms']:.3f} ms), p99 {without['rtt_p99_ms']:.3f} -> {with_acl['rtt_p99_ms']:.3f} ms; "
+            f"throughput {without['msgs_per_s']:,d} -> {with_acl['msgs_per_s']:,d} /s; "
+            f"grid get {without['grid_get_ms']:.2f} -> {with_acl['grid_get_ms']:.2f} ms")

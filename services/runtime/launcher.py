@@ -4,6 +4,11 @@ Each service runs as `omninav run …` in its own process group, so a Ctrl-C in 
 only the launcher, which then stops the services itself in reverse order (the recorder, listed
 first, stops last and records everything). Output lines are prefixed with the service's name.
 Restart policy and start-failure rules: docs/compose.md.
+
+Every run gets fresh identities (acl.py): one per service, plus the tool, teleop and operator ones
+for processes started by hand, written to a folder only this user can read; each service finds
+its own through $OMNINAV_CREDENTIALS, and the router admits only those users and lets each do
+only what its Node declares.
 """
 from __future__ import annotations
 
@@ -22,7 +27,11 @@ import yaml
 import zenoh
 
 from ...schemas.keys import KeyLayout
-from .compose import ComposeError, ServiceSpec, load_compose
+from .acl import CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, write_credentials
+from .compose import Compose, ComposeError, ServiceSpec, load_compose
+from .params import ParamError
+from .registry import UnknownService
+from .run import build_node
 from .zenoh_config import ROUTER_ENV, open_router, router_endpoint
 
 DEFAULT_COMPOSE = "compose/demo.yaml"
@@ -75,8 +84,9 @@ class CannotStart(RuntimeError):
 class Supervised:
     """One service of the compose file: its current process, restart bookkeeping and output."""
 
-    def __init__(self, spec: ServiceSpec, endpoint: str, params_dir: Path, out: Output):
+    def __init__(self, spec: ServiceSpec, endpoint: str, params_dir: Path, credentials: Path, out: Output):
         self.spec, self.endpoint, self.out = spec, endpoint, out
+        self.credentials = credentials / spec.name
         self.params_file = self._write_params(params_dir)
         self.proc: subprocess.Popen | None = None
         self.reader: threading.Thread | None = None
@@ -107,7 +117,7 @@ class Supervised:
         return cmd
 
     def start(self) -> None:
-        env = {**os.environ, ROUTER_ENV: self.endpoint, "PYTHONUNBUFFERED": "1"}
+        env = {**os.environ, ROUTER_ENV: self.endpoint, CREDENTIALS_ENV: str(self.credentials), "PYTHONUNBUFFERED": "1"}
         self.proc = subprocess.Popen(self.command(), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, env=env, process_group=0)
         self.runs += 1
@@ -200,6 +210,28 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                          "else $OMNINAV_ROUTER, else tcp/127.0.0.1:7447)")
     parser.add_argument("--for", dest="duration", type=float, metavar="SECONDS",
                         help="stop everything after this many seconds (default: run until Ctrl-C)")
+    parser.add_argument("--credentials", metavar="FOLDER",
+                        help="write this run's identities here (made readable by you only); tools use "
+                             f"{CREDENTIALS_ENV}=FOLDER/{TOOL} (default: a temporary folder, printed)")
+
+
+def identities(compose: Compose) -> dict[str, Grants]:
+    """Every identity of a run and what it may do: each service's from its own Node's declarations
+    (built with its parameters, as its process will build it), and the hand-started clients'."""
+    grants = client_grants(compose.robot)
+    for spec in compose.services:
+        if spec.name in grants:
+            raise ComposeError(f"{compose.path}: service name {spec.name!r} is reserved for an identity of `up`")
+        try:
+            node = build_node(spec.service or spec.name, overrides=spec.params, robot=spec.robot, name=spec.name,
+                              spec=spec.module)
+        except (UnknownService, ParamError) as exc:
+            raise ComposeError(f"{compose.path}: {spec.name}: {exc}") from None
+        except Exception as exc:    # its setup() failed: its process would fail the same way
+            raise ComposeError(f"{compose.path}: {spec.name} cannot be built to read what it declares: "
+                               f"{type(exc).__name__}: {exc}") from None
+        grants[spec.name] = node_grants(node)
+    return grants
 
 
 def main(args: argparse.Namespace) -> int:
@@ -207,26 +239,39 @@ def main(args: argparse.Namespace) -> int:
     try:
         compose = load_compose(args.compose)
         endpoint = router_endpoint(args.router or compose.router)
+        grants = identities(compose)
     except (ComposeError, ValueError) as exc:
         out.say(f"error: {exc}", sys.stderr)
         return 2
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    try:
-        router = open_router(endpoint)
-    except zenoh.ZError as exc:
-        out.say(f"error: cannot start the router on {endpoint}: {exc}", sys.stderr)
-        return 1
-    with router, tempfile.TemporaryDirectory(prefix="omninav-up-") as params_dir:
-        out.say(f"router listening on {endpoint}")
-        services = [Supervised(spec, endpoint, Path(params_dir), out) for spec in compose.services]
+    with tempfile.TemporaryDirectory(prefix="omninav-up-") as params_dir:
+        credentials = Path(args.credentials or Path(params_dir) / "credentials")
         try:
-            return _supervise(services, stop, args.duration, out, router)
-        finally:
-            for service in reversed(services):
-                service.stop()
-            out.say("stopped")
+            dictionary = write_credentials(credentials, grants)
+            router = open_router(endpoint, dictionary, access_control(grants))
+        except OSError as exc:
+            out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
+            return 1
+        except zenoh.ZError as exc:
+            out.say(f"error: cannot start the router on {endpoint}: {exc}", sys.stderr)
+            return 1
+        with router:
+            out.say(f"router listening on {endpoint}")
+            out.say(f"identities in {credentials} (tools: {CREDENTIALS_ENV}={credentials / TOOL})")
+            services = [Supervised(spec, endpoint, Path(params_dir), credentials, out) for spec in compose.services]
+            return _run(services, stop, args.duration, out, router)
+
+
+def _run(services: list[Supervised], stop: threading.Event, duration: float | None, out: Output,
+         router: zenoh.Session) -> int:
+    try:
+        return _supervise(services, stop, duration, out, router)
+    finally:
+        for service in reversed(services):
+            service.stop()
+        out.say("stopped")
 
 
 def _wait_ready(service: Supervised, session: zenoh.Session, stop: threading.Event, out: Output) -> None:

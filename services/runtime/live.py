@@ -6,6 +6,7 @@ longer exactly replayable.
 """
 from __future__ import annotations
 
+import json
 import queue
 import threading
 import time
@@ -18,10 +19,14 @@ from ...schemas.codec import encode
 from .merge import StampMerger
 from .node import Node, Publisher, QueryError
 from .selector import parse_parameters
-from .zenoh_config import open_client
+from .zenoh_config import MAX_MESSAGE_SIZE, client_config, open_client
 
 _POLL_S = 0.05
 RUN_STARTED = "run_started_ns"
+
+
+class PayloadTooLarge(ValueError):
+    """A message over what the transport carries; inside a handler the node's guard logs and counts it."""
 
 
 class LiveRunner:
@@ -35,6 +40,9 @@ class LiveRunner:
         self._inbox: queue.SimpleQueue = queue.SimpleQueue()
         self._merger = StampMerger([i.synced for i in node.inputs])
         self._zpubs: dict[str, zenoh.Publisher] = {}
+        # the largest message every session of the run accepts (they share one configuration):
+        # a bigger one would be dropped by the receiving side, so it is refused here with its size
+        self.max_payload = json.loads(client_config(router).get_json(MAX_MESSAGE_SIZE))
         # identifies this run of the service in its diagnostics, so replay can tell a restarted
         # service's runs apart in one recording (wall time: diagnostics are never compared)
         self.started_ns = time.time_ns()
@@ -49,6 +57,10 @@ class LiveRunner:
     # ------------------------------------------------------------ wiring
 
     def _sink(self, pub: Publisher, payload: bytes, stamp_ns: int) -> None:
+        if len(payload) > self.max_payload:
+            raise PayloadTooLarge(f"{pub.key}: a {pub.type_name} of {len(payload):,d} bytes is over the "
+                                  f"{self.max_payload:,d} bytes a Zenoh message may carry here "
+                                  f"({MAX_MESSAGE_SIZE}); not sent")
         self._zpubs[pub.key].put(payload, attachment=pack_attachment(pub.seq, stamp_ns, pub.type_name))
 
     def _declare(self, session: zenoh.Session) -> list:

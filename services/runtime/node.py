@@ -168,6 +168,10 @@ class Node:
     def queryable(self, topic: str, handler: Callable[[dict[str, str]], Any]) -> None:
         self.queryables[self.keys.resolve(topic)] = handler
 
+    def subscriptions(self) -> list[str]:
+        """The key expressions this node subscribes to on the bus (its access rights: acl.py)."""
+        return [i.key for i in self.inputs]
+
     def every(self, period_s: float, handler: Callable[[], None]) -> None:
         """Call handler every period_s of sim time (driven by the clock key)."""
         if period_s <= 0:

@@ -20,6 +20,7 @@ SERVICES: dict[str, str] = {
     "explore": "omninav.services.slam.explore_node:ExploreNode",
     "global_planner": "omninav.services.global_planner.node:PlannerNode",
     "local_planner": "omninav.services.local_planner.node:LocalPlannerNode",
+    "cmd_vel_mux": "omninav.services.cmd_vel_mux.node:CmdVelMuxNode",
     "velocity_smoother": "omninav.services.local_planner.gate_nodes:VelocitySmootherNode",
     "collision_monitor": "omninav.services.local_planner.gate_nodes:CollisionMonitorNode",
     "navigator": "omninav.services.navigator.node:NavigatorNode",

@@ -9,14 +9,20 @@ import ipaddress
 import json
 import os
 import socket
+from pathlib import Path
 
 import zenoh
+
+from .acl import CREDENTIALS_ENV, auth_json, read_credentials
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 ROUTER_ENV = "OMNINAV_ROUTER"
 # Zenoh's shared memory is on by default (a 16 MiB pool per process in /dev/shm); "off" disables it
 # for every session of a run (a mix of on and off is slower than either), e.g. where /dev/shm is small
 SHM_ENV = "OMNINAV_SHM"
+# the largest message a session receives (zenoh's default, 1 GiB: a 4000 x 4000 map of 16 MB passes);
+# LiveRunner refuses to publish anything bigger, naming the key and the size
+MAX_MESSAGE_SIZE = "transport/link/rx/max_message_size"
 _SWITCH = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": False}
 
 
@@ -62,15 +68,25 @@ def _base(mode: str) -> zenoh.Config:
     return conf
 
 
-def router_config(listen: str) -> zenoh.Config:
+def router_config(listen: str, dictionary: Path | None = None, access_control: dict | None = None) -> zenoh.Config:
+    """A router; with a dictionary file ("user:password" lines) only those users can connect, and
+    with an access_control section (acl.py) they may do only what it allows."""
     conf = _base("router")
     conf.insert_json5("listen/endpoints", json.dumps([check_loopback(listen)]))
+    if dictionary is not None:
+        conf.insert_json5("transport/auth/usrpwd", json.dumps({"dictionary_file": str(dictionary)}))
+    if access_control is not None:
+        conf.insert_json5("access_control", json.dumps(access_control))
     return conf
 
 
-def client_config(router: str | None = None) -> zenoh.Config:
-    """A client that connects to the router and waits for it (start order does not matter)."""
+def client_config(router: str | None = None, credentials: str | None = None) -> zenoh.Config:
+    """A client that connects to the router and waits for it (start order does not matter); it
+    authenticates with the credentials file given, else $OMNINAV_CREDENTIALS's, if any."""
     conf = _base("client")
+    credentials = credentials or os.environ.get(CREDENTIALS_ENV)
+    if credentials:
+        conf.insert_json5("transport/auth/usrpwd", auth_json(*read_credentials(credentials)))
     conf.insert_json5("listen/endpoints", "[]")
     conf.insert_json5("connect/endpoints", json.dumps([router_endpoint(router)]))
     conf.insert_json5("connect/timeout_ms", "-1")
@@ -78,9 +94,10 @@ def client_config(router: str | None = None) -> zenoh.Config:
     return conf
 
 
-def open_client(router: str | None = None) -> zenoh.Session:
-    return zenoh.open(client_config(router))
+def open_client(router: str | None = None, credentials: str | None = None) -> zenoh.Session:
+    return zenoh.open(client_config(router, credentials))
 
 
-def open_router(listen: str | None = None) -> zenoh.Session:
-    return zenoh.open(router_config(router_endpoint(listen)))
+def open_router(listen: str | None = None, dictionary: Path | None = None,
+                access_control: dict | None = None) -> zenoh.Session:
+    return zenoh.open(router_config(router_endpoint(listen), dictionary, access_control))

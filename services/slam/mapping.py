@@ -30,6 +30,7 @@ from ..chassis.node import ChassisNode, ChassisNodeParams
 from ..costmap.node import CostmapNode, CostmapNodeParams
 from ..global_planner.node import PlannerNode, PlannerNodeParams
 from ..lidar.node import LidarNode, LidarNodeParams
+from ..cmd_vel_mux.node import CmdVelMuxNode
 from ..local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
 from ..local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from ..localizer.evaluate import ROUTES, Harness, HarnessParams, Route, circumscribed_radius, route_problems
@@ -100,7 +101,7 @@ def slam_params_for(world: World, overrides: dict | None = None, seed: int = 0) 
 
 
 def navigation_stack(world: World, drive: str) -> list[Node]:
-    """costmap, global_planner, local_planner, velocity_smoother, collision_monitor and navigator, as
+    """costmap, global_planner, local_planner, cmd_vel_mux, velocity_smoother, collision_monitor and navigator, as
     `omninav navigate` runs them (compose/params' costmaps), fed by slam: the map frame is the world's,
     odometry starts at the world's start pose."""
     start = dict(zip(("initial_pose_x", "initial_pose_y", "initial_pose_a"), map(float, world.robot.start)))
@@ -112,7 +113,7 @@ def navigation_stack(world: World, drive: str) -> list[Node]:
             PlannerNode(PlannerNodeParams(goal_topic="plan_request", planner_frequency=0.0, use_dijkstra=False,
                                           **start)),
             LocalPlannerNode(LocalPlannerNodeParams(**strafing, **start)),
-            VelocitySmootherNode(), CollisionMonitorNode(), NavigatorNode(NavigatorNodeParams(**start))]
+            CmdVelMuxNode(), VelocitySmootherNode(), CollisionMonitorNode(), NavigatorNode(NavigatorNodeParams(**start))]
 
 
 def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, params: SlamNodeParams | None = None,
