@@ -1,6 +1,5 @@
 """Access control on the bus: Zenoh user/password identities per process and the router's ACL built
 from each service's declarations; only the right process moves the robot."""
-import json
 import threading
 from pathlib import Path
 

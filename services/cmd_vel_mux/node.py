@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ...schemas.messages import Clock, Twist
+from ...schemas.messages import Clock
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node
 from ..runtime.params import require_nonnegative
