@@ -24,6 +24,7 @@ SERVICES: dict[str, str] = {
     "collision_monitor": "omninav.services.local_planner.gate_nodes:CollisionMonitorNode",
     "navigator": "omninav.services.navigator.node:NavigatorNode",
     "truth_pose": "omninav.services.navigator.truth_pose:TruthPoseNode",
+    "tracker": "omninav.services.tracker.node:TrackerNode",
 }
 
 
