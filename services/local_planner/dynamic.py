@@ -1,0 +1,128 @@
+"""Moving obstacles for the local planner: the tracker's tracks predicted along each rollout, after
+Nav2 MPPI's critics (one vectorised call scores the whole batch).
+
+A track is a circle moving at constant velocity; its position at the time τ a rollout pose is
+reached is its position at the tick plus velocity·τ, and the standard deviation of that position
+grows as the constant-velocity filter's covariance does: var(τ) = var_p + 2τ·cov_pv + τ²·var_v
+(per axis, averaged over x and y). A pose's slack is its footprint's distance to the predicted
+circle less the margin to keep: dynamic_obstacle_margin + dynamic_obstacle_sigmas·σ(τ). A rollout
+is illegal when some pose after the first has a negative slack that is also below the slack of
+the first pose (the robot comes closer than it may and closer than it is now: moving away from a
+person who came too near stays legal); within dynamic_influence_distance of the kept distance a
+rollout costs dynamic_obstacle_scale per unit of its deepest intrusion.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ...schemas.messages import Tracks
+from ..se2 import compose
+
+
+@dataclass(frozen=True)
+class Movers:
+    """Tracks at one instant in the planner's frame."""
+    positions: np.ndarray    # (N, 2)
+    velocities: np.ndarray   # (N, 2)
+    radii: np.ndarray        # (N,)
+    variance: np.ndarray     # (N, 3): position variance, position-velocity covariance, velocity variance
+
+    def __len__(self) -> int:
+        return len(self.radii)
+
+
+def tracks_problem(msg: Tracks) -> str:
+    """Why a Tracks message cannot be used (its arrays disagree in length), or ''."""
+    n = len(msg.ids)
+    shapes = {"states": msg.states.shape[0], "covariances": msg.covariances.shape[0], "radii": msg.radii.shape[0]}
+    wrong = [f"{name} has {count}" for name, count in shapes.items() if count != n]
+    if wrong:
+        return f"{n} ids but " + ", ".join(wrong)
+    if (msg.radii < 0).any():
+        return "a negative radius"
+    return ""
+
+
+def movers_at(msg: Tracks, now_s: float, frame_pose, min_speed: float) -> Movers:
+    """The tracks of msg as they will be at now_s (constant velocity), carried into a frame in which
+    the tracks' frame has the pose frame_pose; tracks slower than min_speed are left out."""
+    states = np.asarray(msg.states, np.float64).reshape(-1, 4)
+    cov = np.asarray(msg.covariances, np.float64).reshape(-1, 4, 4)
+    keep = np.hypot(states[:, 2], states[:, 3]) >= min_speed
+    states, cov = states[keep], cov[keep]
+    age = max(0.0, now_s - msg.header.stamp_ns * 1e-9)
+    p = (cov[:, 0, 0] + cov[:, 1, 1]) / 2
+    pv = (cov[:, 0, 2] + cov[:, 1, 3]) / 2
+    v = (cov[:, 2, 2] + cov[:, 3, 3]) / 2
+    variance = np.column_stack([p + 2 * age * pv + age * age * v, pv + age * v, v])
+    positions = states[:, :2] + states[:, 2:] * age
+    x, y, theta = (float(t) for t in frame_pose)
+    placed = compose((x, y, theta), np.column_stack([positions, np.zeros(len(positions))]))[:, :2]
+    c, s = math.cos(theta), math.sin(theta)
+    velocities = states[:, 2:] @ np.array([[c, s], [-s, c]])
+    return Movers(placed.reshape(-1, 2), velocities.reshape(-1, 2), np.asarray(msg.radii, np.float64)[keep], variance)
+
+
+@njit(cache=True, inline="always")
+def _polygon_distance(u, v, polygon):
+    """Distance from (u, v) to the polygon (0 inside)."""
+    inside = False
+    best = np.inf
+    n = polygon.shape[0]
+    for i in range(n):
+        ax, ay = polygon[i, 0], polygon[i, 1]
+        bx, by = polygon[(i + 1) % n, 0], polygon[(i + 1) % n, 1]
+        if (ay > v) != (by > v) and u < ax + (v - ay) * (bx - ax) / (by - ay):
+            inside = not inside
+        ex, ey = bx - ax, by - ay
+        t = ((u - ax) * ex + (v - ay) * ey) / (ex * ex + ey * ey)
+        t = min(1.0, max(0.0, t))
+        dx, dy = u - (ax + t * ex), v - (ay + t * ey)
+        best = min(best, math.sqrt(dx * dx + dy * dy))
+    return 0.0 if inside else best
+
+
+@njit(cache=True)
+def _slack(poses, dt, footprint, positions, velocities, radii, variance, margin, sigmas):
+    """(T, S) the least slack over the movers of each pose (pose k reached at k·dt)."""
+    trajectories, steps = poses.shape[0], poses.shape[1]
+    out = np.full((trajectories, steps), np.inf)
+    for t in range(trajectories):
+        for k in range(steps):
+            x, y, theta = poses[t, k, 0], poses[t, k, 1], poses[t, k, 2]
+            c, s = math.cos(theta), math.sin(theta)
+            tau = k * dt
+            for n in range(radii.shape[0]):
+                px = positions[n, 0] + velocities[n, 0] * tau - x
+                py = positions[n, 1] + velocities[n, 1] * tau - y
+                var = variance[n, 0] + 2.0 * tau * variance[n, 1] + tau * tau * variance[n, 2]
+                keep = radii[n] + margin + sigmas * math.sqrt(max(var, 0.0))
+                slack = _polygon_distance(c * px + s * py, -s * px + c * py, footprint) - keep
+                out[t, k] = min(out[t, k], slack)
+    return out
+
+
+def slack(poses: np.ndarray, dt: float, footprint: np.ndarray, movers: Movers, margin: float,
+          sigmas: float) -> np.ndarray:
+    """(T, S) of rollouts (T, S, 3) whose poses are dt apart: metres each pose's footprint keeps
+    beyond the margin from the nearest predicted mover (negative: too close)."""
+    return _slack(np.ascontiguousarray(poses, np.float64), float(dt), np.ascontiguousarray(footprint, np.float64),
+                  movers.positions, movers.velocities, movers.radii, movers.variance, float(margin), float(sigmas))
+
+
+def critic(slacks: np.ndarray, influence: float, scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """(legal (T,), cost (T,)) of rollouts from their slacks (T, S)."""
+    later, first = slacks[:, 1:], slacks[:, :1]
+    legal = ~np.any((later < 0) & (later < first), axis=1)
+    intrusion = np.clip(1.0 - slacks / influence, 0.0, None).max(axis=1, initial=0.0)
+    return legal, scale * intrusion
+
+
+def warm_up() -> None:
+    square = np.array([[0.1, 0.1], [-0.1, 0.1], [-0.1, -0.1], [0.1, -0.1]])
+    movers = Movers(np.ones((1, 2)), np.zeros((1, 2)), np.full(1, 0.2), np.zeros((1, 3)))
+    slack(np.zeros((1, 2, 3)), 0.1, square, movers, 0.1, 2.0)
