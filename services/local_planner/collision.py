@@ -7,6 +7,13 @@ command brings closer to the footprint, the command becomes zero; else with at l
 inside the slowdown zone it is scaled by slowdown_ratio (all axes, so the direction is kept).
 Points are in the robot frame.
 
+Moving obstacles (the tracker's tracks, circles at constant velocity, robot frame at the command's
+time): as Nav2's "approach" action, the command and each track are carried forward every
+simulation_time_step up to time_before_collision; a command that brings a track into the stop zone
+within that time, sooner than standing still would, is scaled down (in quarters) to the fastest
+that does not, or stopped ("approach"). Standing still is never made worse: a person walking into a
+robot that moves away from them is not a reason to stop.
+
 Unlike Nav2's stop polygon, a point in the stop zone stops only a command that approaches it (its
 distance to the footprint would shrink over approach_check_s): a robot that has come within
 stop_padding of a door post may still turn or move away from it, instead of standing there until
@@ -23,7 +30,10 @@ from ...sim.world import points_in_polygons
 from ..costmap.footprint import pad
 from ..costmap.layers import scan_points
 from ..se2 import integrate
+from .dynamic import Movers
 from .params import CollisionMonitorParams
+
+APPROACH_SCALES = (1.0, 0.75, 0.5, 0.25)   # of a command, tried in turn against the tracks (then standing)
 
 
 @dataclass(frozen=True)
@@ -55,10 +65,42 @@ class CollisionMonitor:
         self.stop_zone = pad(footprint, params.stop_padding)
         self.slowdown_zone = pad(footprint, params.slowdown_padding)
 
-    def check(self, twist, points) -> MonitorResult:
-        """The command allowed with these obstacle points (robot frame) around the robot."""
+    def check(self, twist, points, movers: Movers | None = None) -> MonitorResult:
+        """The command allowed with these obstacle points and moving obstacles (robot frame)."""
+        result = self._check_points(np.asarray(twist, float), points)
+        if movers is None or len(movers) == 0 or result.action == "stop":
+            return result
+        return self._check_movers(result, movers)
+
+    def time_to_collision(self, twist, movers: Movers) -> float:
+        """Seconds until a track's circle first reaches the stop zone while the robot drives twist
+        (inf: not within time_before_collision)."""
         p = self.params
-        twist = np.asarray(twist, float)
+        taus = np.arange(0.0, p.time_before_collision + 1e-9, p.simulation_time_step)
+        robot = integrate((0.0, 0.0, 0.0), np.asarray(twist, float), taus)          # (K, 3)
+        where = movers.positions[None] + movers.velocities[None] * taus[:, None, None]   # (K, N, 2)
+        shifted = where - robot[:, None, :2]
+        c, s = np.cos(robot[:, 2])[:, None], np.sin(robot[:, 2])[:, None]
+        local = np.stack([c * shifted[..., 0] + s * shifted[..., 1], -s * shifted[..., 0] + c * shifted[..., 1]], -1)
+        flat = local.reshape(-1, 2)
+        inside = points_in_polygons(flat, self.stop_zone[None])[:, 0]
+        gap = np.where(inside, 0.0, distance_to_outline(flat, self.stop_zone)).reshape(len(taus), -1)
+        hit = np.any(gap <= movers.radii[None], axis=1)
+        return float(taus[np.argmax(hit)]) if hit.any() else np.inf
+
+    def _check_movers(self, result: MonitorResult, movers: Movers) -> MonitorResult:
+        standing = self.time_to_collision(np.zeros(3), movers)
+        for scale in APPROACH_SCALES:
+            twist = result.twist * scale
+            ttc = self.time_to_collision(twist, movers)
+            if not ttc < min(self.params.time_before_collision, standing):
+                if scale == 1.0:
+                    return result
+                return MonitorResult(twist, "approach", 0, f"a track within {ttc:.1f} s at full speed")
+        return MonitorResult(np.zeros(3), "approach", 0, "a track would be met sooner than standing still")
+
+    def _check_points(self, twist: np.ndarray, points) -> MonitorResult:
+        p = self.params
         points = np.asarray(points, float).reshape(-1, 2)
         zones = points_in_polygons(points, np.stack([self.stop_zone, self.slowdown_zone]))
         inside = zones.sum(axis=0)

@@ -140,12 +140,15 @@ class CollisionMonitorParams:
     slowdown_ratio: float = 0.5          # Nav2's default
     min_points: int = 4                  # Nav2's default: fewer points inside a zone are noise
     approach_check_s: float = 0.1        # s: a stop-zone point stops commands that come closer within this
+    # Nav2's "approach" action, here against the tracker's moving obstacles (constant velocity)
+    time_before_collision: float = 2.0   # s: a command meeting a track in its stop zone sooner is slowed or stopped
+    simulation_time_step: float = 0.1    # s between the predicted poses checked
 
     def __post_init__(self):
         if len(self.footprint) < 3:
             raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
         require_nonnegative(self, "stop_padding", "slowdown_padding")
-        require_positive(self, "approach_check_s")
+        require_positive(self, "approach_check_s", "time_before_collision", "simulation_time_step")
         require_at_least(self, 1, "min_points")
         if self.slowdown_padding < self.stop_padding:
             raise ValueError("slowdown_padding must be at least stop_padding")
