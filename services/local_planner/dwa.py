@@ -632,8 +632,10 @@ class DwaPlanner:
         """(legal (T,), cost (T,)) of rollouts against the predicted movers (dynamic.py)."""
         p = self.params
         dt = p.sim_time / max(1, poses.shape[1] - 1)
-        slacks = slack(poses, dt, self.footprint, movers, p.dynamic_obstacle_margin, p.dynamic_obstacle_sigmas)
-        return critic(slacks, p.dynamic_influence_distance, p.dynamic_obstacle_scale)
+        hard, soft = slack(poses, dt, self.footprint, movers, p.dynamic_obstacle_margin, p.dynamic_obstacle_sigmas)
+        standing = np.repeat(poses[:1, :1], poses.shape[1], axis=1)
+        standing_hard, _ = slack(standing, dt, self.footprint, movers, p.dynamic_obstacle_margin, 0.0)
+        return critic(hard, soft, standing_hard, p.dynamic_influence_distance, p.dynamic_obstacle_scale)
 
 
 def warm_up() -> None:

@@ -5,11 +5,13 @@ A track is a circle moving at constant velocity; its position at the time τ a r
 reached is its position at the tick plus velocity·τ, and the standard deviation of that position
 grows as the constant-velocity filter's covariance does: var(τ) = var_p + 2τ·cov_pv + τ²·var_v
 (per axis, averaged over x and y). A pose's slack is its footprint's distance to the predicted
-circle less the margin to keep: dynamic_obstacle_margin + dynamic_obstacle_sigmas·σ(τ). A rollout
-is illegal when some pose after the first has a negative slack that is also below the slack of
-the first pose (the robot comes closer than it may and closer than it is now: moving away from a
-person who came too near stays legal); within dynamic_influence_distance of the kept distance a
-rollout costs dynamic_obstacle_scale per unit of its deepest intrusion.
+circle less dynamic_obstacle_margin (hard), and less also dynamic_obstacle_sigmas·σ(τ) (soft). A
+rollout meets a mover at the first pose after the start whose hard slack is negative and below
+the start's (moving away from a person who came too near is no meeting); it is illegal when it
+meets one sooner than the robot standing still would (people who do not give way walk into a
+robot that stopped in their way: braking is no refuge, and what meets them only later is
+re-planned next cycle). Within dynamic_influence_distance of the soft slack a rollout costs
+dynamic_obstacle_scale per unit of its deepest intrusion.
 """
 from __future__ import annotations
 
@@ -87,38 +89,54 @@ def _polygon_distance(u, v, polygon):
 
 
 @njit(cache=True)
-def _slack(poses, dt, footprint, positions, velocities, radii, variance, margin, sigmas):
-    """(T, S) the least slack over the movers of each pose (pose k reached at k·dt)."""
+def _slack(poses, dt, footprint, positions, velocities, radii, variance, margin, sigmas, hard, soft):
+    """hard, soft (T, S): the least slack over the movers of each pose (pose k reached at k·dt),
+    without and with the sigmas of the predicted position."""
     trajectories, steps = poses.shape[0], poses.shape[1]
-    out = np.full((trajectories, steps), np.inf)
     for t in range(trajectories):
         for k in range(steps):
             x, y, theta = poses[t, k, 0], poses[t, k, 1], poses[t, k, 2]
             c, s = math.cos(theta), math.sin(theta)
             tau = k * dt
+            hard[t, k], soft[t, k] = np.inf, np.inf
             for n in range(radii.shape[0]):
                 px = positions[n, 0] + velocities[n, 0] * tau - x
                 py = positions[n, 1] + velocities[n, 1] * tau - y
                 var = variance[n, 0] + 2.0 * tau * variance[n, 1] + tau * tau * variance[n, 2]
-                keep = radii[n] + margin + sigmas * math.sqrt(max(var, 0.0))
-                slack = _polygon_distance(c * px + s * py, -s * px + c * py, footprint) - keep
-                out[t, k] = min(out[t, k], slack)
-    return out
+                gap = _polygon_distance(c * px + s * py, -s * px + c * py, footprint) - radii[n] - margin
+                hard[t, k] = min(hard[t, k], gap)
+                soft[t, k] = min(soft[t, k], gap - sigmas * math.sqrt(max(var, 0.0)))
 
 
 def slack(poses: np.ndarray, dt: float, footprint: np.ndarray, movers: Movers, margin: float,
-          sigmas: float) -> np.ndarray:
-    """(T, S) of rollouts (T, S, 3) whose poses are dt apart: metres each pose's footprint keeps
-    beyond the margin from the nearest predicted mover (negative: too close)."""
-    return _slack(np.ascontiguousarray(poses, np.float64), float(dt), np.ascontiguousarray(footprint, np.float64),
-                  movers.positions, movers.velocities, movers.radii, movers.variance, float(margin), float(sigmas))
+          sigmas: float) -> tuple[np.ndarray, np.ndarray]:
+    """(hard, soft), each (T, S), of rollouts (T, S, 3) whose poses are dt apart: metres each pose's
+    footprint keeps beyond the margin from the nearest predicted mover (negative: too close), and
+    the same less sigmas standard deviations of the mover's predicted position."""
+    poses = np.ascontiguousarray(poses, np.float64)
+    hard, soft = np.empty(poses.shape[:2]), np.empty(poses.shape[:2])
+    _slack(poses, float(dt), np.ascontiguousarray(footprint, np.float64), movers.positions, movers.velocities,
+           movers.radii, movers.variance, float(margin), float(sigmas), hard, soft)
+    return hard, soft
 
 
-def critic(slacks: np.ndarray, influence: float, scale: float) -> tuple[np.ndarray, np.ndarray]:
-    """(legal (T,), cost (T,)) of rollouts from their slacks (T, S)."""
-    later, first = slacks[:, 1:], slacks[:, :1]
-    legal = ~np.any((later < 0) & (later < first), axis=1)
-    intrusion = np.clip(1.0 - slacks / influence, 0.0, None).max(axis=1, initial=0.0)
+def first_contact(hard: np.ndarray) -> np.ndarray:
+    """(T,) the first step after the start at which each rollout comes closer than the margin and
+    closer than at its start (moving away from a mover already too near is no contact); the
+    number of steps when none does."""
+    closing = (hard[:, 1:] < 0) & (hard[:, 1:] < hard[:, :1])
+    return np.where(closing.any(axis=1), np.argmax(closing, axis=1) + 1, hard.shape[1])
+
+
+def critic(hard: np.ndarray, soft: np.ndarray, standing: np.ndarray, influence: float,
+           scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """(legal (T,), cost (T,)) of rollouts from their slacks (T, S), `standing` (1, S) the hard slack
+    of the robot standing where it is: a rollout that meets a mover sooner than standing still
+    would is illegal (standing in a person's way is no refuge: what reaches them later is
+    legal, and the next cycle looks again); the cost grows with the deepest intrusion of the
+    uncertain prediction into the influence distance."""
+    legal = first_contact(hard) >= first_contact(standing)[0]
+    intrusion = np.clip(1.0 - soft / influence, 0.0, None).max(axis=1, initial=0.0)
     return legal, scale * intrusion
 
 
