@@ -155,7 +155,8 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
     services += [
         localization_service(localization, start, map_file, seed),
         {"name": "costmap", "service": "costmap", "params": {**costmap_files, **start}},
-        # no map is served with slam (the tracker's evidence grid alone tells the static world)
+        # slam's map is still being drawn (and where people walked): the evidence grid alone tells the
+        # tracker the static world then
         {"name": "tracker", "service": "tracker", "params": {**start, "use_map": localization != "slam"}},
         {"name": "global_planner", "service": "global_planner",
          "params": {"goal_topic": "plan_request", "planner_frequency": 0.0, "use_dijkstra": False, **start}},
