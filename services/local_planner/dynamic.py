@@ -11,7 +11,7 @@ the start's (moving away from a person who came too near is no meeting); it is i
 meets one sooner than the robot standing still would (people who do not give way walk into a
 robot that stopped in their way: braking is no refuge, and what meets them only later is
 re-planned next cycle). Within dynamic_influence_distance of the soft slack a rollout costs
-dynamic_obstacle_scale per unit of its deepest intrusion.
+dynamic_obstacle_scale per unit of intrusion deeper than at its start.
 """
 from __future__ import annotations
 
@@ -133,11 +133,13 @@ def critic(hard: np.ndarray, soft: np.ndarray, standing: np.ndarray, influence: 
     """(legal (T,), cost (T,)) of rollouts from their slacks (T, S), `standing` (1, S) the hard slack
     of the robot standing where it is: a rollout that meets a mover sooner than standing still
     would is illegal (standing in a person's way is no refuge: what reaches them later is
-    legal, and the next cycle looks again); the cost grows with the deepest intrusion of the
-    uncertain prediction into the influence distance."""
+    legal, and the next cycle looks again); the cost grows with how much deeper than at the start
+    the uncertain prediction intrudes into the influence distance (a mover already near cost all
+    rollouts alike, and drowned the difference between leaving its way and lingering in it)."""
     legal = first_contact(hard) >= first_contact(standing)[0]
-    intrusion = np.clip(1.0 - soft / influence, 0.0, None).max(axis=1, initial=0.0)
-    return legal, scale * intrusion
+    intrusion = np.clip(1.0 - soft / influence, 0.0, None)
+    deeper = np.clip(intrusion[:, 1:].max(axis=1, initial=0.0) - intrusion[:, 0], 0.0, None)
+    return legal, scale * deeper
 
 
 def warm_up() -> None:
