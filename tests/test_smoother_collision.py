@@ -134,3 +134,13 @@ def test_time_to_collision_is_when_the_track_reaches_the_stop_zone():
     # front edge at x = 0.416; a 0.3 m circle from x = 2.0 at 1 m/s touches it after 1.284 s
     ttc = monitor.time_to_collision(np.zeros(3), movers((2.0, 0.0, -1.0, 0.0, 0.3)))
     assert ttc == pytest.approx(1.3, abs=1e-9)     # the first 0.1 s step at or after
+
+
+def test_a_person_close_behind_does_not_slow_a_robot_driving_away_but_a_wall_does():
+    monitor = CollisionMonitor(CollisionMonitorParams())
+    behind = [(-0.416 - 0.2, y) for y in np.linspace(-0.25, 0.25, 11)]        # 0.2 m behind: the slowdown zone
+    cmd = (0.4, 0.0, 0.0)
+    assert monitor.check(cmd, behind).action == "slowdown"                   # a wall (no track there)
+    person = movers((-0.416 - 0.5, 0.0, 0.8, 0.0, 0.3))                      # a person right there, coming on
+    result = monitor.check(cmd, behind, person)
+    assert result.action == "none" and np.array_equal(result.twist, cmd)

@@ -12,7 +12,10 @@ time): as Nav2's "approach" action, the command and each track are carried forwa
 simulation_time_step up to time_before_collision; a command that brings a track into the stop zone
 within that time, sooner than standing still would, is scaled down (in quarters) to the fastest
 that does not, or stopped ("approach"). Standing still is never made worse: a person walking into a
-robot that moves away from them is not a reason to stop.
+robot that moves away from them is not a reason to stop. Scan points on a track (within its radius
++ TRACKED_POINT_MARGIN) are left out of the slowdown zone, which the approach action stands in for
+there: halving the speed of a robot leaving a person's way behind it let the person walk into it
+(generated crossing variant); they still count in the stop zone.
 
 Unlike Nav2's stop polygon, a point in the stop zone stops only a command that approaches it (its
 distance to the footprint would shrink over approach_check_s): a robot that has come within
@@ -34,6 +37,7 @@ from .dynamic import Movers
 from .params import CollisionMonitorParams
 
 APPROACH_SCALES = (1.0, 0.75, 0.5, 0.25)   # of a command, tried in turn against the tracks (then standing)
+TRACKED_POINT_MARGIN = 0.15   # m beyond a track's radius within which a scan point is that track's
 
 
 @dataclass(frozen=True)
@@ -67,7 +71,12 @@ class CollisionMonitor:
 
     def check(self, twist, points, movers: Movers | None = None) -> MonitorResult:
         """The command allowed with these obstacle points and moving obstacles (robot frame)."""
-        result = self._check_points(np.asarray(twist, float), points)
+        points = np.asarray(points, float).reshape(-1, 2)
+        tracked = np.zeros(len(points), bool)
+        if movers is not None and len(movers):
+            gap = np.hypot(*(points[:, None, :] - movers.positions[None]).transpose(2, 0, 1))
+            tracked = np.any(gap <= movers.radii[None] + TRACKED_POINT_MARGIN, axis=1)
+        result = self._check_points(np.asarray(twist, float), points, tracked)
         if movers is None or len(movers) == 0 or result.action == "stop":
             return result
         return self._check_movers(result, movers)
@@ -99,10 +108,11 @@ class CollisionMonitor:
                 return MonitorResult(twist, "approach", 0, f"a track within {ttc:.1f} s at full speed")
         return MonitorResult(np.zeros(3), "approach", 0, "a track would be met sooner than standing still")
 
-    def _check_points(self, twist: np.ndarray, points) -> MonitorResult:
+    def _check_points(self, twist: np.ndarray, points: np.ndarray, tracked: np.ndarray) -> MonitorResult:
+        """The zones' verdict; `tracked` points (on a track) count in the stop zone only."""
         p = self.params
-        points = np.asarray(points, float).reshape(-1, 2)
         zones = points_in_polygons(points, np.stack([self.stop_zone, self.slowdown_zone]))
+        zones[tracked, 1] = False
         inside = zones.sum(axis=0)
         approached = self._approached(twist, points[zones[:, 0]])
         if approached >= p.min_points:
