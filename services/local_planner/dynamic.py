@@ -11,7 +11,8 @@ the start's (moving away from a person who came too near is no meeting); it is i
 meets one sooner than the robot standing still would (people who do not give way walk into a
 robot that stopped in their way: braking is no refuge, and what meets them only later is
 re-planned next cycle). Within dynamic_influence_distance of the soft slack a rollout costs
-dynamic_obstacle_scale per unit of intrusion deeper than at its start.
+dynamic_obstacle_scale per unit of intrusion deeper than at its start, and up to as much again
+the sooner it meets a mover.
 """
 from __future__ import annotations
 
@@ -136,10 +137,12 @@ def critic(hard: np.ndarray, soft: np.ndarray, standing: np.ndarray, influence: 
     legal, and the next cycle looks again); the cost grows with how much deeper than at the start
     the uncertain prediction intrudes into the influence distance (a mover already near cost all
     rollouts alike, and drowned the difference between leaving its way and lingering in it)."""
-    legal = first_contact(hard) >= first_contact(standing)[0]
+    contact = first_contact(hard)
+    legal = contact >= first_contact(standing)[0]
     intrusion = np.clip(1.0 - soft / influence, 0.0, None)
     deeper = np.clip(intrusion[:, 1:].max(axis=1, initial=0.0) - intrusion[:, 0], 0.0, None)
-    return legal, scale * deeper
+    sooner = (hard.shape[1] - contact) / hard.shape[1]      # 0 without a meeting, towards 1 the sooner
+    return legal, scale * (deeper + sooner)
 
 
 def warm_up() -> None:
