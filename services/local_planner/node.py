@@ -9,8 +9,8 @@ clock, and deferred, whether a message reached the node before or after the odom
 is above the 0.1–0.3 s by which live costmaps trailed the clock on a loaded 2-core machine (it
 is the costmap's age that grows, not the path's, which the controller tracks on fresh odometry).
 
-The tracker's tracks (moving obstacles) are held tracks_delay_s only (0.15 s: they follow the
-scan, and are predicted from their stamp to the tick): DWA scores each rollout against where the
+The tracker's tracks (moving obstacles) are held tracks_delay_s only (0.3 s: they follow the
+scan, and are predicted from their stamp to the tick; 0.15 s was exceeded live on a loaded machine): DWA scores each rollout against where the
 tracks will be along it (dynamic.py).
 
 Control ticks fall on the odometry stamped at or first after each multiple of
@@ -105,7 +105,7 @@ class LocalPlannerNodeParams(FrameParams, DwaParams, RotationShimParams):
     inflation_radius: float = 0.55       # m: with cost_scaling_factor, where the footprint check starts
     cost_scaling_factor: float = 10.0    # 1/m
     request_delay_s: float = 0.5         # sim s from a costmap / tf / path stamp to its effect
-    tracks_delay_s: float = 0.15         # sim s from a tracks stamp to its effect (they are predicted to the tick)
+    tracks_delay_s: float = 0.3          # sim s from a tracks stamp to its effect (they are predicted to the tick)
     # m: the collision monitor's stop zone (its default), kept free by DWA's rollouts
     stop_padding: float = CollisionMonitorParams.stop_padding
 
