@@ -99,7 +99,8 @@ class CollisionMonitorNodeParams(CollisionMonitorParams):
     laser_yaw: float = LidarParams.mount_yaw
     scan_delay_s: float = 0.05               # sim s from a scan's stamp until it is used
     source_timeout: float = 1.0              # s: an older scan is no scan (Nav2's name; its default is 2)
-    tracks_delay_s: float = 0.3              # sim s from a tracks / odom stamp until it is used
+    tracks_delay_s: float = 0.5              # sim s from a tracks / odom stamp until it is used (live, tracks trailed
+                                             # the clock the monitor runs on by more than 0.3 s)
 
     def __post_init__(self):
         super().__post_init__()
