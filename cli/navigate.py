@@ -162,6 +162,9 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
     services += [
         localization_service(localization, start, map_file, seed),
         {"name": "costmap", "service": "costmap", "params": {**costmap_files, **start}},
+        # slam's map is still being drawn (and where people walked): the evidence grid alone tells the
+        # tracker the static world then
+        {"name": "tracker", "service": "tracker", "params": {**start, "use_map": localization != "slam"}},
         {"name": "global_planner", "service": "global_planner",
          "params": {"goal_topic": "plan_request", "planner_frequency": 0.0, "use_dijkstra": False, **start}},
         {"name": "local_planner", "service": "local_planner", "params": {**drive_params(drive), **start}},

@@ -41,6 +41,7 @@ ROBOT_TOPICS: dict[str, type] = {
     "follow_path": m.Path,              # navigator -> local planner: the plan to follow (empty: stop)
     "local_cmd": m.LocalCommand,        # local planner -> navigator
     "local_plan": m.Path,
+    "tracks": m.Tracks,                 # tracker -> local planner, collision monitor: moving obstacles (odom frame)
     "goal": m.Goal,
     "cancel": m.CancelGoal,
     "nav_status": m.NavStatus,

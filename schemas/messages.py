@@ -279,6 +279,18 @@ class Obstacles:
         return same_length(("circles", "velocities"), (self.circles, self.velocities))
 
 
+@message("Tracks", 1)
+@dataclass(slots=True)
+class Tracks:
+    """Moving obstacles tracked from the scan (the tracker service), each a constant-velocity
+    Kalman filter's estimate at the header's stamp, in the header's frame (odom)."""
+    header: Header = field(default_factory=Header)
+    ids: np.ndarray = array("<i8", (None,))             # stable over the track's life
+    states: np.ndarray = array("<f8", (None, 4))        # x, y, vx, vy: m, m/s
+    covariances: np.ndarray = array("<f8", (None, 4, 4))  # over (x, y, vx, vy)
+    radii: np.ndarray = array("<f8", (None,))           # m, estimated from the clusters seen
+
+
 @message("Clock", 1)
 @dataclass(slots=True)
 class Clock:

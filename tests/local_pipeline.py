@@ -11,6 +11,8 @@ from conftest import REPO
 from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Header, Path, Twist
+from omninav.schemas.registry import type_info
+from omninav.services.recorder.mcap_io import Record, RecordingWriter
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.cmd_vel_mux.node import CmdVelMuxNode
 from omninav.services.costmap.node import CostmapNode, CostmapNodeParams
@@ -62,6 +64,14 @@ class Scheduled(Node):
             _, msg = self.schedule.pop(0)
             msg.header.stamp_ns = self.now_ns
             self.out.publish(msg)
+
+
+def recorder_tap(writer: RecordingWriter):
+    """A tap writing every message as the recorder would."""
+    def record(key, payload, stamp):
+        msg = decode(payload)
+        writer.write_record(Record(key, type_info(type(msg))[0], payload, msg.header.seq, stamp, writer.count))
+    return record
 
 
 def polyline(corners, goal_yaw: float, spacing: float = 0.05) -> np.ndarray:

@@ -431,3 +431,40 @@ def test_keepout_masks_from_files_in_a_rolling_window(tmp_path):
     assert costmap.cost_at(0.95, 1.0) == 0                          # map x = 1.95 m: free
     costmap.update(robot_pose=(1.0, 1.0, 0.0), frame_in_map=Pose2D(0.5, 0.0, 0.0))   # localization moved
     assert costmap.cost_at(1.45, 1.0) == 0 and costmap.cost_at(1.55, 1.0) == LETHAL_OBSTACLE
+
+
+# ---------------------------------------------------------------- a walking person leaves no trail
+
+@pytest.mark.parametrize("behind", ["wall", "open"])
+def test_a_person_crossing_the_scan_leaves_no_ghost_trail_in_the_local_costmap(tmp_path, behind):
+    """The sample local costmap (6 m rolling window, odom frame) with the robot standing in a hall
+    while a person (0.3 m circle) walks across 1.5 m in front of it: once they have passed, the
+    cells they stood on are free again — cleared by the beams that now pass through them to the
+    wall behind, or (no wall within the lidar's range: no return) by the inf_is_valid beams."""
+    from omninav.sim.raycast import LidarParams, make_scan
+    from omninav.sim.raycast import scan as cast_scan
+    from omninav.sim.world import load_world
+    bounds = "[12.0, 8.0]" if behind == "wall" else "[40.0, 40.0]"
+    start = (1.0, 4.0) if behind == "wall" else (20.0, 20.0)
+    world_file = tmp_path / "hall.yaml"
+    world_file.write_text(f"name: hall\nbounds: {bounds}\nrobot:\n  start: [{start[0]}, {start[1]}, 0.0]\n")
+    world = load_world(world_file)
+    lidar = LidarParams(noise_std=0.0)
+    costmap = Costmap(load_costmap_params([PARAMS / "costmap_common_params.yaml",
+                                           PARAMS / "costmap_local_params.yaml"], "local_costmap"))
+    robot = np.array([*start, 0.0])
+    trail = []
+    for k in range(100):                    # 10 s at 10 Hz: the person walks 5 m across at 0.5 m/s
+        person = np.array([[start[0] + 1.5, start[1] - 2.5 + 0.05 * k, 0.3]])
+        ranges = cast_scan(world, robot, person, lidar, None)
+        costmap.add_scan(make_scan(lidar, ranges, k * 100_000_000), robot)
+        if k % 2 == 0:
+            costmap.update(robot)
+        if 30 <= k <= 70 and k % 10 == 0:   # where they were while in front of the robot
+            trail.append(person[0, :2] - (0.3, 0.0))       # the side facing the robot
+    info = costmap.info
+    cells = [(int((y - info.origin.y) / info.resolution), int((x - info.origin.x) / info.resolution))
+             for x, y in trail]
+    assert all(0 <= r < info.height and 0 <= c < info.width for r, c in cells)
+    assert all(costmap.costs[r, c] < INSCRIBED_INFLATED_OBSTACLE for r, c in cells), \
+        [int(costmap.costs[r, c]) for r, c in cells]

@@ -11,16 +11,15 @@ import pytest
 import zenoh
 
 from conftest import REPO, wait_until
-from local_pipeline import KEYS, follow_path, pipeline, polyline
+from local_pipeline import KEYS, follow_path, pipeline, polyline, recorder_tap
 from omninav.cli.main import main
 from omninav.schemas import decode, encode
 from omninav.schemas.attachment import pack_attachment
 from omninav.schemas.messages import Header, LocalCommand, Odometry, Path
-from omninav.schemas.registry import type_info
 from omninav.services.local_planner.approach import FinalApproach
 from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from omninav.services.local_planner.params import FollowerParams
-from omninav.services.recorder.mcap_io import Record, RecordingWriter, read_records
+from omninav.services.recorder.mcap_io import RecordingWriter, read_records
 from omninav.services.runtime.node import NS_PER_S
 from omninav.services.runtime.params import ParamError
 from omninav.services.runtime.run import build_node
@@ -162,14 +161,6 @@ LIVE = (REPLAYED[0], ("velocity_smoother", ["--set", "command_delay_s=0.3"]),
         ("collision_monitor", ["--set", "scan_delay_s=0.3"]))
 
 
-def _recorder(writer: RecordingWriter):
-    """A tap writing every message as the recorder would."""
-    def record(key, payload, stamp):
-        msg = decode(payload)
-        writer.write_record(Record(key, type_info(type(msg))[0], payload, msg.header.seq, stamp, writer.count))
-    return record
-
-
 def _replays_byte_for_byte(recording, capsys, services=REPLAYED) -> None:
     for service, extra in services:
         assert main(["replay", str(recording), "--into", service, "--compare", *extra]) == 0, capsys.readouterr().out
@@ -180,7 +171,7 @@ def test_an_in_process_run_replays_byte_for_byte_into_the_local_planner_and_the_
     run = pipeline("room", "mecanum", [(0.5, follow_path(polyline(STRAIGHT[0], STRAIGHT[1])))], watch=["local_cmd"])
     recording = tmp_path / "in_process.mcap"
     with RecordingWriter(recording) as writer:        # what the recorder would write
-        run.runner.tap(_recorder(writer))
+        run.runner.tap(recorder_tap(writer))
         commands = run.published.setdefault(LOCAL_CMD, [])
         run.run(20.0, until=lambda: commands and commands[-1].reason == "goal_reached")
     assert commands[-1].reason == "goal_reached"
@@ -195,7 +186,7 @@ def test_a_robot_facing_away_from_the_path_turns_on_the_spot_first_then_drives_a
     run = pipeline(str(world), "mecanum", [(0.5, follow_path(polyline(corners, goal_yaw)))], watch=["local_cmd"])
     recording = tmp_path / "turned.mcap"
     with RecordingWriter(recording) as writer:
-        run.runner.tap(_recorder(writer))
+        run.runner.tap(recorder_tap(writer))
         commands = run.published.setdefault(LOCAL_CMD, [])
         run.run(40.0, until=lambda: commands and commands[-1].reason == "goal_reached")
         run.run(1.0)                     # what is still on its way to the wheels

@@ -240,13 +240,14 @@ def test_mission_compose_has_every_service_without_restarts(localization, servic
                           seed=3, rate=1.0, robot="r1")
     names = [s["name"] for s in compose["services"]]
     assert names[0] == "recorder" and service in names       # the recorder first: it is stopped last
-    assert {"sim", "chassis", "lidar", "costmap", "global_planner", "local_planner", "velocity_smoother",
+    assert {"sim", "chassis", "lidar", "costmap", "tracker", "global_planner", "local_planner", "velocity_smoother",
             "collision_monitor", "navigator"} <= set(names)
     assert ("map_server" in names) == (localization != "slam")
     assert all(s["restart"] == "no" for s in compose["services"])
     by_name = {s["name"]: s for s in compose["services"]}
     assert by_name["sim"]["params"]["drive"] == by_name["chassis"]["params"]["drive"] == "diff"
     assert by_name["global_planner"]["params"]["goal_topic"] == "plan_request"
+    assert by_name["tracker"]["params"]["use_map"] == (localization != "slam")    # slam's map is being drawn
     x, y, yaw = world.robot.start
     assert by_name["costmap"]["params"]["initial_pose_x"] == x and by_name["navigator"]["params"]["initial_pose_y"] == y
     path = tmp_path / "compose.yaml"
@@ -291,7 +292,7 @@ def test_navigate_drives_a_mission_as_separate_processes_and_scores_it(mission):
             "omninav/r1/cmd_vel", "omninav/r1/pose"} <= keys
 
 
-@pytest.mark.parametrize("service", ["local_planner", "navigator"])
+@pytest.mark.parametrize("service", ["local_planner", "navigator", "tracker"])
 def test_the_live_mission_replays_byte_for_byte_into_the_local_planner_and_the_navigator(mission, service, capsys):
     """No parameters given: replay builds the service with the compose's (xy_goal_tolerance 0.03 m, ...,
     not the defaults), which the live service's Diagnostic carries into the recording."""

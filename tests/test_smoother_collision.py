@@ -6,6 +6,7 @@ import pytest
 
 from omninav.schemas.messages import LaserScan
 from omninav.services.local_planner.collision import CollisionMonitor, robot_frame_points
+from omninav.services.local_planner.dynamic import Movers
 from omninav.services.local_planner.params import CollisionMonitorParams, VelocitySmootherParams
 from omninav.services.local_planner.smoother import VelocitySmoother
 
@@ -102,3 +103,44 @@ def test_the_collision_monitor_ignores_fewer_than_min_points_and_uses_the_sensor
     # a laser mounted 0.3 m ahead sees an obstacle 0.15 m in front of it: 0.45 m from the centre
     result = monitor.check((0.3, 0, 0), robot_frame_points(scan_with_obstacle(0.15, width=0.2), (0.3, 0.0, 0.0)))
     assert result.action == "stop"
+
+
+def movers(*tracks) -> Movers:
+    """Tracks (x, y, vx, vy, radius) in the robot frame, known exactly."""
+    t = np.array(tracks, float).reshape(-1, 5)
+    return Movers(t[:, :2], t[:, 2:4], t[:, 4], np.zeros((len(t), 3)))
+
+
+@pytest.mark.parametrize("track, cmd, action", [
+    ((3.0, 0.0, -0.8, 0.0, 0.3), (0.5, 0.0, 0.0), "approach"),     # head-on, met within 2 s: slowed or stopped
+    ((1.5, -1.8, 0.0, 0.9, 0.3), (0.5, 0.0, 0.0), "approach"),     # crossing ahead, met on the way
+    ((6.0, 0.0, -0.5, 0.0, 0.3), (0.5, 0.0, 0.0), "none"),         # head-on but beyond 2 s
+    ((2.0, 0.0, -1.5, 0.0, 0.3), (-0.3, 0.0, 0.0), "none"),        # coming at the robot, which backs away: sooner standing
+    ((-2.0, 0.0, 0.0, 0.0, 0.3), (0.5, 0.0, 0.0), "none"),         # behind, standing
+])
+def test_the_collision_monitor_slows_or_stops_a_command_that_meets_a_track_sooner_than_standing(track, cmd, action):
+    monitor = CollisionMonitor(CollisionMonitorParams())
+    result = monitor.check(cmd, np.zeros((0, 2)), movers(track))
+    assert result.action == action, result.reason
+    if action == "approach":
+        ttc = monitor.time_to_collision(result.twist, movers(track))
+        standing = monitor.time_to_collision(np.zeros(3), movers(track))
+        assert not ttc < min(monitor.params.time_before_collision, standing)
+        assert np.linalg.norm(result.twist) < np.linalg.norm(cmd)
+
+
+def test_time_to_collision_is_when_the_track_reaches_the_stop_zone():
+    monitor = CollisionMonitor(CollisionMonitorParams(stop_padding=0.0))
+    # front edge at x = 0.416; a 0.3 m circle from x = 2.0 at 1 m/s touches it after 1.284 s
+    ttc = monitor.time_to_collision(np.zeros(3), movers((2.0, 0.0, -1.0, 0.0, 0.3)))
+    assert ttc == pytest.approx(1.3, abs=1e-9)     # the first 0.1 s step at or after
+
+
+def test_a_person_close_behind_does_not_slow_a_robot_driving_away_but_a_wall_does():
+    monitor = CollisionMonitor(CollisionMonitorParams())
+    behind = [(-0.416 - 0.2, y) for y in np.linspace(-0.25, 0.25, 11)]        # 0.2 m behind: the slowdown zone
+    cmd = (0.4, 0.0, 0.0)
+    assert monitor.check(cmd, behind).action == "slowdown"                   # a wall (no track there)
+    person = movers((-0.416 - 0.5, 0.0, 0.8, 0.0, 0.3))                      # a person right there, coming on
+    result = monitor.check(cmd, behind, person)
+    assert result.action == "none" and np.array_equal(result.twist, cmd)

@@ -42,6 +42,8 @@ from ...schemas.messages import MapMetaData
 from ..costmap.footprint import pad
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
 from ..map_server.mapio import in_grid, world_to_cell
+from .dynamic import Movers, critic, slack
+from .dynamic import warm_up as warm_up_movers
 from .params import DwaParams
 
 SMALL_ANGLE = 1e-9   # rad: below this a step is a straight line (sin x / x = 1)
@@ -587,9 +589,10 @@ class DwaPlanner:
         return np.where(legal, total, np.inf)
 
     def compute(self, pose, velocity, costs: np.ndarray, info: MapMetaData, path: np.ndarray,
-                maps: PathMaps | None = None) -> DwaResult:
+                maps: PathMaps | None = None, movers: Movers | None = None) -> DwaResult:
         """One cycle: pose (x, y, yaw) and path (N, 3) in the costmap's frame, velocity (vx, vy, wz)
-        in the robot frame. `maps` may be passed when already computed for this cycle."""
+        in the robot frame. `maps` may be passed when already computed for this cycle; `movers`
+        (dynamic.py), the tracks predicted from the cycle's time, are scored along each rollout."""
         maps = maps if maps is not None else path_maps(path, pose, info, costs)
         low, high = reachable(self.params, velocity)
         brake = np.clip(0.0, low, high)   # as hard as the acceleration limits allow
@@ -600,23 +603,39 @@ class DwaPlanner:
             return DwaResult("no_path", brake, samples, np.zeros((0, 1, 3)), np.zeros(0), -1,
                              "no point of the path lies on the local costmap")
         check = self.check_setup(pose, costs, info)
-        poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info, check)
-        scores = self.score(poses, max_cost, legal, maps, info)
+
+        def evaluate(samples):
+            poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info, check)
+            cost = 0.0
+            if movers is not None and len(movers):
+                clear, cost = self._clear_of(poses, movers)
+                legal = legal & clear
+            return poses, legal, self.score(poses, max_cost, legal, maps, info) + cost
+
+        poses, legal, scores = evaluate(samples)
         last_resorts = fallback_velocities(self.params, velocity) if not legal.any() else samples[:0]
         if len(last_resorts):     # base_local_planner's last resorts before backing up
             samples = last_resorts
-            poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info, check)
-            scores = self.score(poses, max_cost, legal, maps, info)
+            poses, legal, scores = evaluate(samples)
         if legal.any():
             best = int(np.argmin(scores))
             return DwaResult("ok", samples[best].copy(), samples, poses, scores, best)
         if self.params.escape_vel < 0:
             escape = np.clip(np.array([self.params.escape_vel, 0.0, 0.0]), low, high)
-            if escape[0] < 0 and self.rollout(escape[None], pose, velocity, costs, info, check)[2][0]:
+            if escape[0] < 0 and evaluate(escape[None])[1][0]:
                 return DwaResult("escape", escape, samples, poses, scores, -1,
                                  f"every one of {len(samples)} trajectories collides; backing up")
         return DwaResult("no_valid_trajectory", brake, samples, poses, scores, -1,
                          f"every one of {len(samples)} trajectories collides; braking")
+
+    def _clear_of(self, poses: np.ndarray, movers: Movers) -> tuple[np.ndarray, np.ndarray]:
+        """(legal (T,), cost (T,)) of rollouts against the predicted movers (dynamic.py)."""
+        p = self.params
+        dt = p.sim_time / max(1, poses.shape[1] - 1)
+        hard, soft = slack(poses, dt, self.footprint, movers, p.dynamic_obstacle_margin, p.dynamic_obstacle_sigmas)
+        standing = np.repeat(poses[:1, :1], poses.shape[1], axis=1)
+        standing_hard, _ = slack(standing, dt, self.footprint, movers, p.dynamic_obstacle_margin, 0.0)
+        return critic(hard, soft, standing_hard, p.dynamic_influence_distance, p.dynamic_obstacle_scale)
 
 
 def warm_up() -> None:
@@ -628,3 +647,4 @@ def warm_up() -> None:
                         np.zeros((4, 4), np.uint8), info)
     DwaPlanner(DwaParams(), square).legal_poses(np.array([[0.2, 0.2, 0.0]]), np.zeros((4, 4), np.uint8), info)
     _flood(np.eye(4, dtype=np.bool_), np.ones((4, 4), np.bool_), _MOVES)
+    warm_up_movers()

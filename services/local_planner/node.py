@@ -1,13 +1,17 @@
 """The local_planner service: follows the navigator's path on the local costmap (move_base's
 controller loop), with DWA, the elastic band or the path follower, and a precise final approach.
 
-Inputs, in merge order: odom (synced); costmap/local, tf/map_odom, follow_path (sporadic). A
+Inputs, in merge order: odom (synced); costmap/local, tf/map_odom, follow_path, tracks (sporadic). A
 sporadic message stamped t takes effect at the first control tick stamped after
 t + request_delay_s, as in global_planner/node.py: the costmap runs up to a scan period behind the
 clock, and deferred, whether a message reached the node before or after the odometry stamped in
 (t, t + delay] cannot change the commands — a live run replays byte for byte. The default, 0.5 s,
 is above the 0.1–0.3 s by which live costmaps trailed the clock on a loaded 2-core machine (it
 is the costmap's age that grows, not the path's, which the controller tracks on fresh odometry).
+
+The tracker's tracks (moving obstacles) are held tracks_delay_s only (0.3 s: they follow the
+scan, and are predicted from their stamp to the tick; 0.15 s was exceeded live on a loaded machine): DWA scores each rollout against where the
+tracks will be along it (dynamic.py).
 
 Control ticks fall on the odometry stamped at or first after each multiple of
 1/controller_frequency of sim time. Each tick publishes a LocalCommand on local_cmd, stamped with
@@ -41,7 +45,7 @@ from dataclasses import dataclass, field, fields
 
 import numpy as np
 
-from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Path
+from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Path, Tracks
 from ...sim.world import DEFAULT_FOOTPRINT
 from ..costmap.footprint import make_footprint
 from ..costmap.frames import FrameParams
@@ -51,6 +55,7 @@ from ..runtime.params import ParamError, load_params, require_nonnegative
 from ..se2 import compose, inverse
 from .approach import FinalApproach
 from .dwa import DwaPlanner, footprint_check_cost, reachable, warm_up
+from .dynamic import Movers, movers_at, tracks_problem
 from .follower import PathFollower, segments_from_poses
 from .params import CollisionMonitorParams, DwaParams, FollowerParams
 from .path_ahead import ahead_of
@@ -100,6 +105,7 @@ class LocalPlannerNodeParams(FrameParams, DwaParams, RotationShimParams):
     inflation_radius: float = 0.55       # m: with cost_scaling_factor, where the footprint check starts
     cost_scaling_factor: float = 10.0    # 1/m
     request_delay_s: float = 0.5         # sim s from a costmap / tf / path stamp to its effect
+    tracks_delay_s: float = 0.3          # sim s from a tracks stamp to its effect (they are predicted to the tick)
     # m: the collision monitor's stop zone (its default), kept free by DWA's rollouts
     stop_padding: float = CollisionMonitorParams.stop_padding
 
@@ -107,7 +113,7 @@ class LocalPlannerNodeParams(FrameParams, DwaParams, RotationShimParams):
         super().__post_init__()
         if self.controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
-        require_nonnegative(self, "final_approach_distance", "request_delay_s", "robot_radius", "footprint_padding",
+        require_nonnegative(self, "final_approach_distance", "request_delay_s", "tracks_delay_s", "robot_radius", "footprint_padding",
                             "inflation_radius", "cost_scaling_factor", "stop_padding")
         if self.footprint and len(self.footprint) < 3:
             raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
@@ -185,6 +191,8 @@ class LocalPlannerNode(Node):
         self.shim = RotationShim(p.shim_params(), self.dt) if shimmed else None
         self.shim_key: tuple[str, np.ndarray] | None = None   # goal_id and start of the last path the shim saw
         self.pending = Deferred(p.request_delay_s)   # sporadic inputs not yet in effect
+        self.pending_tracks = Deferred(p.tracks_delay_s)
+        self.tracks: Tracks | None = None        # the moving obstacles in effect
         self.costmap: Costmap | None = None
         self.path: Path | None = None            # followed; None: idle
         self.path_follower: PathFollower | None = None      # controller "follower", on the path in the map frame
@@ -198,6 +206,7 @@ class LocalPlannerNode(Node):
                                    (MAP_ODOM, "tf/map_odom", self.frames.transform_problem),
                                    (PATH, "follow_path", self._check_path)):
             self.subscribe_deferred(topic, self.pending, kind, check)
+        self.subscribe_deferred("tracks", self.pending_tracks, check=self._check_tracks)
 
     def _make_controller(self, footprint: np.ndarray, check_cost: int):
         p = self.params
@@ -225,6 +234,9 @@ class LocalPlannerNode(Node):
             return f"data of shape {msg.data.shape} for a grid of {msg.info.height} x {msg.info.width} cells"
         return self._frame_problem(msg.header.frame_id)
 
+    def _check_tracks(self, msg: Tracks) -> str:
+        return tracks_problem(msg) or self._frame_problem(msg.header.frame_id)
+
     def _check_path(self, msg: Path) -> str:
         return self._frame_problem(msg.header.frame_id) if len(msg.poses) else ""
 
@@ -237,6 +249,8 @@ class LocalPlannerNode(Node):
                 self.frames.set_map_odom(msg)
             else:
                 self._follow(msg)
+        for _, msg in self.pending_tracks.due(now_ns):
+            self.tracks = msg
 
     def _follow(self, msg: Path) -> None:
         self.path = msg if len(msg.poses) else None
@@ -306,10 +320,22 @@ class LocalPlannerNode(Node):
             return rotation
         if self.params.controller == "follower":
             return self._follow_path(velocity, path, robot)
-        result = self.controller.compute(robot, velocity, self.costmap.data, self.costmap.info, path)
+        if self.controller is self.dwa:
+            result = self.dwa.compute(robot, velocity, self.costmap.data, self.costmap.info, path,
+                                      movers=self._movers(frame))
+        else:
+            result = self.controller.compute(robot, velocity, self.costmap.data, self.costmap.info, path)
         reason = result.status if result.status in ("ok", "escape") else f"{result.status}: {result.message}"
         return Control(result.cmd, result.status in ("ok", "escape"), "" if result.status == "ok" else reason,
                        result.trajectory)
+
+    def _movers(self, frame: str) -> Movers | None:
+        """The tracks in effect, predicted to this tick, in the costmap's frame."""
+        if self.tracks is None:
+            return None
+        source = self.tracks.header.frame_id
+        frame_pose = (0.0, 0.0, 0.0) if source == frame else self._in_frame(np.zeros((1, 3)), source, frame)[0]
+        return movers_at(self.tracks, self.now_ns / NS_PER_S, frame_pose, self.params.dynamic_min_speed)
 
     def _approach(self, velocity: np.ndarray) -> Control | None:
         """The final approach's answer, or None when the robot is not close to the goal or the

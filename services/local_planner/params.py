@@ -50,6 +50,12 @@ class DwaParams:
     goal_distance_bias: float = 24.0     # per m from the local goal
     occdist_scale: float = 0.01          # per unit of the highest cost met
     forward_point_distance: float = 0.325  # m: the point ahead of the robot scored for heading
+    # moving obstacles (the tracker's tracks, predicted along each rollout; dynamic.py): no ROS names
+    dynamic_obstacle_margin: float = 0.1   # m kept between the footprint and a track's circle ...
+    dynamic_obstacle_sigmas: float = 2.0   # ... plus this many standard deviations of its predicted position
+    dynamic_obstacle_scale: float = 20.0   # per unit of intrusion into dynamic_influence_distance
+    dynamic_influence_distance: float = 0.8  # m beyond the kept distance within which a track costs
+    dynamic_min_speed: float = 0.1         # m/s: slower tracks are left to the costmap (a standing person is in it)
     # goal
     xy_goal_tolerance: float = 0.10      # m
     yaw_goal_tolerance: float = 0.05     # rad
@@ -58,7 +64,10 @@ class DwaParams:
         require_positive(self, "acc_lim_x", "acc_lim_theta", "max_vel_theta", "min_in_place_vel_theta", "sim_time",
                          "sim_granularity", "controller_frequency")
         require_nonnegative(self, "acc_lim_y", "path_distance_bias", "goal_distance_bias", "occdist_scale",
-                            "forward_point_distance", "xy_goal_tolerance", "yaw_goal_tolerance")
+                            "forward_point_distance", "xy_goal_tolerance", "yaw_goal_tolerance",
+                            "dynamic_obstacle_margin", "dynamic_obstacle_sigmas", "dynamic_obstacle_scale",
+                            "dynamic_min_speed")
+        require_positive(self, "dynamic_influence_distance")
         require_at_least(self, 1, "vx_samples", "vy_samples", "vtheta_samples")
         for low, high in (("min_vel_x", "max_vel_x"), ("min_vel_y", "max_vel_y"),
                           ("min_vel_theta", "max_vel_theta")):
@@ -131,12 +140,15 @@ class CollisionMonitorParams:
     slowdown_ratio: float = 0.5          # Nav2's default
     min_points: int = 4                  # Nav2's default: fewer points inside a zone are noise
     approach_check_s: float = 0.1        # s: a stop-zone point stops commands that come closer within this
+    # Nav2's "approach" action, here against the tracker's moving obstacles (constant velocity)
+    time_before_collision: float = 2.0   # s: a command meeting a track in its stop zone sooner is slowed or stopped
+    simulation_time_step: float = 0.1    # s between the predicted poses checked
 
     def __post_init__(self):
         if len(self.footprint) < 3:
             raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
         require_nonnegative(self, "stop_padding", "slowdown_padding")
-        require_positive(self, "approach_check_s")
+        require_positive(self, "approach_check_s", "time_before_collision", "simulation_time_step")
         require_at_least(self, 1, "min_points")
         if self.slowdown_padding < self.stop_padding:
             raise ValueError("slowdown_padding must be at least stop_padding")

@@ -26,6 +26,7 @@ SERVICES: dict[str, str] = {
     "navigator": "omninav.services.navigator.node:NavigatorNode",
     "truth_pose": "omninav.services.navigator.truth_pose:TruthPoseNode",
     "view": "omninav.services.view.node:ViewNode",
+    "tracker": "omninav.services.tracker.node:TrackerNode",
 }
 
 

@@ -39,6 +39,7 @@ from ..navigator.node import NavigatorNode, NavigatorNodeParams
 from ..runtime.inprocess import InProcessRunner
 from ..runtime.node import Node
 from ..runtime.params import load_params
+from ..tracker.node import TrackerNode, TrackerNodeParams
 from .explore_node import ExploreNode, ExploreNodeParams
 from .node import SlamNode, SlamNodeParams
 
@@ -101,15 +102,16 @@ def slam_params_for(world: World, overrides: dict | None = None, seed: int = 0) 
 
 
 def navigation_stack(world: World, drive: str) -> list[Node]:
-    """costmap, global_planner, local_planner, cmd_vel_mux, velocity_smoother, collision_monitor and navigator, as
+    """costmap, tracker, global_planner, local_planner, cmd_vel_mux, velocity_smoother, collision_monitor and navigator, as
     `omninav navigate` runs them (compose/params' costmaps), fed by slam: the map frame is the world's,
-    odometry starts at the world's start pose."""
+    odometry starts at the world's start pose. The tracker ignores slam's map, still being drawn (as
+    `navigate --localization slam`)."""
     start = dict(zip(("initial_pose_x", "initial_pose_y", "initial_pose_a"), map(float, world.robot.start)))
     costmap_files = {f"{which}_costmap_files": (str(COSTMAP_PARAMS / "costmap_common_params.yaml"),
                                                 str(COSTMAP_PARAMS / f"costmap_{which}_params.yaml"))
                      for which in ("global", "local")}
     strafing = {} if drive != "diff" else dict(holonomic_robot=False, max_vel_y=0.0, min_vel_y=0.0, y_vels=())
-    return [CostmapNode(CostmapNodeParams(**costmap_files, **start)),
+    return [CostmapNode(CostmapNodeParams(**costmap_files, **start)), TrackerNode(TrackerNodeParams(use_map=False, **start)),
             PlannerNode(PlannerNodeParams(goal_topic="plan_request", planner_frequency=0.0, use_dijkstra=False,
                                           **start)),
             LocalPlannerNode(LocalPlannerNodeParams(**strafing, **start)),

@@ -1,0 +1,151 @@
+"""Moving obstacles for the local planner: the tracker's tracks predicted along each rollout, after
+Nav2 MPPI's critics (one vectorised call scores the whole batch).
+
+A track is a circle moving at constant velocity; its position at the time τ a rollout pose is
+reached is its position at the tick plus velocity·τ, and the standard deviation of that position
+grows as the constant-velocity filter's covariance does: var(τ) = var_p + 2τ·cov_pv + τ²·var_v
+(per axis, averaged over x and y). A pose's slack is its footprint's distance to the predicted
+circle less dynamic_obstacle_margin (hard), and less also dynamic_obstacle_sigmas·σ(τ) (soft). A
+rollout meets a mover at the first pose after the start whose hard slack is negative and below
+the start's (moving away from a person who came too near is no meeting); it is illegal when it
+meets one sooner than the robot standing still would (people who do not give way walk into a
+robot that stopped in their way: braking is no refuge, and what meets them only later is
+re-planned next cycle). Within dynamic_influence_distance of the soft slack a rollout costs
+dynamic_obstacle_scale per unit of intrusion deeper than at its start, and up to as much again
+the sooner it meets a mover.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from numba import njit
+
+from ...schemas.messages import Tracks
+from ..se2 import compose
+
+
+@dataclass(frozen=True)
+class Movers:
+    """Tracks at one instant in the planner's frame."""
+    positions: np.ndarray    # (N, 2)
+    velocities: np.ndarray   # (N, 2)
+    radii: np.ndarray        # (N,)
+    variance: np.ndarray     # (N, 3): position variance, position-velocity covariance, velocity variance
+
+    def __len__(self) -> int:
+        return len(self.radii)
+
+
+def tracks_problem(msg: Tracks) -> str:
+    """Why a Tracks message cannot be used (its arrays disagree in length), or ''."""
+    n = len(msg.ids)
+    shapes = {"states": msg.states.shape[0], "covariances": msg.covariances.shape[0], "radii": msg.radii.shape[0]}
+    wrong = [f"{name} has {count}" for name, count in shapes.items() if count != n]
+    if wrong:
+        return f"{n} ids but " + ", ".join(wrong)
+    if (msg.radii < 0).any():
+        return "a negative radius"
+    return ""
+
+
+def movers_at(msg: Tracks, now_s: float, frame_pose, min_speed: float) -> Movers:
+    """The tracks of msg as they will be at now_s (constant velocity), carried into a frame in which
+    the tracks' frame has the pose frame_pose; tracks slower than min_speed are left out."""
+    states = np.asarray(msg.states, np.float64).reshape(-1, 4)
+    cov = np.asarray(msg.covariances, np.float64).reshape(-1, 4, 4)
+    keep = np.hypot(states[:, 2], states[:, 3]) >= min_speed
+    states, cov = states[keep], cov[keep]
+    age = max(0.0, now_s - msg.header.stamp_ns * 1e-9)
+    p = (cov[:, 0, 0] + cov[:, 1, 1]) / 2
+    pv = (cov[:, 0, 2] + cov[:, 1, 3]) / 2
+    v = (cov[:, 2, 2] + cov[:, 3, 3]) / 2
+    variance = np.column_stack([p + 2 * age * pv + age * age * v, pv + age * v, v])
+    positions = states[:, :2] + states[:, 2:] * age
+    x, y, theta = (float(t) for t in frame_pose)
+    placed = compose((x, y, theta), np.column_stack([positions, np.zeros(len(positions))]))[:, :2]
+    c, s = math.cos(theta), math.sin(theta)
+    velocities = states[:, 2:] @ np.array([[c, s], [-s, c]])
+    return Movers(placed.reshape(-1, 2), velocities.reshape(-1, 2), np.asarray(msg.radii, np.float64)[keep], variance)
+
+
+@njit(cache=True, inline="always")
+def _polygon_distance(u, v, polygon):
+    """Distance from (u, v) to the polygon (0 inside)."""
+    inside = False
+    best = np.inf
+    n = polygon.shape[0]
+    for i in range(n):
+        ax, ay = polygon[i, 0], polygon[i, 1]
+        bx, by = polygon[(i + 1) % n, 0], polygon[(i + 1) % n, 1]
+        if (ay > v) != (by > v) and u < ax + (v - ay) * (bx - ax) / (by - ay):
+            inside = not inside
+        ex, ey = bx - ax, by - ay
+        t = ((u - ax) * ex + (v - ay) * ey) / (ex * ex + ey * ey)
+        t = min(1.0, max(0.0, t))
+        dx, dy = u - (ax + t * ex), v - (ay + t * ey)
+        best = min(best, math.sqrt(dx * dx + dy * dy))
+    return 0.0 if inside else best
+
+
+@njit(cache=True)
+def _slack(poses, dt, footprint, positions, velocities, radii, variance, margin, sigmas, hard, soft):
+    """hard, soft (T, S): the least slack over the movers of each pose (pose k reached at k·dt),
+    without and with the sigmas of the predicted position."""
+    trajectories, steps = poses.shape[0], poses.shape[1]
+    for t in range(trajectories):
+        for k in range(steps):
+            x, y, theta = poses[t, k, 0], poses[t, k, 1], poses[t, k, 2]
+            c, s = math.cos(theta), math.sin(theta)
+            tau = k * dt
+            hard[t, k], soft[t, k] = np.inf, np.inf
+            for n in range(radii.shape[0]):
+                px = positions[n, 0] + velocities[n, 0] * tau - x
+                py = positions[n, 1] + velocities[n, 1] * tau - y
+                var = variance[n, 0] + 2.0 * tau * variance[n, 1] + tau * tau * variance[n, 2]
+                gap = _polygon_distance(c * px + s * py, -s * px + c * py, footprint) - radii[n] - margin
+                hard[t, k] = min(hard[t, k], gap)
+                soft[t, k] = min(soft[t, k], gap - sigmas * math.sqrt(max(var, 0.0)))
+
+
+def slack(poses: np.ndarray, dt: float, footprint: np.ndarray, movers: Movers, margin: float,
+          sigmas: float) -> tuple[np.ndarray, np.ndarray]:
+    """(hard, soft), each (T, S), of rollouts (T, S, 3) whose poses are dt apart: metres each pose's
+    footprint keeps beyond the margin from the nearest predicted mover (negative: too close), and
+    the same less sigmas standard deviations of the mover's predicted position."""
+    poses = np.ascontiguousarray(poses, np.float64)
+    hard, soft = np.empty(poses.shape[:2]), np.empty(poses.shape[:2])
+    _slack(poses, float(dt), np.ascontiguousarray(footprint, np.float64), movers.positions, movers.velocities,
+           movers.radii, movers.variance, float(margin), float(sigmas), hard, soft)
+    return hard, soft
+
+
+def first_contact(hard: np.ndarray) -> np.ndarray:
+    """(T,) the first step after the start at which each rollout comes closer than the margin and
+    closer than at its start (moving away from a mover already too near is no contact); the
+    number of steps when none does."""
+    closing = (hard[:, 1:] < 0) & (hard[:, 1:] < hard[:, :1])
+    return np.where(closing.any(axis=1), np.argmax(closing, axis=1) + 1, hard.shape[1])
+
+
+def critic(hard: np.ndarray, soft: np.ndarray, standing: np.ndarray, influence: float,
+           scale: float) -> tuple[np.ndarray, np.ndarray]:
+    """(legal (T,), cost (T,)) of rollouts from their slacks (T, S), `standing` (1, S) the hard slack
+    of the robot standing where it is: a rollout that meets a mover sooner than standing still
+    would is illegal (standing in a person's way is no refuge: what reaches them later is
+    legal, and the next cycle looks again); the cost grows with how much deeper than at the start
+    the uncertain prediction intrudes into the influence distance (a mover already near cost all
+    rollouts alike, and drowned the difference between leaving its way and lingering in it)."""
+    contact = first_contact(hard)
+    legal = contact >= first_contact(standing)[0]
+    intrusion = np.clip(1.0 - soft / influence, 0.0, None)
+    deeper = np.clip(intrusion[:, 1:].max(axis=1, initial=0.0) - intrusion[:, 0], 0.0, None)
+    sooner = (hard.shape[1] - contact) / hard.shape[1]      # 0 without a meeting, towards 1 the sooner
+    return legal, scale * (deeper + sooner)
+
+
+def warm_up() -> None:
+    square = np.array([[0.1, 0.1], [-0.1, 0.1], [-0.1, -0.1], [0.1, -0.1]])
+    movers = Movers(np.ones((1, 2)), np.zeros((1, 2)), np.full(1, 0.2), np.zeros((1, 3)))
+    slack(np.zeros((1, 2, 3)), 0.1, square, movers, 0.1, 2.0)

@@ -1,0 +1,383 @@
+"""Moving-obstacle tracking from a 2-D scan, in the odom frame (the local planner's).
+
+One scan (`MoverTracker.update`):
+1. static points are flagged: those within `map_obstacle_distance` of an occupied cell of the
+   static map (when one is served, placed by map→odom), and those on or next to a cell of the
+   rolling evidence grid that has been hit without a break for `static_after_s` — a wall, a shelf,
+   a BARN cylinder, also without a map (SLAM, BARN). A cell's streak ends when a beam passes
+   through it (its free space is seen), so a person who walks on frees the cells behind them and
+   one who stands still long enough becomes part of the static world;
+2. the points are clustered (PCL's Euclidean cluster extraction: points within
+   `cluster_tolerance` of each other join, clusters of `min_cluster_size` points up to
+   `max_cluster_radius` are kept, larger ones are walls not yet known to be static) and a cluster
+   of which more than `max_static_share` is static is part of the static world;
+3. each cluster is a measurement of a circle's centre: the centroid of the seen arc pushed away
+   from the sensor by (2/π)·radius, where an arc of a quarter circle on each side has its centroid;
+4. tracks (constant-velocity Kalman filters, state x y vx vy, white-acceleration process noise)
+   are predicted to the scan's time and associated with the measurements by the Hungarian method
+   (scipy's linear_sum_assignment) on the squared Mahalanobis distance, gated by `gate_chi2` and by
+   `max_association_distance`; matched tracks are corrected, unmatched measurements start tentative
+   tracks, and a track is confirmed after `confirm_hits` hits and deleted after `max_misses` scans
+   in a row without one (`tentative_max_misses` while still tentative). Only tracks that have
+   moved `min_travel` from where they were first seen are confirmed: before the evidence grid
+   knows the walls (the first static_after_s, or a wall piece first seen), a piece of wall cut
+   off by a shadow is a cluster like a person, but it stays where it is; and once the walls first
+   seen are static, the tracks begun before are dropped (pieces of them coming out of a shadow
+   made moving clusters).
+Deterministic: no randomness, ties broken by the order of the inputs (the scan's beam order).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+from scipy import ndimage
+from scipy.optimize import linear_sum_assignment
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from ...schemas.messages import OccupancyGrid
+from ..se2 import compose, inverse
+
+ARC_CENTROID = 2.0 / math.pi   # a half circle's points have their centroid this many radii from its centre
+UNSET = -1.0                   # an evidence cell without a streak
+
+
+@dataclass(frozen=True)
+class TrackerParams:
+    """Names after PCL's EuclideanClusterExtraction (cluster_tolerance, min/max_cluster_size) and the
+    usual multi-target tracker's; no ROS package sets the others' defaults."""
+    cluster_tolerance: float = 0.2        # m: points this close belong to one cluster
+    min_cluster_size: int = 3             # points: fewer are noise
+    max_cluster_size: int = 400           # points
+    max_cluster_radius: float = 0.6       # m: a wider cluster is a wall, not a mover
+    max_static_share: float = 0.3         # of a cluster's points static: more, and it is part of the static world
+    map_obstacle_distance: float = 0.15   # m from an occupied map cell within which a point is static
+    map_occupied_thresh: int = 65         # map value (percent) from which a cell is occupied (map_server's 0.65)
+    evidence_resolution: float = 0.1      # m: cells of the rolling evidence grid
+    evidence_size: float = 24.0           # m: side of the evidence grid, centred on the robot
+    static_after_s: float = 2.0           # s of cell hits without a break after which the cell is static
+    evidence_clear_margin: float = 0.2    # m short of a hit in which a beam does not end a cell's streak
+    measurement_noise: float = 0.05       # m: std of a cluster centre
+    process_noise: float = 1.0            # m/s²: std of the white acceleration of a mover
+    initial_velocity_std: float = 1.0     # m/s: of a new track
+    gate_chi2: float = 13.8               # squared Mahalanobis distance (χ², 2 dof, 99.9 %)
+    max_association_distance: float = 1.0  # m between a predicted track and a measurement
+    confirm_hits: int = 4                 # hits before a track is confirmed (published) ...
+    min_travel: float = 0.3               # m ... and how far it must have gone from where it was first seen:
+                                          # what never moved is the static world (the costmap's), not a mover
+    max_misses: int = 10                  # scans without a hit before a confirmed track is deleted
+    tentative_max_misses: int = 1         # the same for a tentative track
+    radius_smoothing: float = 0.3         # weight of a new cluster's radius in the track's estimate
+    min_radius: float = 0.1               # m: a track is at least this wide
+
+    def __post_init__(self) -> None:
+        for name in ("cluster_tolerance", "max_cluster_radius", "evidence_resolution", "evidence_size",
+                     "static_after_s", "measurement_noise", "process_noise", "initial_velocity_std",
+                     "gate_chi2", "max_association_distance", "min_radius"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"parameter {name!r} must be positive, got {value!r}")
+        for name in ("map_obstacle_distance", "evidence_clear_margin", "min_travel"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"parameter {name!r} must be zero or positive, got {value!r}")
+        for name in ("min_cluster_size", "max_cluster_size", "confirm_hits", "max_misses"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"parameter {name!r} must be at least 1, got {getattr(self, name)!r}")
+        if self.tentative_max_misses < 0:
+            raise ValueError(f"parameter 'tentative_max_misses' must be ≥ 0, got {self.tentative_max_misses}")
+        if self.max_cluster_size < self.min_cluster_size:
+            raise ValueError("max_cluster_size must be at least min_cluster_size")
+        if not 0 <= self.max_static_share <= 1:
+            raise ValueError(f"parameter 'max_static_share' must be in [0, 1], got {self.max_static_share}")
+        if not 0 < self.radius_smoothing <= 1:
+            raise ValueError(f"parameter 'radius_smoothing' must be in (0, 1], got {self.radius_smoothing}")
+        if not 0 <= self.map_occupied_thresh <= 100:
+            raise ValueError(f"parameter 'map_occupied_thresh' must be in [0, 100], got {self.map_occupied_thresh}")
+
+
+@dataclass
+class Track:
+    id: int
+    state: np.ndarray          # (4,) x, y, vx, vy
+    covariance: np.ndarray     # (4, 4)
+    radius: float
+    start: np.ndarray = field(default_factory=lambda: np.zeros(2))   # where it was first seen
+    hits: int = 1
+    misses: int = 0
+    moved: bool = False        # has been min_travel from its start
+
+    def confirmed(self, params: TrackerParams) -> bool:
+        return self.hits >= params.confirm_hits and self.moved
+
+
+@dataclass(frozen=True)
+class TrackSet:
+    """The confirmed tracks after a scan, as arrays (the Tracks message's fields)."""
+    ids: np.ndarray            # (N,) int64
+    states: np.ndarray         # (N, 4)
+    covariances: np.ndarray    # (N, 4, 4)
+    radii: np.ndarray          # (N,)
+
+
+@dataclass(frozen=True)
+class Cluster:
+    centre: np.ndarray         # (2,) the circle's centre as measured
+    radius: float
+    points: np.ndarray         # (K, 2)
+
+
+# ---------------------------------------------------------------- static world
+
+@njit(cache=True)
+def _evidence_update(since, now, origin_u, origin_v, us, vs, clear_cells):
+    """Each beam from the sensor (grid coordinates, cells) to its hit: the cells it passes more than
+    clear_cells short of the hit lose their streak; the hit's cell starts one (or keeps it)."""
+    height, width = since.shape
+    for k in range(us.shape[0]):
+        du, dv = us[k] - origin_u, vs[k] - origin_v
+        length = math.sqrt(du * du + dv * dv)
+        steps = int((length - clear_cells) * 2.0)      # half-cell steps
+        for i in range(steps):
+            t = i * 0.5 / length
+            col, row = int(math.floor(origin_u + du * t)), int(math.floor(origin_v + dv * t))
+            if 0 <= row < height and 0 <= col < width:
+                since[row, col] = -1.0
+    for k in range(us.shape[0]):
+        col, row = int(math.floor(us[k])), int(math.floor(vs[k]))
+        if 0 <= row < height and 0 <= col < width and since[row, col] < 0.0:
+            since[row, col] = now
+
+
+class EvidenceGrid:
+    """Since when each cell (odom frame) has been hit without a break; a square that follows the
+    robot, shifted by whole cells so that a cell keeps its place in the odom frame."""
+
+    def __init__(self, params: TrackerParams):
+        self.params = params
+        self.resolution = params.evidence_resolution
+        self.cells = max(3, int(round(params.evidence_size / self.resolution)))
+        self.since = np.full((self.cells, self.cells), UNSET)
+        self.origin: np.ndarray | None = None    # (col, row) of cell (0, 0) in whole cells of the odom frame
+
+    def _follow(self, robot_xy: np.ndarray) -> None:
+        centre = np.floor(robot_xy / self.resolution).astype(np.int64) - self.cells // 2
+        if self.origin is None:
+            self.origin = centre
+            return
+        shift = centre - self.origin
+        if np.all(np.abs(shift) < self.cells // 4):
+            return
+        moved = np.full_like(self.since, UNSET)
+        dc, dr = (int(v) for v in shift)
+        src = self.since[max(dr, 0):self.cells + min(dr, 0), max(dc, 0):self.cells + min(dc, 0)]
+        moved[max(-dr, 0):max(-dr, 0) + src.shape[0], max(-dc, 0):max(-dc, 0) + src.shape[1]] = src
+        self.since, self.origin = moved, centre
+
+    def grid_coords(self, points: np.ndarray) -> np.ndarray:
+        """(N, 2) points in cells (u along x, v along y) of the grid."""
+        return points / self.resolution - self.origin
+
+    def update(self, now_s: float, sensor_xy: np.ndarray, points: np.ndarray) -> None:
+        self._follow(np.asarray(sensor_xy, np.float64))
+        uv = self.grid_coords(np.asarray(points, np.float64).reshape(-1, 2))
+        su, sv = self.grid_coords(np.asarray(sensor_xy, np.float64).reshape(1, 2))[0]
+        _evidence_update(self.since, now_s, su, sv, np.ascontiguousarray(uv[:, 0]), np.ascontiguousarray(uv[:, 1]),
+                         self.params.evidence_clear_margin / self.resolution)
+
+    def static(self, now_s: float, points: np.ndarray) -> np.ndarray:
+        """(N,) whether each point lies on or next to a cell hit without a break for static_after_s."""
+        old = (self.since >= 0) & (now_s - self.since >= self.params.static_after_s)
+        near_old = ndimage.binary_dilation(old, np.ones((3, 3), bool))
+        cols, rows = np.floor(self.grid_coords(points)).astype(np.int64).T
+        inside = (rows >= 0) & (rows < self.cells) & (cols >= 0) & (cols < self.cells)
+        result = np.zeros(len(points), bool)
+        result[inside] = near_old[rows[inside], cols[inside]]
+        return result
+
+
+class StaticMap:
+    """Distances (m) to the static map's occupied cells, for points in the odom frame."""
+
+    def __init__(self, grid: OccupancyGrid, params: TrackerParams):
+        info = grid.info
+        if info.width == 0 or info.height == 0 or info.resolution <= 0:
+            raise ValueError(f"a map of {info.width} x {info.height} cells at {info.resolution} m cannot be used")
+        occupied = np.asarray(grid.data) >= params.map_occupied_thresh
+        self.info = info
+        self.distance = ndimage.distance_transform_edt(~occupied) * info.resolution if occupied.any() \
+            else np.full(occupied.shape, np.inf)
+        self.origin = np.array([info.origin.x, info.origin.y, info.origin.theta])
+
+    def static(self, points_in_map: np.ndarray, within: float) -> np.ndarray:
+        """(N,) whether each point (map frame) lies within `within` of an occupied cell's centre
+        plus half a cell (the cell's edge, nearly)."""
+        local = compose(inverse(self.origin), np.column_stack([points_in_map, np.zeros(len(points_in_map))]))
+        cols, rows = np.floor(local[:, :2] / self.info.resolution).astype(np.int64).T
+        inside = (rows >= 0) & (rows < self.info.height) & (cols >= 0) & (cols < self.info.width)
+        result = np.zeros(len(points_in_map), bool)
+        result[inside] = self.distance[rows[inside], cols[inside]] <= within + self.info.resolution / 2
+        return result
+
+
+# ---------------------------------------------------------------- clusters
+
+def euclidean_clusters(points: np.ndarray, sensor_xy, params: TrackerParams,
+                       static: np.ndarray | None = None) -> list[Cluster]:
+    """Clusters of points within cluster_tolerance of each other, of min_cluster_size up to
+    max_cluster_size points and max_cluster_radius, in the order of their first point. With
+    `static` (N,) flags, a cluster more than max_static_share static is part of the static world:
+    the piece of a wall coming out of a mover's shadow is new to the evidence grid, but it hangs
+    together with the wall seen before (clustering only the new points made it a false mover
+    sliding along the wall with the shadow's edge)."""
+    points = np.asarray(points, np.float64).reshape(-1, 2)
+    static = np.zeros(len(points), bool) if static is None else np.asarray(static, bool)
+    if len(points) < params.min_cluster_size:
+        return []
+    pairs = cKDTree(points).query_pairs(params.cluster_tolerance, output_type="ndarray")
+    graph = coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points),) * 2)
+    _, labels = connected_components(graph, directed=False)
+    clusters = []
+    _, first = np.unique(labels, return_index=True)
+    for label in labels[np.sort(first)]:
+        member = labels == label
+        members = points[member]
+        if not params.min_cluster_size <= len(members) <= params.max_cluster_size \
+                or np.mean(static[member]) > params.max_static_share:
+            continue
+        centroid = members.mean(axis=0)
+        radius = max(params.min_radius, float(np.max(np.hypot(*(members - centroid).T))))
+        if radius > params.max_cluster_radius:
+            continue
+        away = centroid - np.asarray(sensor_xy, np.float64)
+        away /= max(float(np.hypot(*away)), 1e-9)
+        clusters.append(Cluster(centroid + away * ARC_CENTROID * radius, radius, members))
+    return clusters
+
+
+# ---------------------------------------------------------------- the tracker
+
+MEASURE = np.array([[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0]])
+
+
+def predicted(state: np.ndarray, covariance: np.ndarray, dt: float, accel_std: float) -> tuple[np.ndarray, np.ndarray]:
+    """A constant-velocity filter's state and covariance dt seconds on (white acceleration noise)."""
+    f = np.eye(4)
+    f[0, 2] = f[1, 3] = dt
+    g = np.array([[dt * dt / 2, 0.0], [0.0, dt * dt / 2], [dt, 0.0], [0.0, dt]])
+    return f @ state, f @ covariance @ f.T + (accel_std ** 2) * (g @ g.T)
+
+
+@dataclass
+class MoverTracker:
+    params: TrackerParams = field(default_factory=TrackerParams)
+
+    def __post_init__(self) -> None:
+        self.evidence = EvidenceGrid(self.params)
+        self.static_map: StaticMap | None = None
+        self.tracks: list[Track] = []
+        self.next_id = 1
+        self.stamp_s: float | None = None
+        self.warm_until_s: float | None = None    # the evidence grid knows the walls seen first from then
+
+    def set_map(self, grid: OccupancyGrid | None) -> None:
+        """The static map (ValueError for one that cannot be used), or None to track without one."""
+        self.static_map = None if grid is None else StaticMap(grid, self.params)
+
+    def static_points(self, now_s: float, sensor_xy, points: np.ndarray, odom_in_map=None) -> np.ndarray:
+        """(N,) whether each point (odom frame) is explained by the static world; updates the
+        evidence grid."""
+        points = np.asarray(points, np.float64).reshape(-1, 2)
+        self.evidence.update(now_s, np.asarray(sensor_xy, np.float64), points)
+        static = self.evidence.static(now_s, points)
+        if self.static_map is not None and odom_in_map is not None and len(points):
+            in_map = compose(np.asarray(odom_in_map, np.float64), np.column_stack([points, np.zeros(len(points))]))
+            static |= self.static_map.static(in_map[:, :2], self.params.map_obstacle_distance)
+        return static
+
+    def update(self, now_s: float, sensor_xy, points: np.ndarray, odom_in_map=None) -> TrackSet:
+        """One scan: its endpoints (N, 2) and the sensor's position in the odom frame at now_s (s);
+        odom_in_map is the odom frame's pose in the map (the static map's frame) when a map is set."""
+        if self.stamp_s is not None and now_s < self.stamp_s:
+            raise ValueError(f"scan at {now_s} s is older than the last one at {self.stamp_s} s")
+        dt = 0.0 if self.stamp_s is None else now_s - self.stamp_s
+        self.stamp_s = now_s
+        if self.warm_until_s is None:
+            self.warm_until_s = now_s + self.params.static_after_s
+        elif self.warm_until_s <= now_s:
+            # until the walls seen first are static, pieces of them coming out of a shadow make
+            # moving clusters: begin again from scratch once, when they are
+            self.tracks, self.warm_until_s = [], np.inf
+        points = np.asarray(points, np.float64).reshape(-1, 2)
+        static = self.static_points(now_s, sensor_xy, points, odom_in_map)
+        clusters = euclidean_clusters(points, sensor_xy, self.params, static)
+        for track in self.tracks:
+            track.state, track.covariance = predicted(track.state, track.covariance, dt, self.params.process_noise)
+        matches = self._associate(clusters)
+        matched = set()
+        for t, c in matches:
+            self._correct(self.tracks[t], clusters[c])
+            matched.add(t)
+        for t, track in enumerate(self.tracks):
+            if t not in matched:
+                track.misses += 1
+        self.tracks = [t for t in self.tracks if t.misses <= (self.params.max_misses if t.confirmed(self.params)
+                                                             else self.params.tentative_max_misses)]
+        used = {c for _, c in matches}
+        for c, cluster in enumerate(clusters):
+            if c not in used:
+                self._start(cluster)
+        return self.confirmed()
+
+    def _associate(self, clusters: list[Cluster]) -> list[tuple[int, int]]:
+        """(track, cluster) pairs: the assignment of least total squared Mahalanobis distance among
+        the pairs inside both gates."""
+        if not self.tracks or not clusters:
+            return []
+        p = self.params
+        centres = np.array([c.centre for c in clusters])
+        cost = np.empty((len(self.tracks), len(clusters)))
+        for t, track in enumerate(self.tracks):
+            innovation = centres - track.state[:2]
+            s = track.covariance[:2, :2] + np.eye(2) * p.measurement_noise ** 2
+            d2 = np.einsum("ki,ij,kj->k", innovation, np.linalg.inv(s), innovation)
+            far = np.hypot(innovation[:, 0], innovation[:, 1]) > p.max_association_distance
+            cost[t] = np.where((d2 > p.gate_chi2) | far, np.inf, d2)
+        gated = np.isfinite(cost)
+        rows, cols = linear_sum_assignment(np.where(gated, cost, p.gate_chi2 * 1e3))
+        return [(int(r), int(c)) for r, c in zip(rows, cols) if gated[r, c]]
+
+    def _correct(self, track: Track, cluster: Cluster) -> None:
+        p = self.params
+        s = MEASURE @ track.covariance @ MEASURE.T + np.eye(2) * p.measurement_noise ** 2
+        gain = track.covariance @ MEASURE.T @ np.linalg.inv(s)
+        track.state = track.state + gain @ (cluster.centre - track.state[:2])
+        joseph = np.eye(4) - gain @ MEASURE
+        track.covariance = joseph @ track.covariance @ joseph.T + gain @ (np.eye(2) * p.measurement_noise ** 2) @ gain.T
+        track.radius += p.radius_smoothing * (cluster.radius - track.radius)
+        track.hits += 1
+        track.misses = 0
+        track.moved |= bool(np.hypot(*(track.state[:2] - track.start)) >= p.min_travel)
+
+    def _start(self, cluster: Cluster) -> None:
+        p = self.params
+        covariance = np.diag([p.measurement_noise ** 2] * 2 + [p.initial_velocity_std ** 2] * 2)
+        self.tracks.append(Track(self.next_id, np.array([*cluster.centre, 0.0, 0.0]), covariance, cluster.radius,
+                                 cluster.centre.copy()))
+        self.next_id += 1
+
+    def confirmed(self) -> TrackSet:
+        tracks = [t for t in self.tracks if t.confirmed(self.params)]
+        return TrackSet(np.array([t.id for t in tracks], np.int64).reshape(-1),
+                        np.array([t.state for t in tracks], np.float64).reshape(-1, 4),
+                        np.array([t.covariance for t in tracks], np.float64).reshape(-1, 4, 4),
+                        np.array([t.radius for t in tracks], np.float64).reshape(-1))
+
+
+def warm_up() -> None:
+    """Compile (or load from cache) the evidence kernel outside any scan."""
+    EvidenceGrid(TrackerParams(evidence_size=1.0)).update(0.0, np.zeros(2), np.array([[0.3, 0.2]]))

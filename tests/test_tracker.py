@@ -1,0 +1,171 @@
+"""The tracker core on synthetic scans of known movers: circles moving at known velocities in a
+walled hall, seen by the simulated lidar from a robot standing (or driving) in it."""
+import math
+
+import numpy as np
+import pytest
+
+from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
+from omninav.services.tracker.tracker import MoverTracker, TrackerParams, euclidean_clusters, predicted
+from omninav.sim.raycast import LidarParams, cast, scan
+from omninav.sim.world import load_world
+
+LIDAR = LidarParams(noise_std=0.01)
+RATE = 10.0     # scans per second
+# s: the tracker starts afresh once the walls seen first are static (static_after_s), and confirms a
+# track after confirm_hits scans and min_travel of motion
+WARMED = 3.0
+
+
+@pytest.fixture(scope="module")
+def hall(tmp_path_factory):
+    """An empty 12 m × 8 m hall with a pillar (a static circle no track may come from)."""
+    path = tmp_path_factory.mktemp("hall") / "hall.yaml"
+    path.write_text("name: hall\nbounds: [12.0, 8.0]\nobstacles:\n  - {circle: [9.0, 6.5, 0.3]}\n"
+                    "robot:\n  start: [1.0, 4.0, 0.0]\n")
+    return load_world(path)
+
+
+def movers_at(t: float, movers) -> np.ndarray:
+    """(K, 3) circles of movers given as (x0, y0, vx, vy, radius) at time t."""
+    return np.array([[x + vx * t, y + vy * t, r] for x, y, vx, vy, r in movers]).reshape(-1, 3)
+
+
+def run(world, movers, seconds: float, robot=lambda t: (1.0, 4.0, 0.0), seed: int = 0, tracker=None,
+        odom_in_map=None):
+    """Scans of the movers from the robot, fed to a tracker; the TrackSet after each scan."""
+    rng = np.random.default_rng(seed)
+    tracker = tracker or MoverTracker()
+    out = []
+    for k in range(int(seconds * RATE)):
+        t = k / RATE
+        pose = robot(t)
+        ranges = scan(world, pose, movers_at(t, movers), LIDAR, rng)
+        keep = np.isfinite(ranges)
+        angles = pose[2] + LIDAR.angles()[keep]
+        points = np.column_stack([pose[0] + ranges[keep] * np.cos(angles), pose[1] + ranges[keep] * np.sin(angles)])
+        out.append(tracker.update(t, pose[:2], points, odom_in_map))
+    return tracker, out
+
+
+def assert_tracks(final, movers, t: float, velocity_tol: float = 0.1, position_tol: float = 0.15) -> None:
+    truth = movers_at(t, movers)
+    assert len(final.ids) == len(movers), final
+    for (x, y, r), (_, _, vx, vy, _) in zip(truth, movers):
+        k = int(np.argmin(np.hypot(final.states[:, 0] - x, final.states[:, 1] - y)))
+        assert math.hypot(final.states[k, 0] - x, final.states[k, 1] - y) < position_tol, (final.states[k], x, y)
+        assert math.hypot(final.states[k, 2] - vx, final.states[k, 3] - vy) < velocity_tol, (final.states[k], vx, vy)
+        assert abs(final.radii[k] - r) < 0.1
+
+
+@pytest.mark.parametrize("velocity", [(0.0, 0.5), (-0.4, 0.3), (0.0, -1.2)])
+def test_one_mover_in_front_of_walls_gives_one_confirmed_track_with_its_velocity(hall, velocity):
+    movers = [(5.0, 4.0 - 2.0 * np.sign(velocity[1]), *velocity, 0.3)]
+    _, sets = run(hall, movers, 4.0)
+    ids = {int(i) for s in sets[int(WARMED * RATE):] for i in s.ids}
+    assert len(ids) == 1                       # one track, its id kept, none from walls or the pillar
+    assert_tracks(sets[-1], movers, 3.9)
+
+
+def test_static_walls_and_a_pillar_alone_give_no_track_even_while_the_robot_drives(hall):
+    _, sets = run(hall, [], 6.0, robot=lambda t: (1.0 + 0.4 * t, 4.0 + 0.3 * math.sin(t), 0.2 * t))
+    assert all(len(s.ids) == 0 for s in sets[int(3 * RATE):])     # once the walls have been seen for a while
+
+
+def test_two_movers_while_the_robot_drives_each_get_their_own_track(hall):
+    movers = [(5.0, 1.5, 0.0, 0.6, 0.3), (8.0, 6.5, -0.3, -0.4, 0.25)]
+    _, sets = run(hall, movers, 4.1, robot=lambda t: (1.0 + 0.3 * t, 4.0, 0.05 * t), seed=3)
+    assert_tracks(sets[-1], movers, 4.0)     # (soon after, the first hides the second)
+    assert len({int(i) for s in sets[int(WARMED * RATE):] for i in s.ids}) == 2
+
+
+@pytest.mark.parametrize("angle_deg, speed, seed", [(90, 0.6, 0), (60, 0.8, 1), (130, 0.5, 2)])
+def test_two_movers_crossing_each_other_keep_their_ids(hall, angle_deg, speed, seed):
+    """Two people cross the same point (6, 4) at an angle, the second 1.5 s after the first (they do
+    not walk through each other), and walk on; the first crosses the robot's line of sight."""
+    a = math.radians(angle_deg)
+    va, vb = (0.0, speed), (speed * math.sin(a), speed * math.cos(a))
+    meet = 4.5
+    movers = [(6.0 - va[0] * meet, 4.0 - va[1] * meet, *va, 0.25),
+              (6.0 - vb[0] * (meet + 1.5), 4.0 - vb[1] * (meet + 1.5), *vb, 0.25)]
+    _, sets = run(hall, movers, 8.0, seed=seed)
+    before, after = sets[int(WARMED * RATE)], sets[-1]
+    assert len(before.ids) == len(after.ids) == 2
+
+    def id_of(track_set, t, which):
+        x, y, _ = movers_at(t, movers)[which]
+        return int(track_set.ids[np.argmin(np.hypot(track_set.states[:, 0] - x, track_set.states[:, 1] - y))])
+
+    assert [id_of(before, WARMED, k) for k in (0, 1)] == [id_of(after, 7.9, k) for k in (0, 1)]
+    assert_tracks(after, movers, 7.9, velocity_tol=0.15)
+
+
+def test_with_a_static_map_the_walls_are_static_from_the_first_scan(hall):
+    """The map (rasterized from the world's walls, odom frame = map frame shifted) explains the walls
+    at once: the first scans, before any evidence, give no tentative cluster from them."""
+    resolution = 0.05
+    height, width = int(9.0 / resolution), int(13.0 / resolution)      # and half a metre around
+    ys, xs = (np.mgrid[0:height, 0:width] + 0.5) * resolution - 0.5
+    occupied = (xs < 0.05) | (xs > 11.95) | (ys < 0.05) | (ys > 7.95) | (np.hypot(xs - 9.0, ys - 6.5) < 0.3)
+    grid = OccupancyGrid(info=MapMetaData(resolution=resolution, width=width, height=height,
+                                          origin=Pose2D(-0.5, -0.5, 0.0)),
+                         data=np.where(occupied, 100, 0).astype(np.int8))
+    tracker = MoverTracker()
+    tracker.set_map(grid)
+    robot = (1.0, 4.0, 0.0)
+    ranges = cast(hall, robot[0], robot[1], LIDAR.angles(), None, LIDAR.range_max)
+    angles = LIDAR.angles()[np.isfinite(ranges)]
+    points = np.column_stack([robot[0] + ranges[np.isfinite(ranges)] * np.cos(angles),
+                              robot[1] + ranges[np.isfinite(ranges)] * np.sin(angles)])
+    odom = points - (1.0, 4.0)     # the odom frame starts at the robot
+    assert tracker.static_points(0.0, (0.0, 0.0), odom, odom_in_map=(1.0, 4.0, 0.0)).all()
+    assert not MoverTracker().static_points(0.0, (0.0, 0.0), odom).any()    # without the map: all new
+
+
+def test_a_person_who_stops_becomes_static_and_their_track_is_dropped(hall):
+    params = TrackerParams()
+    movers = [(5.0, 2.0, 0.0, 0.5, 0.3)]
+    tracker, sets = run(hall, movers, WARMED + 1.0)
+    assert len(sets[-1].ids) == 1
+    standing = [(5.0, 2.0 + 0.5 * (WARMED + 1.0), 0.0, 0.0, 0.3)]
+    _, later = run(hall, standing, params.static_after_s + 2.0, tracker=_shifted(tracker, WARMED + 1.0))
+    assert len(later[-1].ids) == 0
+
+
+def _shifted(tracker: MoverTracker, seconds: float) -> MoverTracker:
+    """The tracker, its clock set back by `seconds` so that a second run can start at t = 0."""
+    tracker.stamp_s -= seconds
+    tracker.evidence.since[tracker.evidence.since >= 0] -= seconds
+    return tracker
+
+
+def test_clusters_measure_a_circles_centre_not_its_near_side():
+    centre, radius = np.array([4.0, 0.0]), 0.3
+    angles = np.linspace(-0.07, 0.07, 15)            # the beams that hit it from the origin
+    world_angles = np.arctan2(centre[1], centre[0]) + angles
+    # ray-circle intersection: the near side
+    b = world_angles * 0
+    d = np.column_stack([np.cos(world_angles), np.sin(world_angles)])
+    proj = d @ centre
+    r = proj - np.sqrt(np.maximum(radius ** 2 - (np.hypot(*centre) ** 2 - proj ** 2), 0)) + b
+    points = d * r[:, None]
+    (cluster,) = euclidean_clusters(points[np.isfinite(r)], (0.0, 0.0), TrackerParams())
+    assert np.hypot(*(cluster.centre - centre)) < 0.06
+    assert abs(cluster.radius - radius) < 0.05
+
+
+def test_prediction_moves_the_state_and_grows_its_uncertainty():
+    state, cov = predicted(np.array([1.0, 2.0, 0.5, -0.5]), np.eye(4) * 0.01, 2.0, 1.0)
+    assert np.allclose(state, [2.0, 1.0, 0.5, -0.5])
+    assert cov[0, 0] > 0.01 + 2.0 ** 2 * 0.01
+
+
+def test_bad_parameters_are_named():
+    with pytest.raises(ValueError, match="cluster_tolerance"):
+        TrackerParams(cluster_tolerance=0.0)
+    with pytest.raises(ValueError, match="max_cluster_size"):
+        TrackerParams(min_cluster_size=5, max_cluster_size=3)
+    with pytest.raises(ValueError, match="older"):
+        tracker = MoverTracker()
+        tracker.update(1.0, (0, 0), np.zeros((0, 2)))
+        tracker.update(0.5, (0, 0), np.zeros((0, 2)))
