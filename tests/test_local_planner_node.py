@@ -139,7 +139,7 @@ def test_ros_planner_files_configure_it(tmp_path):
     assert (p.max_vel_x, p.holonomic_robot, p.dwa, p.path_distance_bias, p.goal_distance_bias) == (0.45, False, False,
                                                                                                    0.6, 0.8)
     assert p.follower_params().drive == "diff"
-    with pytest.raises(ParamError, match=r"unknown parameter\(s\) \['max_vel_z'\]"):
+    with pytest.raises(ParamError, match=r"unknown parameter 'max_vel_z' \(did you mean 'max_vel_y'\?\)"):
         build_node("local_planner", overrides={"DWAPlannerROS": {"max_vel_z": 1.0}})
     with pytest.raises(ParamError, match="max_vel_x is given twice"):
         build_node("local_planner", overrides={"DWAPlannerROS": {"max_vel_x": 0.3}, "max_vel_x": 0.4})

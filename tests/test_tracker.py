@@ -21,7 +21,7 @@ WARMED = 3.0
 def hall(tmp_path_factory):
     """An empty 12 m × 8 m hall with a pillar (a static circle no track may come from)."""
     path = tmp_path_factory.mktemp("hall") / "hall.yaml"
-    path.write_text("name: hall\nbounds: [12.0, 8.0]\nobstacles:\n  - {circle: [9.0, 6.5, 0.3]}\n"
+    path.write_text("name: hall\nbounds: [12.0, 8.0]\ncircles:\n  - {center: [9.0, 6.5], radius: 0.3}\n"
                     "robot:\n  start: [1.0, 4.0, 0.0]\n")
     return load_world(path)
 
