@@ -326,6 +326,38 @@ def test_a_mover_without_yield_distance_drives_into_the_robot(tmp_path):
     assert sim.collisions >= 1 and min(gap_to_mover(world, r) for r in readings) < 0.01
 
 
+def test_a_mover_driving_into_a_parked_robot_is_the_movers_fault(tmp_path):
+    world = make_world(tmp_path, LANE_WORLD % "")
+    sim = Simulation(world, NO_NOISE)
+    drive(sim, [(900, (0.0, 0.0, 0.0))])
+    assert sim.mover_fault_collisions >= 1 and sim.robot_fault_collisions == 0
+    assert sim.collisions == sim.mover_fault_collisions
+
+
+def test_a_robot_driving_into_a_mover_is_the_robots_fault(tmp_path):
+    # a slow mover walks away along +x ahead of the robot, which drives after it at 0.6 m/s
+    world = make_world(tmp_path, "bounds: [14.0, 6.0]\nrobot: {start: [1.5, 3.0, 0.0]}\n"
+                                 "movers: [{radius: 0.3, speed: 0.2, path: [[3.0, 3.0], [13.0, 3.0]], loop: false}]\n")
+    sim = Simulation(world, NO_NOISE)
+    drive(sim, [(400, (0.6, 0.0, 0.0))])
+    assert sim.robot_fault_collisions >= 1 and sim.mover_fault_collisions == 0
+
+
+def test_a_mover_catching_up_with_a_robot_driving_away_is_the_movers_fault(tmp_path):
+    # the mover comes from behind at 0.8 m/s while the robot drives on along +x at 0.2 m/s
+    world = make_world(tmp_path, "bounds: [14.0, 6.0]\nrobot: {start: [3.0, 3.0, 0.0]}\n"
+                                 "movers: [{radius: 0.3, speed: 0.8, path: [[1.0, 3.0], [13.0, 3.0]], loop: false}]\n")
+    sim = Simulation(world, NO_NOISE)
+    drive(sim, [(400, (0.2, 0.0, 0.0))])
+    assert sim.mover_fault_collisions >= 1 and sim.robot_fault_collisions == 0
+
+
+def test_every_wall_contact_is_the_robots_fault(wall_world):
+    sim = Simulation(wall_world, NO_NOISE)
+    drive(sim, [(700, (0.8, 0.0, 0.0)), (300, (-0.5, 0.0, 0.0)), (700, (0.8, 0.0, 0.0))])
+    assert sim.robot_fault_collisions == sim.collisions == 2 and sim.mover_fault_collisions == 0
+
+
 def test_a_robot_behind_or_beside_a_yielding_mover_does_not_stop_it(tmp_path):
     # both start touching the robot (front x = 2.416, left side y = 3.318) and walk away along +x:
     # one from right ahead of it, the other from beside its front corner, 6 cm to its left
