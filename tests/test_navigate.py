@@ -157,6 +157,35 @@ def test_summary_of_a_mission_with_two_goals(box_world):
     assert json.loads(json.dumps(s.to_json()))["recording"] == "run.mcap"
 
 
+def test_time_within_1m_of_each_goal_on_a_synthetic_record(box_world):
+    stamps, poses = straight_run(np.arange(0.0, 10.01, 0.01))     # x = 1 + 0.3 t, y = 1
+    record = MissionRecord(stamps, poses, goals=[goal("g1", 2.5, 1.0, 0.0, 1.0), goal("g2", 4.0, 1.02, 0.5, 5.5),
+                                                 goal("g3", 1.0, 3.5, 0.0, 9.0)],
+                           statuses=[status("g1", "succeeded", 5.0), status("g2", "succeeded", 9.0)],
+                           sim_values={"collisions": 0})
+    g1, g2, g3 = summarize_mission(record, box_world).goals
+    assert g1.within_1m_s == pytest.approx((1.5 - 1.0) / 0.3 - 1.0, abs=0.011)   # x = 1.5
+    assert g2.within_1m_s == pytest.approx((3.0002 - 1.0) / 0.3 - 5.5, abs=0.011)   # sqrt(1 - 0.02²) short of x = 4
+    assert g3.within_1m_s is None                                  # 2.5 m away the whole time
+    assert "never within 1 m" in "\n".join(summary_lines(summarize_mission(record, box_world)))
+
+
+@pytest.mark.parametrize("values, success", [
+    ({"collisions": 2, "robot_fault_collisions": 0, "mover_fault_collisions": 2}, True),
+    ({"collisions": 3, "robot_fault_collisions": 1, "mover_fault_collisions": 2}, False),
+    ({"collisions": 1}, False),                 # a sim that does not split: the robot's fault
+])
+def test_only_collisions_that_were_the_robots_fault_fail_a_mission(box_world, values, success):
+    stamps, poses = straight_run(np.arange(0.0, 4.01, 0.01))
+    record = MissionRecord(stamps, poses, goals=[goal("g1", 4.0, 1.0, 0.5, 0.5)],
+                           statuses=[status("g1", "succeeded", 4.0)], sim_values=values)
+    s = summarize_mission(record, box_world)
+    assert s.success == success and s.collisions == values["collisions"]
+    assert s.robot_fault_collisions == values.get("robot_fault_collisions", values["collisions"])
+    assert s.mover_fault_collisions == values.get("mover_fault_collisions")
+    assert f"{values['collisions']} collisions ({s.robot_fault_collisions} the robot's fault" in summary_lines(s)[0]
+
+
 def test_clearance_counts_movers_and_overlaps(box_world):
     world = box_world
     stamps, poses = straight_run(np.arange(0.0, 2.01, 0.01), start=(1.0, 2.0, 0.0), end=(1.5, 2.0, 0.0))

@@ -12,9 +12,13 @@ pure and computes:
 - for the mission: time_s from the first goal sent to the last goal's end (or the last truth),
   path_length_m of the true trajectory over that span, min_clearance_m between the footprint and
   static obstacles and movers along it, and the collisions the sim counted (its contact starts;
-  sim/physics.py).
+  sim/physics.py), split into the robot's fault and the movers' (a mover drove into a robot
+  standing still or moving away);
+- per goal, within_1m_s: the sim s from sending it until the robot's true position first came
+  within WITHIN_M of it (None if it never did) — how long the way took, apart from the final approach.
 
-success: every requested goal reached (status succeeded) and no collision.
+success: every requested goal reached (status succeeded) and no collision that was the robot's
+fault; a recording whose sim does not split its collisions counts every one as the robot's.
 """
 from __future__ import annotations
 
@@ -36,6 +40,7 @@ from ..se2 import wrap_angle
 
 TERMINAL = ("succeeded", "aborted", "canceled")
 CLEARANCE_CHUNK = 2048      # poses per vectorised clearance computation (bounds the temporaries)
+WITHIN_M = 1.0              # the radius of a goal's within_1m_s
 
 
 class MissionError(UserError):
@@ -65,6 +70,7 @@ class GoalOutcome:
     xy_error_m: float
     yaw_error_deg: float
     plan_length_m: float | None     # the first global plan's length
+    within_1m_s: float | None       # sim s from sending it until the robot first came within WITHIN_M
 
 
 @dataclass(frozen=True)
@@ -78,6 +84,8 @@ class MissionSummary:
     final_xy_error_m: float | None
     final_yaw_error_deg: float | None
     collisions: int | None          # None: the recording holds no sim Diagnostic
+    robot_fault_collisions: int | None   # the robot moved towards what it touched (every static contact)
+    mover_fault_collisions: int | None   # a mover drove into the robot standing still or moving away
     min_clearance_m: float
     recording: str
     goals: list[GoalOutcome]
@@ -204,6 +212,18 @@ def _first_plan_length(plans: list[PathMsg], goal_id: str) -> float | None:
     return None
 
 
+def _sim_count(record: MissionRecord, name: str) -> int | None:
+    value = record.sim_values.get(name)
+    return int(value) if isinstance(value, (int, float)) else None
+
+
+def _first_within(record: MissionRecord, goal: np.ndarray, sent_ns: int, ended_ns: int) -> float | None:
+    """Sim s from sent_ns until the first true pose (up to ended_ns) within WITHIN_M of the goal."""
+    span = (record.truth_stamps >= sent_ns) & (record.truth_stamps <= ended_ns)
+    near = np.flatnonzero(span & (np.hypot(*(record.truth_poses[:, :2] - goal[:2]).T) <= WITHIN_M))
+    return (int(record.truth_stamps[near[0]]) - sent_ns) / NS_PER_S if len(near) else None
+
+
 def summarize_mission(record: MissionRecord, world: World, goals_total: int | None = None,
                       recording: str = "") -> MissionSummary:
     """The mission's figures; goals_total is how many goals were to be sent (default: those sent)."""
@@ -222,24 +242,27 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
                                     final.status if final is not None else "none",
                                     final.reason if final is not None else "",
                                     (ended_ns - goal.header.stamp_ns) / NS_PER_S, xy, yaw,
-                                    _first_plan_length(record.plans, goal.goal_id)))
+                                    _first_plan_length(record.plans, goal.goal_id),
+                                    _first_within(record, target, goal.header.stamp_ns, ended_ns)))
     start_ns = record.goals[0].header.stamp_ns if record.goals else int(record.truth_stamps[0])
     span = (record.truth_stamps >= start_ns) & (record.truth_stamps <= end_ns)
     poses = record.truth_poses[span] if span.any() else record.truth_poses[-1:]
     stamps = record.truth_stamps[span] if span.any() else record.truth_stamps[-1:]
     reached = sum(o.status == "succeeded" for o in outcomes)
-    collisions = record.sim_values.get("collisions")
-    collisions = int(collisions) if isinstance(collisions, (int, float)) else None
+    collisions, robot_fault, mover_fault = (_sim_count(record, name) for name in (
+        "collisions", "robot_fault_collisions", "mover_fault_collisions"))
+    if robot_fault is None:
+        robot_fault = collisions
     plan_lengths = [o.plan_length_m for o in outcomes if o.plan_length_m is not None]
     return MissionSummary(
-        success=reached == goals_total and collisions == 0,
+        success=reached == goals_total and robot_fault == 0,
         goals_reached=reached, goals_total=goals_total,
         time_s=((last_end_ns if last_end_ns is not None else end_ns) - start_ns) / NS_PER_S,
         path_length_m=path_length(poses),
         plan_length_m=sum(plan_lengths) if plan_lengths else None,
         final_xy_error_m=outcomes[-1].xy_error_m if outcomes else None,
         final_yaw_error_deg=outcomes[-1].yaw_error_deg if outcomes else None,
-        collisions=collisions,
+        collisions=collisions, robot_fault_collisions=robot_fault, mover_fault_collisions=mover_fault,
         min_clearance_m=clearance_along(world, poses, _movers_at(record, stamps)),
         recording=recording, goals=outcomes)
 
@@ -250,13 +273,17 @@ def summary_lines(summary: MissionSummary) -> list[str]:
         return "n/a" if value is None else format(value, fmt)
 
     lines = [f"{'SUCCESS' if summary.success else 'FAILED'}: {summary.goals_reached}/{summary.goals_total} goals "
-             f"reached, {num(summary.collisions, 'd')} collisions",
+             f"reached, {num(summary.collisions, 'd')} collisions ({num(summary.robot_fault_collisions, 'd')} "
+             f"the robot's fault, {num(summary.mover_fault_collisions, 'd')} a mover's)",
              f"time {summary.time_s:.1f} sim s, driven {summary.path_length_m:.2f} m "
              f"(first global plans {num(summary.plan_length_m, '.2f')} m), min clearance {summary.min_clearance_m:.3f} m",
              f"final error {num(summary.final_xy_error_m, '.3f')} m, {num(summary.final_yaw_error_deg, '.2f')} deg"]
     for o in summary.goals:
         why = f" ({o.reason})" if o.reason else ""
+        near = f"within {WITHIN_M:g} m after {o.within_1m_s:.1f} s" if o.within_1m_s is not None else \
+            f"never within {WITHIN_M:g} m"
         lines.append(f"  {o.goal_id} ({o.goal[0]:.2f}, {o.goal[1]:.2f}, {math.degrees(o.goal[2]):.1f} deg): "
-                     f"{o.status}{why} after {o.time_s:.1f} s, error {o.xy_error_m:.3f} m {o.yaw_error_deg:.2f} deg")
+                     f"{o.status}{why} after {o.time_s:.1f} s ({near}), error {o.xy_error_m:.3f} m "
+                     f"{o.yaw_error_deg:.2f} deg")
     lines.append(f"recording {summary.recording}")
     return lines
