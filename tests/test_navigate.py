@@ -196,6 +196,8 @@ def test_clearance_counts_movers_and_overlaps(box_world):
     mover[:, 0] = (2.5, 2.0, 0.2)                                # the robot's front edge reaches 1.916
     record = MissionRecord(stamps, poses, mover_stamps=stamps, mover_circles=mover, sim_values={"collisions": 0})
     assert summarize_mission(record, world).min_clearance_m == pytest.approx(2.5 - 0.2 - 1.916)
+    assert summarize_mission(record, world).min_mover_clearance_m == pytest.approx(2.5 - 0.2 - 1.916)
+    assert clear_static.min_mover_clearance_m is None
     mover[150:, 0] = (1.8, 2.0, 0.2)                             # inside the footprint
     assert summarize_mission(record, world).min_clearance_m == 0.0
 
@@ -258,6 +260,21 @@ def test_navigate_argument_errors_exit_2_naming_the_problem(argv, message, capsy
     assert cli_main(["navigate", *argv, "-o", str(tmp_path)]) == 2
     assert message in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []            # nothing was started or written
+
+
+def test_navigate_refuses_a_goal_in_an_obstacle_or_out_of_reach_before_starting_anything(capsys, tmp_path):
+    walled = tmp_path / "walled.yaml"          # a wall across the whole hall: the right half is closed off
+    walled.write_text("bounds: [8.0, 4.0]\nwalls: [[4.0, 0.0, 4.0, 4.0]]\nrobot: {start: [1.0, 2.0, 0.0]}\n")
+    cases = [(["--world", "room", "--goal", "5", "4", "0"], "goal 1 (5.00, 4.00) is in an obstacle"),
+             (["--world", str(walled), "--goal", "2", "2", "0", "--goal", "6", "2", "0"],
+              "goal 2 (6.00, 2.00) cannot be reached from the start (1.00, 2.00)"),
+             (["--world", str(walled), "--goal", "3.8", "2", "0"], "goal 1 (3.80, 2.00) is in an obstacle")]
+    for k, (argv, message) in enumerate(cases):
+        out = tmp_path / f"run{k}"
+        assert cli_main(["navigate", *argv, "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1
+        assert not (out / "compose.yaml").exists() and not (out / "services.log").exists()   # nothing started
 
 
 @pytest.mark.parametrize("localization, service", [("amcl", "localizer"), ("slam", "slam"), ("truth", "truth_pose")])

@@ -87,6 +87,7 @@ class MissionSummary:
     robot_fault_collisions: int | None   # the robot moved towards what it touched (every static contact)
     mover_fault_collisions: int | None   # a mover drove into the robot standing still or moving away
     min_clearance_m: float
+    min_mover_clearance_m: float | None     # the closest the footprint came to a mover; None: no movers
     recording: str
     goals: list[GoalOutcome]
 
@@ -175,15 +176,17 @@ def movers_clearance(footprint: np.ndarray, poses: np.ndarray, circles: np.ndarr
     return gap.min(axis=1)
 
 
-def clearance_along(world: World, poses: np.ndarray, mover_circles: np.ndarray) -> float:
-    """The smallest distance between the footprint and any obstacle or mover along a trajectory."""
-    best = math.inf
+def clearance_along(world: World, poses: np.ndarray, mover_circles: np.ndarray) -> tuple[float, float]:
+    """The smallest distances between the footprint and (any obstacle or mover, a mover) along a
+    trajectory; the second is inf without movers."""
+    best, best_mover = math.inf, math.inf
     for start in range(0, len(poses), CLEARANCE_CHUNK):
         chunk = slice(start, start + CLEARANCE_CHUNK)
         static = world.footprint_clearance(poses[chunk])
         moving = movers_clearance(world.robot.footprint, poses[chunk], mover_circles[chunk])
         best = min(best, float(np.minimum(static, moving).min()))
-    return best
+        best_mover = min(best_mover, float(moving.min()))
+    return best, best_mover
 
 
 def _pose_error(pose: np.ndarray, goal: np.ndarray) -> tuple[float, float]:
@@ -254,6 +257,7 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
     if robot_fault is None:
         robot_fault = collisions
     plan_lengths = [o.plan_length_m for o in outcomes if o.plan_length_m is not None]
+    clearance, mover_clearance = clearance_along(world, poses, _movers_at(record, stamps))
     return MissionSummary(
         success=reached == goals_total and robot_fault == 0,
         goals_reached=reached, goals_total=goals_total,
@@ -263,7 +267,7 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
         final_xy_error_m=outcomes[-1].xy_error_m if outcomes else None,
         final_yaw_error_deg=outcomes[-1].yaw_error_deg if outcomes else None,
         collisions=collisions, robot_fault_collisions=robot_fault, mover_fault_collisions=mover_fault,
-        min_clearance_m=clearance_along(world, poses, _movers_at(record, stamps)),
+        min_clearance_m=clearance, min_mover_clearance_m=mover_clearance if math.isfinite(mover_clearance) else None,
         recording=recording, goals=outcomes)
 
 
@@ -276,7 +280,8 @@ def summary_lines(summary: MissionSummary) -> list[str]:
              f"reached, {num(summary.collisions, 'd')} collisions ({num(summary.robot_fault_collisions, 'd')} "
              f"the robot's fault, {num(summary.mover_fault_collisions, 'd')} a mover's)",
              f"time {summary.time_s:.1f} sim s, driven {summary.path_length_m:.2f} m "
-             f"(first global plans {num(summary.plan_length_m, '.2f')} m), min clearance {summary.min_clearance_m:.3f} m",
+             f"(first global plans {num(summary.plan_length_m, '.2f')} m), min clearance {summary.min_clearance_m:.3f} m"
+             + (f" ({summary.min_mover_clearance_m:.3f} m to a mover)" if summary.min_mover_clearance_m is not None else ""),
              f"final error {num(summary.final_xy_error_m, '.3f')} m, {num(summary.final_yaw_error_deg, '.2f')} deg"]
     for o in summary.goals:
         why = f" ({o.reason})" if o.reason else ""
