@@ -334,22 +334,18 @@ def test_a_mover_driving_into_a_parked_robot_is_the_movers_fault(tmp_path):
     assert sim.collisions == sim.mover_fault_collisions
 
 
-def test_a_robot_driving_into_a_mover_is_the_robots_fault(tmp_path):
-    # a slow mover walks away along +x ahead of the robot, which drives after it at 0.6 m/s
-    world = make_world(tmp_path, "bounds: [14.0, 6.0]\nrobot: {start: [1.5, 3.0, 0.0]}\n"
-                                 "movers: [{radius: 0.3, speed: 0.2, path: [[3.0, 3.0], [13.0, 3.0]], loop: false}]\n")
+@pytest.mark.parametrize("robot_x, mover_from, mover_speed, robot_speed, robots_fault", [
+    (1.5, 3.0, 0.2, 0.6, True),      # the robot drives after a slow mover walking away and runs into it
+    (3.0, 1.0, 0.8, 0.2, False),     # a fast mover catches up from behind with a robot driving away
+])
+def test_who_moved_into_whom_decides_the_fault(tmp_path, robot_x, mover_from, mover_speed, robot_speed, robots_fault):
+    world = make_world(tmp_path, f"bounds: [14.0, 6.0]\nrobot: {{start: [{robot_x}, 3.0, 0.0]}}\nmovers: [{{radius: 0.3, "
+                                 f"speed: {mover_speed}, path: [[{mover_from}, 3.0], [13.0, 3.0]], loop: false}}]\n")
     sim = Simulation(world, NO_NOISE)
-    drive(sim, [(400, (0.6, 0.0, 0.0))])
-    assert sim.robot_fault_collisions >= 1 and sim.mover_fault_collisions == 0
-
-
-def test_a_mover_catching_up_with_a_robot_driving_away_is_the_movers_fault(tmp_path):
-    # the mover comes from behind at 0.8 m/s while the robot drives on along +x at 0.2 m/s
-    world = make_world(tmp_path, "bounds: [14.0, 6.0]\nrobot: {start: [3.0, 3.0, 0.0]}\n"
-                                 "movers: [{radius: 0.3, speed: 0.8, path: [[1.0, 3.0], [13.0, 3.0]], loop: false}]\n")
-    sim = Simulation(world, NO_NOISE)
-    drive(sim, [(400, (0.2, 0.0, 0.0))])
-    assert sim.mover_fault_collisions >= 1 and sim.robot_fault_collisions == 0
+    drive(sim, [(400, (robot_speed, 0.0, 0.0))])
+    assert sim.collisions >= 1
+    assert (sim.robot_fault_collisions, sim.mover_fault_collisions) == ((sim.collisions, 0) if robots_fault
+                                                                        else (0, sim.collisions))
 
 
 def test_every_wall_contact_is_the_robots_fault(wall_world):
