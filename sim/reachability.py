@@ -31,7 +31,9 @@ PATH_SEARCH = GlobalPlannerParams(use_dijkstra=False, use_grid_path=True, allow_
 
 @dataclass(frozen=True)
 class ReachabilityParams:
-    clearance_m: float = 0.05       # the footprint grown by this keeps off every blocked cell
+    # the footprint grown by this keeps off every blocked cell; a rasterised obstacle may already
+    # reach up to a cell beyond the real one, so 0 still keeps the footprint off the obstacle
+    clearance_m: float = 0.0
     occupied_threshold: int = 50    # cells above are obstacles (map_server's trinary occupied: 100)
     unknown_is_free: bool = False   # unknown cells (-1) block, as the static costmap treats them
 
@@ -60,8 +62,9 @@ def pose_problem(grid: OccupancyGrid, blocked: np.ndarray, footprint: np.ndarray
     grown = pad(footprint, params.clearance_m + info.resolution / 2)
     rows, cols = cells_inside(info, transform(grown, pose))
     if blocked[rows, cols].any():
+        grown_by = f", grown by {params.clearance_m:g} m" if params.clearance_m else ""
         return (f"{_describe(what, pose)} is in an obstacle: the robot's footprint there (yaw "
-                f"{math.degrees(pose[2]):.0f} deg, grown by {params.clearance_m:g} m) covers occupied cells")
+                f"{math.degrees(pose[2]):.0f} deg{grown_by}) covers occupied cells")
     return None
 
 
