@@ -10,6 +10,7 @@ from scipy import ndimage
 
 from omninav.cli.main import main as cli_main
 from omninav.experiments.scenarios import DYNAMIC_KINDS, KINDS, ScenarioError, generate_world, world_text
+from omninav.experiments.scenarios.bench import overall
 from omninav.experiments.scenarios.layout import TIMING
 from omninav.services.global_planner.astar import GlobalPlanner
 from omninav.services.global_planner.params import GlobalPlannerParams
@@ -108,3 +109,22 @@ def test_unknown_kinds_and_bad_seeds_are_one_line_errors(tmp_path, capsys):
     err = capsys.readouterr().err
     assert len(err.strip().splitlines()) == 1 and "unknown scenario kind 'maize'" in err
     assert not (tmp_path / "w.yaml").exists()
+
+
+def test_bench_figures_over_the_worlds():
+    def row(success, robot, mover, approach, time_s, path, plan):
+        return {"success": success, "robot_fault_collisions": robot, "mover_fault_collisions": mover,
+                "min_mover_clearance_m": approach, "time_s": time_s, "path_length_m": path, "plan_length_m": plan}
+    figures = overall([row(True, 0, 0, 0.4, 20.0, 10.0, 10.0), row(False, 2, 1, 0.0, 60.0, 15.0, 10.0),
+                       row(True, 0, 3, 0.0, 30.0, 11.0, 10.0), row(False, 0, 0, None, 40.0, 1.0, None)])
+    assert figures["success_rate"] == 0.5 and figures["worlds"] == 4
+    assert (figures["robot_fault_collisions"], figures["mover_fault_collisions"], figures["worlds_with_robot_fault"]) == (2, 4, 1)
+    assert figures["closest_mover_approach_m"] == 0.0 and figures["median_time_s"] == 35.0
+    assert figures["median_path_over_plan"] == pytest.approx(1.1)           # of the worlds with a plan
+
+
+def test_bench_scenarios_refuses_an_unknown_kind_or_no_worlds(capsys):
+    assert cli_main(["bench", "scenarios", "--kind", "maize"]) == 2
+    assert "unknown scenario kind 'maize'" in capsys.readouterr().err
+    assert cli_main(["bench", "scenarios", "--kind", "crowd", "--count", "0"]) == 2
+    assert "--count and --workers must be >= 1" in capsys.readouterr().err

@@ -17,10 +17,11 @@ from pathlib import Path
 
 from ...cli.navigate import LOCALIZATIONS, compose_for, map_for
 from ...services.chassis.kinematics import DRIVES
+from ...services.runtime.errors import exits_2_on_user_error
 from ...sim.world import load_world
 from ..lockstep_mission import run_mission
 from ..workers import run_in_workers
-from . import check_kind, generate_world, world_text
+from . import ScenarioError, check_kind, generate_world, world_text
 
 REPO = Path(__file__).resolve().parents[2]
 
@@ -90,10 +91,12 @@ def overall(rows: list[dict]) -> dict:
             "median_path_over_plan": statistics.median(ratios) if ratios else None}
 
 
+@exits_2_on_user_error("bench scenarios")
 def main(args: argparse.Namespace) -> int:
     check_kind(args.kind)
     if args.count < 1 or args.workers < 1 or args.seed < 0:
-        raise SystemExit("omninav bench scenarios: --count and --workers must be >= 1 and --seed >= 0")
+        raise ScenarioError(f"--count and --workers must be >= 1 and --seed >= 0, got {args.count}, "
+                            f"{args.workers} and {args.seed}")
     out = Path(args.out or REPO / "out" / time.strftime(f"scenarios-{args.kind}-%Y%m%d-%H%M%S")).resolve()
     out.mkdir(parents=True, exist_ok=True)
     jobs = [(args.kind, seed, args.drive, args.localization, args.timeout, str(out))
