@@ -170,6 +170,17 @@ def test_time_within_1m_of_each_goal_on_a_synthetic_record(box_world):
     assert "never within 1 m" in "\n".join(summary_lines(summarize_mission(record, box_world)))
 
 
+def test_a_goal_declared_reached_far_from_the_truth_is_a_false_arrival(box_world):
+    stamps, poses = straight_run(np.arange(0.0, 4.01, 0.01))     # the robot ends at (4, 1)
+    for goal_x, reached in ((4.2, True), (5.0, False)):
+        record = MissionRecord(stamps, poses, goals=[goal("g1", goal_x, 1.0, 0.5, 0.5)],
+                               statuses=[status("g1", "succeeded", 4.0)], sim_values={"collisions": 0})
+        s = summarize_mission(record, box_world)
+        assert (s.success, s.goals_reached, s.goals[0].reached, s.to_json()["goals"][0]["reached"]) == (
+            reached, int(reached), reached, reached)
+        assert ("a false arrival: 1.00 m from the goal" in "\n".join(summary_lines(s))) == (not reached)
+
+
 @pytest.mark.parametrize("values, success", [
     ({"collisions": 2, "robot_fault_collisions": 0, "mover_fault_collisions": 2}, True),
     ({"collisions": 3, "robot_fault_collisions": 1, "mover_fault_collisions": 2}, False),

@@ -3,7 +3,8 @@ worlds of one kind (seeds S … S+N−1), each driven as one lockstep mission fr
 goal with the stack `omninav navigate` composes (cli/navigate.py compose_for) — deterministic per
 world, as fast as the CPU computes, on --workers processes.
 
-Per world and overall: success (the goal reached, no collision that was the robot's fault),
+Per world and overall: success (the goal reached — the navigator said so and the truth agrees —
+and no collision that was the robot's fault), false arrivals (succeeded, but far from the goal),
 robot-fault and mover-fault collisions, the closest the footprint came to a mover, the sim time,
 the driven path against the first global plan, and when the robot first came within 1 m of the goal.
 """
@@ -56,7 +57,7 @@ def drive_world(job: tuple[str, int, str | None, str, float, str]) -> dict:
     return {"world": world.name, "seed": seed, "drive": drive, **{k: summary[k] for k in (
         "success", "collisions", "robot_fault_collisions", "mover_fault_collisions", "min_mover_clearance_m",
         "min_clearance_m", "time_s", "path_length_m", "plan_length_m", "final_xy_error_m")},
-        "status": goal.get("status", "none"), "within_1m_s": goal.get("within_1m_s"),
+        "status": goal.get("status", "none"), "reached": goal.get("reached", False), "within_1m_s": goal.get("within_1m_s"),
         "wall_s": round(time.monotonic() - began, 1)}
 
 
@@ -68,12 +69,13 @@ def _ratio(row: dict) -> float | None:
     return row["path_length_m"] / row["plan_length_m"] if row.get("plan_length_m") else None
 
 
-HEADER = (f"{'world':14} {'ok':3} {'status':10} {'robot':>5} {'mover':>5} {'mover m':>7} {'time s':>7} "
+HEADER = (f"{'world':14} {'ok':3} {'status':13} {'robot':>5} {'mover':>5} {'mover m':>7} {'time s':>7} "
           f"{'1 m s':>6} {'path m':>7} {'plan m':>7} {'ratio':>5}")
 
 
 def row_line(r: dict) -> str:
-    return (f"{r['world']:14} {'yes' if r['success'] else 'NO':3} {r['status']:10} "
+    status = "false arrival" if r["status"] == "succeeded" and not r["reached"] else r["status"]
+    return (f"{r['world']:14} {'yes' if r['success'] else 'NO':3} {status:13} "
             f"{_fmt(r['robot_fault_collisions'], 'd'):>5} {_fmt(r['mover_fault_collisions'], 'd'):>5} "
             f"{_fmt(r['min_mover_clearance_m'], '7.3f')} {r['time_s']:7.1f} {_fmt(r['within_1m_s'], '6.1f')} "
             f"{r['path_length_m']:7.2f} {_fmt(r['plan_length_m'], '7.2f')} {_fmt(_ratio(r), '5.2f')}")
@@ -86,6 +88,7 @@ def overall(rows: list[dict]) -> dict:
             "robot_fault_collisions": sum(r["robot_fault_collisions"] or 0 for r in rows),
             "mover_fault_collisions": sum(r["mover_fault_collisions"] or 0 for r in rows),
             "worlds_with_robot_fault": sum(bool(r["robot_fault_collisions"]) for r in rows),
+            "false_arrivals": sum(r["status"] == "succeeded" and not r["reached"] for r in rows),
             "closest_mover_approach_m": min(approaches) if approaches else None,
             "median_time_s": statistics.median(r["time_s"] for r in rows),
             "median_path_over_plan": statistics.median(ratios) if ratios else None}

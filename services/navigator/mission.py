@@ -17,8 +17,12 @@ pure and computes:
 - per goal, within_1m_s: the sim s from sending it until the robot's true position first came
   within WITHIN_M of it (None if it never did) — how long the way took, apart from the final approach.
 
-success: every requested goal reached (status succeeded) and no collision that was the robot's
-fault; a recording whose sim does not split its collisions counts every one as the robot's.
+A goal is reached when the navigator said succeeded and the truth agrees: the robot stood within
+ARRIVED_M of it. A navigator misled by its pose (a shove, a localizer settled on a wrong pose) can
+declare a goal reached metres away from it; that is a false arrival, not a reached goal.
+
+success: every requested goal reached and no collision that was the robot's fault; a recording
+whose sim does not split its collisions counts every one as the robot's.
 """
 from __future__ import annotations
 
@@ -41,6 +45,9 @@ from ..se2 import wrap_angle
 TERMINAL = ("succeeded", "aborted", "canceled")
 CLEARANCE_CHUNK = 2048      # poses per vectorised clearance computation (bounds the temporaries)
 WITHIN_M = 1.0              # the radius of a goal's within_1m_s
+# a succeeded goal farther than this from the truth was a false arrival: ten times navigate's
+# arrival tolerance (3 cm) plus AMCL's usual error of a few cm, well below the robot's width
+ARRIVED_M = 0.25
 
 
 class MissionError(UserError):
@@ -72,6 +79,11 @@ class GoalOutcome:
     plan_length_m: float | None     # the first global plan's length
     within_1m_s: float | None       # sim s from sending it until the robot first came within WITHIN_M
 
+    @property
+    def reached(self) -> bool:
+        """Succeeded, and the truth within ARRIVED_M of the goal (not a false arrival)."""
+        return self.status == "succeeded" and self.xy_error_m <= ARRIVED_M
+
 
 @dataclass(frozen=True)
 class MissionSummary:
@@ -92,7 +104,10 @@ class MissionSummary:
     goals: list[GoalOutcome]
 
     def to_json(self) -> dict:
-        return asdict(self)
+        mapping = asdict(self)
+        for outcome, goal in zip(mapping["goals"], self.goals):
+            outcome["reached"] = goal.reached
+        return mapping
 
 
 # ---------------------------------------------------------------- reading a recording
@@ -251,7 +266,7 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
     span = (record.truth_stamps >= start_ns) & (record.truth_stamps <= end_ns)
     poses = record.truth_poses[span] if span.any() else record.truth_poses[-1:]
     stamps = record.truth_stamps[span] if span.any() else record.truth_stamps[-1:]
-    reached = sum(o.status == "succeeded" for o in outcomes)
+    reached = sum(o.reached for o in outcomes)
     collisions, robot_fault, mover_fault = (_sim_count(record, name) for name in (
         "collisions", "robot_fault_collisions", "mover_fault_collisions"))
     if robot_fault is None:
@@ -285,6 +300,8 @@ def summary_lines(summary: MissionSummary) -> list[str]:
              f"final error {num(summary.final_xy_error_m, '.3f')} m, {num(summary.final_yaw_error_deg, '.2f')} deg"]
     for o in summary.goals:
         why = f" ({o.reason})" if o.reason else ""
+        if o.status == "succeeded" and not o.reached:
+            why += f" (a false arrival: {o.xy_error_m:.2f} m from the goal by the truth)"
         near = f"within {WITHIN_M:g} m after {o.within_1m_s:.1f} s" if o.within_1m_s is not None else \
             f"never within {WITHIN_M:g} m"
         lines.append(f"  {o.goal_id} ({o.goal[0]:.2f}, {o.goal[1]:.2f}, {math.degrees(o.goal[2]):.1f} deg): "
