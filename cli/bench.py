@@ -13,9 +13,10 @@ BENCHES: dict[str, str] = {
     "amcl": "omninav.services.localizer.bench",
     "planner": "omninav.services.global_planner.bench",
     "local": "omninav.services.local_planner.bench",
-    "missions": "omninav.services.navigator.bench",
-    "paper": "omninav.services.navigator.paper_bench",
     "fuzz": "omninav.experiments.fuzz",
+    "missions": "omninav.experiments.missions_bench",
+    "paper": "omninav.experiments.paper_bench",
+    "scenarios": "omninav.experiments.scenarios.bench",
 }
 
 

@@ -28,6 +28,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "localize-eval": ("omninav.services.localizer.evaluate", "score AMCL in the simulator against the ground truth"),
     "slam-eval": ("omninav.services.slam.evaluate", "run SLAM on a CARMEN log and score it with the relations metric"),
     "navigate": ("omninav.cli.navigate", "drive a navigation mission in the simulator and score it"),
+    "scenario": ("omninav.experiments.scenarios.cli", "generate worlds of a kind from a seed (crossing, crowd, ...)"),
     "bench": ("omninav.cli.bench", "benchmarks (transport, recorder, sim, amcl, planner, ...)"),
     "demo": ("omninav.cli.demo", "the main job: a short run of the stack, recorded and replayed"),
 }

@@ -36,7 +36,7 @@ import zenoh
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout
 from ..schemas.messages import CancelGoal, Clock, Goal, Header, NavStatus, Pose2D
 from ..services.chassis.kinematics import DRIVES
-from ..services.map_server.mapio import save_map
+from ..services.map_server.mapio import MapError, load_map, save_map
 from ..services.navigator.mission import TERMINAL, load_mission, summarize_mission, summary_lines
 from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
 from ..services.runtime.compose import ComposeError, load_compose
@@ -45,6 +45,7 @@ from ..services.runtime.live import LiveRunner
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.zenoh_config import ROUTER_ENV, free_loopback_endpoint, open_client, router_endpoint
 from ..sim.node import open_world
+from ..sim.reachability import mission_problems
 from ..sim.world import World, WorldError, world_path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -222,6 +223,17 @@ def mission_goals(args: argparse.Namespace, world: World) -> np.ndarray:
     return goals
 
 
+def check_goals(map_file: Path, world: World, goals: np.ndarray) -> None:
+    """NavigateError naming every goal (or the start) in an obstacle or out of reach on the map."""
+    try:
+        grid = load_map(map_file)
+    except MapError as exc:
+        raise NavigateError(f"the mission's map is not usable: {exc}") from None
+    problems = mission_problems(grid, world.robot.footprint, world.robot.start, goals)
+    if problems:
+        raise NavigateError(f"on the map {map_file}: " + "; ".join(problems))
+
+
 def check_numbers(args: argparse.Namespace) -> None:
     for name, value in (("--timeout", args.timeout), ("--rate", args.rate)):
         if not (math.isfinite(value) and value > 0):
@@ -303,17 +315,24 @@ class Mission:
         return status.status
 
 
-def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot: str) -> bool:
-    """Until every service of the compose file has declared its liveliness token (or up died)."""
+def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot: str, say) -> bool:
+    """Until every service of the compose file has declared its liveliness token (or up died);
+    says which are up whenever more are."""
     keys = KeyLayout(robot)
     deadline = time.monotonic() + READY_TIMEOUT_S
     while not Path(os.environ[CREDENTIALS_ENV]).exists():     # `up` writes the run's identities first
         if up.poll() is not None or time.monotonic() > deadline:
             return False
         time.sleep(POLL_S)
+    ready: list[str] = []
     with open_client(router) as session:
         while time.monotonic() < deadline and up.poll() is None:
-            if all(any(r.ok is not None for r in session.liveliness().get(keys.alive(n), timeout=0.2)) for n in names):
+            alive = [n for n in names if any(r.ok is not None for r in session.liveliness().get(keys.alive(n), timeout=0.2))]
+            if len(alive) > len(ready):
+                waiting = [n for n in names if n not in alive]
+                say(f"{len(alive)}/{len(names)} services up" + (f"; waiting for {', '.join(waiting)}" if waiting else ""))
+                ready = alive
+            if len(alive) == len(names):
                 return True
             time.sleep(0.2)
     return False
@@ -361,6 +380,8 @@ def main(args: argparse.Namespace) -> int:
         (lambda text: print(f"navigate: {text}", flush=True))
 
     map_file = map_for(world, args.world, out)
+    check_goals(map_file, world, goals)
+    say(f"{len(goals)} goal(s) checked on the map {map_file.name}: free for the footprint and reachable from the start")
     compose = compose_for(world, world_file, map_file, drive, args.localization, recording, args.seed,
                           args.rate, args.robot)
     compose_file = out / "compose.yaml"
@@ -388,7 +409,7 @@ def run_lockstep(compose: dict, world: World, goals: np.ndarray, args: argparse.
 
     say("running them in lockstep in this process")
     run = run_mission(compose["services"], world, goals, timeout_s=args.timeout, robot=args.robot,
-                      recording=recording)
+                      recording=recording, progress=say)
     for goal_id, outcome in run.outcomes.items():
         say(f"{goal_id}: {outcome}")
     say(f"{run.sim_s:.1f} sim s")
@@ -406,7 +427,7 @@ def run_processes(compose: dict, compose_file: Path, args: argparse.Namespace, r
     up = start_stack(compose_file, router, log)
     problem = ""
     try:
-        if not wait_until_ready(router, names, up, args.robot):
+        if not wait_until_ready(router, names, up, args.robot, say):
             problem = f"the services did not all start; see {log}"
         else:
             with Mission(router, names, up, args.robot, log) as mission:

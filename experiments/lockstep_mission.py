@@ -88,22 +88,30 @@ class LockstepRun:
     nodes: dict[str, Node]          # by instance name: their counters, the sim's state
 
 
-def mission_nodes(services: list[dict], robot: str) -> dict[str, Node]:
+def mission_nodes(services: list[dict], robot: str, progress: Callable[[str], None] | None = None) -> dict[str, Node]:
     """The Nodes of a compose mapping's services (the recorder left out: the runner records),
-    with the parameters `omninav up` would give them."""
-    return {s["name"]: build_node(s["service"], s.get("params_file"), s.get("params") or {}, robot, s["name"])
-            for s in services if s["service"] != "recorder"}
+    with the parameters `omninav up` would give them; `progress` hears of each as it is built
+    (a node's setup loads maps and compiles its kernels: seconds each)."""
+    wanted = [s for s in services if s["service"] != "recorder"]
+    nodes = {}
+    for k, s in enumerate(wanted):
+        if progress is not None:
+            progress(f"starting {s['name']} ({k + 1}/{len(wanted)})")
+        nodes[s["name"]] = build_node(s["service"], s.get("params_file"), s.get("params") or {}, robot, s["name"])
+    return nodes
 
 
 def run_mission(services: list[dict], world: World, goals: np.ndarray, *, timeout_s: float, robot: str = "r1",
                 recording: Path | None = None, max_sim_s: float | None = None,
-                watch: Callable[[str, bytes, int], None] | None = None) -> LockstepRun:
+                watch: Callable[[str, bytes, int], None] | None = None,
+                progress: Callable[[str], None] | None = None) -> LockstepRun:
     """Drive the goals through the stack in lockstep and score the mission against the truth.
 
     max_sim_s bounds the whole run (default: every goal's timeout, the cancels and the settling);
-    `watch` sees every published (key, payload, stamp_ns), as InProcessRunner.tap does.
+    `watch` sees every published (key, payload, stamp_ns), as InProcessRunner.tap does; `progress`
+    hears of each service as it starts.
     """
-    nodes = mission_nodes(services, robot)
+    nodes = mission_nodes(services, robot, progress)
     sequencer = GoalSequencer(goals, timeout_s, robot=robot)
     runner = InProcessRunner([*nodes.values(), sequencer])
     collector = MissionCollector(robot)

@@ -27,6 +27,11 @@ stands, and only then is the position advanced (pymunk's own update, including i
 correction). So a command acts in the very step it is applied, and with no contact and no noise
 the true motion is exactly what wheel odometry integrates.
 
+Collisions: a collision is the robot starting to touch an object it did not touch (the static
+world counts as one object, each mover as one). It is the robot's fault when it touched static
+geometry, or when its contact point moved towards the mover faster than `fault_speed` (by the
+velocity commanded for that step); otherwise the mover drove into a robot standing or leaving.
+
 Deterministic: everything random comes from the one Generator, drawn in a fixed order per step.
 """
 from __future__ import annotations
@@ -48,6 +53,7 @@ from .world import World, polygon_area, transform_points
 ROBOT_MASS = 40.0            # kg; with pymunk's moment it only decides how a contact splits turn and push
 CONTACT_SLOP = 1e-3          # m of overlap pymunk tolerates before pushing bodies apart
 _ROBOT, _STATIC, _MOVERS = 1, 2, 4   # shape categories: clearance queries look at obstacles only
+STATIC = -1                          # what a contact touched when it is no mover
 
 
 @dataclass(frozen=True)
@@ -69,6 +75,9 @@ class SimParams:
     # (2.5 m/s^2 → 33 rad/s^2, 3.2 rad/s^2 → 23 rad/s^2), so limited commands are tracked
     wheel_acc_limit: float = 60.0         # rad/s^2, motor response
     contact_friction: float = 0.3         # friction between the robot and whatever it touches
+    # a contact is the robot's fault when its contact point moved towards what it touched faster
+    # than this (any static contact is); slower, a mover drove into a robot standing or leaving
+    fault_speed: float = 0.02             # m/s
     seed: int = 0
 
     def __post_init__(self) -> None:
@@ -77,7 +86,7 @@ class SimParams:
             raise ValueError(f"dt must be a whole number of nanoseconds in [1e-4, 0.1] s, got {self.dt}")
         if self.drive not in ("",) + DRIVES:
             raise ValueError(f"drive must be '' (the world's) or one of {DRIVES}, got {self.drive!r}")
-        for name in ("wheel_slip_std", "encoder_noise_std", "gyro_noise_std", "contact_friction"):
+        for name in ("wheel_slip_std", "encoder_noise_std", "gyro_noise_std", "contact_friction", "fault_speed"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a number >= 0, got {value}")
@@ -174,13 +183,15 @@ class Simulation:
         self._followers = np.zeros(2)
         self._tick = 2 * math.pi / params.encoder_ticks_per_rev if params.encoder_ticks_per_rev else 0.0
         self.steps = 0
-        self.collisions = 0                   # times the robot started touching something
+        self.robot_fault_collisions = 0       # contacts begun while the robot moved towards what it hit
+        self.mover_fault_collisions = 0       # a mover drove into a robot standing still or moving away
         self.contact_steps = 0                # steps in which it touched something
         self.clearance_queries = 0            # exact clearance computations (they cost ~1 ms)
-        self._touching = 0                    # shapes in contact with the robot right now
+        self._touching: dict[int, int] = {}   # object touched (STATIC or mover index) -> robot shapes on it
 
         self.space = pymunk.Space()
         self.space.collision_slop = CONTACT_SLOP
+        self._mover_of_shape: dict[pymunk.Shape, int] = {}
         self._add_static_geometry()
         self._movers = self._add_movers()
         self._mover_steps = np.zeros(len(world.movers), np.int64)   # steps each mover has moved
@@ -216,13 +227,14 @@ class Simulation:
 
     def _add_movers(self) -> list[pymunk.Body]:
         bodies = []
-        for radius, (x, y) in zip(self.world.movers.radius, self.world.movers.pose_after(0.0)):
+        for k, (radius, (x, y)) in enumerate(zip(self.world.movers.radius, self.world.movers.pose_after(0.0))):
             body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
             body.position = (float(x), float(y))
             body.position_func = _hold
             shape = pymunk.Circle(body, float(radius))
             shape.friction = 1.0
             shape.filter = pymunk.ShapeFilter(categories=_MOVERS)
+            self._mover_of_shape[shape] = k
             self.space.add(body, shape)
             bodies.append(body)
         return bodies
@@ -243,15 +255,39 @@ class Simulation:
             self.space.add(shape)
         return body
 
+    def _touched(self, arbiter: pymunk.Arbiter) -> int:
+        """What the robot's shape touches: a mover's index, or STATIC for all static geometry (one
+        object, so sliding along a wall built of several map boxes is one collision)."""
+        return self._mover_of_shape.get(arbiter.shapes[1], STATIC)
+
     def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
-        if self._touching == 0:
-            self.collisions += 1
-        self._touching += 1
+        touched = self._touched(arbiter)
+        if self._touching.get(touched, 0) == 0:
+            if touched == STATIC or self._robot_approach_speed(arbiter) > self.params.fault_speed:
+                self.robot_fault_collisions += 1
+            else:
+                self.mover_fault_collisions += 1
+        self._touching[touched] = self._touching.get(touched, 0) + 1
 
     def _on_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
-        self._touching = max(0, self._touching - 1)
+        touched = self._touched(arbiter)
+        self._touching[touched] = max(0, self._touching.get(touched, 0) - 1)
+
+    def _robot_approach_speed(self, arbiter: pymunk.Arbiter) -> float:
+        """How fast the robot's contact point moves along the contact normal towards what it touches
+        (m/s; negative: away), from the velocity it was commanded for this step, turning included."""
+        contact = arbiter.contact_point_set
+        normal = contact.normal             # from the robot's shape (shapes[0]) to the other one
+        point = contact.points[0].point_a if contact.points else self.robot.position
+        velocity = self.robot.velocity_at_world_point(point)
+        return float(velocity.x * normal.x + velocity.y * normal.y)
 
     # ------------------------------------------------------------ state
+
+    @property
+    def collisions(self) -> int:
+        """Times the robot started touching an object (the static world, or a mover) it did not touch."""
+        return self.robot_fault_collisions + self.mover_fault_collisions
 
     @property
     def time(self) -> float:
@@ -325,7 +361,7 @@ class Simulation:
             self.space.reindex_shapes_for_body(body)
         mover_velocities = (next_xy - self._mover_xy) / dt
         self._mover_xy = next_xy
-        in_contact = self._touching > 0         # begin/separate ran in this step's collision detection
+        in_contact = any(self._touching.values())   # begin/separate ran in this step's collision detection
         self.contact_steps += in_contact
 
         after = (*self.robot.position, self.robot.angle)

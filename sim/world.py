@@ -491,7 +491,13 @@ WORLD_KEYS = ("name", "bounds", "origin", "map", "walls", "boxes", "circles", "m
 def load_world(path: str | Path) -> World:
     """Read and validate a world file; raises WorldError naming the file and key on any problem."""
     path = Path(path)
-    doc = read_yaml(path, WorldError)
+    return world_from_mapping(read_yaml(path, WorldError), path)
+
+
+def world_from_mapping(doc: dict, path: str | Path) -> World:
+    """Validate a world file's mapping (a map's relative path resolves against `path`'s folder);
+    WorldError naming `path` and the key on any problem."""
+    path = Path(path)
     keys = _Keys(str(path))
     keys.mapping(doc, "", optional=WORLD_KEYS)
 

@@ -40,7 +40,10 @@ def test_a_lockstep_mission_arrives_and_its_recording_is_the_same_every_time(tmp
 def test_navigate_lockstep_cancels_a_goal_it_cannot_reach_in_time_and_says_so(tmp_path, capsys):
     code = cli_main(["navigate", "--world", "room", "--lockstep", "--goal", "8.5", "6.5", "0", "--timeout", "3",
                      "-o", str(tmp_path), "--json"])
-    summary = json.loads(capsys.readouterr().out)
+    captured = capsys.readouterr()
+    summary = json.loads(captured.out)
     assert code == 1 and not summary["success"]
+    assert "1 goal(s) checked on the map" in captured.err                 # progress, before and while starting
+    assert "starting sim (1/" in captured.err and "starting navigator (" in captured.err
     assert summary["goals"][0]["status"] in ("canceled", "none")
     assert (tmp_path / "run.mcap").is_file()

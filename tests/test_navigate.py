@@ -157,6 +157,46 @@ def test_summary_of_a_mission_with_two_goals(box_world):
     assert json.loads(json.dumps(s.to_json()))["recording"] == "run.mcap"
 
 
+def test_time_within_1m_of_each_goal_on_a_synthetic_record(box_world):
+    stamps, poses = straight_run(np.arange(0.0, 10.01, 0.01))     # x = 1 + 0.3 t, y = 1
+    record = MissionRecord(stamps, poses, goals=[goal("g1", 2.5, 1.0, 0.0, 1.0), goal("g2", 4.0, 1.02, 0.5, 5.5),
+                                                 goal("g3", 1.0, 3.5, 0.0, 9.0)],
+                           statuses=[status("g1", "succeeded", 5.0), status("g2", "succeeded", 9.0)],
+                           sim_values={"collisions": 0})
+    g1, g2, g3 = summarize_mission(record, box_world).goals
+    assert g1.within_1m_s == pytest.approx((1.5 - 1.0) / 0.3 - 1.0, abs=0.011)   # x = 1.5
+    assert g2.within_1m_s == pytest.approx((3.0002 - 1.0) / 0.3 - 5.5, abs=0.011)   # sqrt(1 - 0.02²) short of x = 4
+    assert g3.within_1m_s is None                                  # 2.5 m away the whole time
+    assert "never within 1 m" in "\n".join(summary_lines(summarize_mission(record, box_world)))
+
+
+def test_a_goal_declared_reached_far_from_the_truth_is_a_false_arrival(box_world):
+    stamps, poses = straight_run(np.arange(0.0, 4.01, 0.01))     # the robot ends at (4, 1)
+    for goal_x, reached in ((4.2, True), (5.0, False)):
+        record = MissionRecord(stamps, poses, goals=[goal("g1", goal_x, 1.0, 0.5, 0.5)],
+                               statuses=[status("g1", "succeeded", 4.0)], sim_values={"collisions": 0})
+        s = summarize_mission(record, box_world)
+        assert (s.success, s.goals_reached, s.goals[0].reached, s.to_json()["goals"][0]["reached"]) == (
+            reached, int(reached), reached, reached)
+        assert ("a false arrival: 1.00 m from the goal" in "\n".join(summary_lines(s))) == (not reached)
+
+
+@pytest.mark.parametrize("values, success", [
+    ({"collisions": 2, "robot_fault_collisions": 0, "mover_fault_collisions": 2}, True),
+    ({"collisions": 3, "robot_fault_collisions": 1, "mover_fault_collisions": 2}, False),
+    ({"collisions": 1}, False),                 # a sim that does not split: the robot's fault
+])
+def test_only_collisions_that_were_the_robots_fault_fail_a_mission(box_world, values, success):
+    stamps, poses = straight_run(np.arange(0.0, 4.01, 0.01))
+    record = MissionRecord(stamps, poses, goals=[goal("g1", 4.0, 1.0, 0.5, 0.5)],
+                           statuses=[status("g1", "succeeded", 4.0)], sim_values=values)
+    s = summarize_mission(record, box_world)
+    assert s.success == success and s.collisions == values["collisions"]
+    assert s.robot_fault_collisions == values.get("robot_fault_collisions", values["collisions"])
+    assert s.mover_fault_collisions == values.get("mover_fault_collisions")
+    assert f"{values['collisions']} collisions ({s.robot_fault_collisions} the robot's fault" in summary_lines(s)[0]
+
+
 def test_clearance_counts_movers_and_overlaps(box_world):
     world = box_world
     stamps, poses = straight_run(np.arange(0.0, 2.01, 0.01), start=(1.0, 2.0, 0.0), end=(1.5, 2.0, 0.0))
@@ -167,6 +207,8 @@ def test_clearance_counts_movers_and_overlaps(box_world):
     mover[:, 0] = (2.5, 2.0, 0.2)                                # the robot's front edge reaches 1.916
     record = MissionRecord(stamps, poses, mover_stamps=stamps, mover_circles=mover, sim_values={"collisions": 0})
     assert summarize_mission(record, world).min_clearance_m == pytest.approx(2.5 - 0.2 - 1.916)
+    assert summarize_mission(record, world).min_mover_clearance_m == pytest.approx(2.5 - 0.2 - 1.916)
+    assert clear_static.min_mover_clearance_m is None
     mover[150:, 0] = (1.8, 2.0, 0.2)                             # inside the footprint
     assert summarize_mission(record, world).min_clearance_m == 0.0
 
@@ -229,6 +271,21 @@ def test_navigate_argument_errors_exit_2_naming_the_problem(argv, message, capsy
     assert cli_main(["navigate", *argv, "-o", str(tmp_path)]) == 2
     assert message in capsys.readouterr().err
     assert list(tmp_path.iterdir()) == []            # nothing was started or written
+
+
+def test_navigate_refuses_a_goal_in_an_obstacle_or_out_of_reach_before_starting_anything(capsys, tmp_path):
+    walled = tmp_path / "walled.yaml"          # a wall across the whole hall: the right half is closed off
+    walled.write_text("bounds: [8.0, 4.0]\nwalls: [[4.0, 0.0, 4.0, 4.0]]\nrobot: {start: [1.0, 2.0, 0.0]}\n")
+    cases = [(["--world", "room", "--goal", "5", "4", "0"], "goal 1 (5.00, 4.00) is in an obstacle"),
+             (["--world", str(walled), "--goal", "2", "2", "0", "--goal", "6", "2", "0"],
+              "goal 2 (6.00, 2.00) cannot be reached from the start (1.00, 2.00)"),
+             (["--world", str(walled), "--goal", "3.8", "2", "0"], "goal 1 (3.80, 2.00) is in an obstacle")]
+    for k, (argv, message) in enumerate(cases):
+        out = tmp_path / f"run{k}"
+        assert cli_main(["navigate", *argv, "-o", str(out)]) == 2
+        err = capsys.readouterr().err
+        assert message in err and len(err.strip().splitlines()) == 1
+        assert not (out / "compose.yaml").exists() and not (out / "services.log").exists()   # nothing started
 
 
 @pytest.mark.parametrize("localization, service", [("amcl", "localizer"), ("slam", "slam"), ("truth", "truth_pose")])

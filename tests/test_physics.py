@@ -326,6 +326,34 @@ def test_a_mover_without_yield_distance_drives_into_the_robot(tmp_path):
     assert sim.collisions >= 1 and min(gap_to_mover(world, r) for r in readings) < 0.01
 
 
+def test_a_mover_driving_into_a_parked_robot_is_the_movers_fault(tmp_path):
+    world = make_world(tmp_path, LANE_WORLD % "")
+    sim = Simulation(world, NO_NOISE)
+    drive(sim, [(900, (0.0, 0.0, 0.0))])
+    assert sim.mover_fault_collisions >= 1 and sim.robot_fault_collisions == 0
+    assert sim.collisions == sim.mover_fault_collisions
+
+
+@pytest.mark.parametrize("robot_x, mover_from, mover_speed, robot_speed, robots_fault", [
+    (1.5, 3.0, 0.2, 0.6, True),      # the robot drives after a slow mover walking away and runs into it
+    (3.0, 1.0, 0.8, 0.2, False),     # a fast mover catches up from behind with a robot driving away
+])
+def test_who_moved_into_whom_decides_the_fault(tmp_path, robot_x, mover_from, mover_speed, robot_speed, robots_fault):
+    world = make_world(tmp_path, f"bounds: [14.0, 6.0]\nrobot: {{start: [{robot_x}, 3.0, 0.0]}}\nmovers: [{{radius: 0.3, "
+                                 f"speed: {mover_speed}, path: [[{mover_from}, 3.0], [13.0, 3.0]], loop: false}}]\n")
+    sim = Simulation(world, NO_NOISE)
+    drive(sim, [(400, (robot_speed, 0.0, 0.0))])
+    assert sim.collisions >= 1
+    assert (sim.robot_fault_collisions, sim.mover_fault_collisions) == ((sim.collisions, 0) if robots_fault
+                                                                        else (0, sim.collisions))
+
+
+def test_every_wall_contact_is_the_robots_fault(wall_world):
+    sim = Simulation(wall_world, NO_NOISE)
+    drive(sim, [(700, (0.8, 0.0, 0.0)), (300, (-0.5, 0.0, 0.0)), (700, (0.8, 0.0, 0.0))])
+    assert sim.robot_fault_collisions == sim.collisions == 2 and sim.mover_fault_collisions == 0
+
+
 def test_a_robot_behind_or_beside_a_yielding_mover_does_not_stop_it(tmp_path):
     # both start touching the robot (front x = 2.416, left side y = 3.318) and walk away along +x:
     # one from right ahead of it, the other from beside its front corner, 6 cm to its left

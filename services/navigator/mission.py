@@ -12,9 +12,17 @@ pure and computes:
 - for the mission: time_s from the first goal sent to the last goal's end (or the last truth),
   path_length_m of the true trajectory over that span, min_clearance_m between the footprint and
   static obstacles and movers along it, and the collisions the sim counted (its contact starts;
-  sim/physics.py).
+  sim/physics.py), split into the robot's fault and the movers' (a mover drove into a robot
+  standing still or moving away);
+- per goal, within_1m_s: the sim s from sending it until the robot's true position first came
+  within WITHIN_M of it (None if it never did) — how long the way took, apart from the final approach.
 
-success: every requested goal reached (status succeeded) and no collision.
+A goal is reached when the navigator said succeeded and the truth agrees: the robot stood within
+ARRIVED_M of it. A navigator misled by its pose (a shove, a localizer settled on a wrong pose) can
+declare a goal reached metres away from it; that is a false arrival, not a reached goal.
+
+success: every requested goal reached and no collision that was the robot's fault; a recording
+whose sim does not split its collisions counts every one as the robot's.
 """
 from __future__ import annotations
 
@@ -35,6 +43,10 @@ from ..se2 import wrap_angle
 
 TERMINAL = ("succeeded", "aborted", "canceled")
 CLEARANCE_CHUNK = 2048      # poses per vectorised clearance computation (bounds the temporaries)
+WITHIN_M = 1.0              # the radius of a goal's within_1m_s
+# a succeeded goal farther than this from the truth was a false arrival: ten times navigate's
+# arrival tolerance (3 cm) plus AMCL's usual error of a few cm, well below the robot's width
+ARRIVED_M = 0.25
 
 
 class MissionError(UserError):
@@ -64,6 +76,12 @@ class GoalOutcome:
     xy_error_m: float
     yaw_error_deg: float
     plan_length_m: float | None     # the first global plan's length
+    within_1m_s: float | None       # sim s from sending it until the robot first came within WITHIN_M
+
+    @property
+    def reached(self) -> bool:
+        """Succeeded, and the truth within ARRIVED_M of the goal (not a false arrival)."""
+        return self.status == "succeeded" and self.xy_error_m <= ARRIVED_M
 
 
 @dataclass(frozen=True)
@@ -77,12 +95,18 @@ class MissionSummary:
     final_xy_error_m: float | None
     final_yaw_error_deg: float | None
     collisions: int | None          # None: the recording holds no sim Diagnostic
+    robot_fault_collisions: int | None   # the robot moved towards what it touched (every static contact)
+    mover_fault_collisions: int | None   # a mover drove into the robot standing still or moving away
     min_clearance_m: float
+    min_mover_clearance_m: float | None     # the closest the footprint came to a mover; None: no movers
     recording: str
     goals: list[GoalOutcome]
 
     def to_json(self) -> dict:
-        return asdict(self)
+        mapping = asdict(self)
+        for outcome, goal in zip(mapping["goals"], self.goals):
+            outcome["reached"] = goal.reached
+        return mapping
 
 
 # ---------------------------------------------------------------- reading a recording
@@ -163,15 +187,17 @@ def movers_clearance(footprint: np.ndarray, poses: np.ndarray, circles: np.ndarr
     return gap.min(axis=1)
 
 
-def clearance_along(world: World, poses: np.ndarray, mover_circles: np.ndarray) -> float:
-    """The smallest distance between the footprint and any obstacle or mover along a trajectory."""
-    best = math.inf
+def clearance_along(world: World, poses: np.ndarray, mover_circles: np.ndarray) -> tuple[float, float]:
+    """The smallest distances between the footprint and (any obstacle or mover, a mover) along a
+    trajectory; the second is inf without movers."""
+    best, best_mover = math.inf, math.inf
     for start in range(0, len(poses), CLEARANCE_CHUNK):
         chunk = slice(start, start + CLEARANCE_CHUNK)
         static = world.footprint_clearance(poses[chunk])
         moving = movers_clearance(world.robot.footprint, poses[chunk], mover_circles[chunk])
         best = min(best, float(np.minimum(static, moving).min()))
-    return best
+        best_mover = min(best_mover, float(moving.min()))
+    return best, best_mover
 
 
 def _pose_error(pose: np.ndarray, goal: np.ndarray) -> tuple[float, float]:
@@ -200,6 +226,18 @@ def _first_plan_length(plans: list[PathMsg], goal_id: str) -> float | None:
     return None
 
 
+def _sim_count(record: MissionRecord, name: str) -> int | None:
+    value = record.sim_values.get(name)
+    return int(value) if isinstance(value, (int, float)) else None
+
+
+def _first_within(record: MissionRecord, goal: np.ndarray, sent_ns: int, ended_ns: int) -> float | None:
+    """Sim s from sent_ns until the first true pose (up to ended_ns) within WITHIN_M of the goal."""
+    span = (record.truth_stamps >= sent_ns) & (record.truth_stamps <= ended_ns)
+    near = np.flatnonzero(span & (np.hypot(*(record.truth_poses[:, :2] - goal[:2]).T) <= WITHIN_M))
+    return (int(record.truth_stamps[near[0]]) - sent_ns) / NS_PER_S if len(near) else None
+
+
 def summarize_mission(record: MissionRecord, world: World, goals_total: int | None = None,
                       recording: str = "") -> MissionSummary:
     """The mission's figures; goals_total is how many goals were to be sent (default: those sent)."""
@@ -218,25 +256,29 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
                                     final.status if final is not None else "none",
                                     final.reason if final is not None else "",
                                     (ended_ns - goal.header.stamp_ns) / NS_PER_S, xy, yaw,
-                                    _first_plan_length(record.plans, goal.goal_id)))
+                                    _first_plan_length(record.plans, goal.goal_id),
+                                    _first_within(record, target, goal.header.stamp_ns, ended_ns)))
     start_ns = record.goals[0].header.stamp_ns if record.goals else int(record.truth_stamps[0])
     span = (record.truth_stamps >= start_ns) & (record.truth_stamps <= end_ns)
     poses = record.truth_poses[span] if span.any() else record.truth_poses[-1:]
     stamps = record.truth_stamps[span] if span.any() else record.truth_stamps[-1:]
-    reached = sum(o.status == "succeeded" for o in outcomes)
-    collisions = record.sim_values.get("collisions")
-    collisions = int(collisions) if isinstance(collisions, (int, float)) else None
+    reached = sum(o.reached for o in outcomes)
+    collisions, robot_fault, mover_fault = (_sim_count(record, name) for name in (
+        "collisions", "robot_fault_collisions", "mover_fault_collisions"))
+    if robot_fault is None:
+        robot_fault = collisions
     plan_lengths = [o.plan_length_m for o in outcomes if o.plan_length_m is not None]
+    clearance, mover_clearance = clearance_along(world, poses, _movers_at(record, stamps))
     return MissionSummary(
-        success=reached == goals_total and collisions == 0,
+        success=reached == goals_total and robot_fault == 0,
         goals_reached=reached, goals_total=goals_total,
         time_s=((last_end_ns if last_end_ns is not None else end_ns) - start_ns) / NS_PER_S,
         path_length_m=path_length(poses),
         plan_length_m=sum(plan_lengths) if plan_lengths else None,
         final_xy_error_m=outcomes[-1].xy_error_m if outcomes else None,
         final_yaw_error_deg=outcomes[-1].yaw_error_deg if outcomes else None,
-        collisions=collisions,
-        min_clearance_m=clearance_along(world, poses, _movers_at(record, stamps)),
+        collisions=collisions, robot_fault_collisions=robot_fault, mover_fault_collisions=mover_fault,
+        min_clearance_m=clearance, min_mover_clearance_m=mover_clearance if math.isfinite(mover_clearance) else None,
         recording=recording, goals=outcomes)
 
 
@@ -246,13 +288,20 @@ def summary_lines(summary: MissionSummary) -> list[str]:
         return "n/a" if value is None else format(value, fmt)
 
     lines = [f"{'SUCCESS' if summary.success else 'FAILED'}: {summary.goals_reached}/{summary.goals_total} goals "
-             f"reached, {num(summary.collisions, 'd')} collisions",
+             f"reached, {num(summary.collisions, 'd')} collisions ({num(summary.robot_fault_collisions, 'd')} "
+             f"the robot's fault, {num(summary.mover_fault_collisions, 'd')} a mover's)",
              f"time {summary.time_s:.1f} sim s, driven {summary.path_length_m:.2f} m "
-             f"(first global plans {num(summary.plan_length_m, '.2f')} m), min clearance {summary.min_clearance_m:.3f} m",
+             f"(first global plans {num(summary.plan_length_m, '.2f')} m), min clearance {summary.min_clearance_m:.3f} m"
+             + (f" ({summary.min_mover_clearance_m:.3f} m to a mover)" if summary.min_mover_clearance_m is not None else ""),
              f"final error {num(summary.final_xy_error_m, '.3f')} m, {num(summary.final_yaw_error_deg, '.2f')} deg"]
     for o in summary.goals:
         why = f" ({o.reason})" if o.reason else ""
+        if o.status == "succeeded" and not o.reached:
+            why += f" (a false arrival: {o.xy_error_m:.2f} m from the goal by the truth)"
+        near = f"within {WITHIN_M:g} m after {o.within_1m_s:.1f} s" if o.within_1m_s is not None else \
+            f"never within {WITHIN_M:g} m"
         lines.append(f"  {o.goal_id} ({o.goal[0]:.2f}, {o.goal[1]:.2f}, {math.degrees(o.goal[2]):.1f} deg): "
-                     f"{o.status}{why} after {o.time_s:.1f} s, error {o.xy_error_m:.3f} m {o.yaw_error_deg:.2f} deg")
+                     f"{o.status}{why} after {o.time_s:.1f} s ({near}), error {o.xy_error_m:.3f} m "
+                     f"{o.yaw_error_deg:.2f} deg")
     lines.append(f"recording {summary.recording}")
     return lines

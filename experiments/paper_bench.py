@@ -11,11 +11,13 @@ from __future__ import annotations
 import argparse
 import json
 import statistics
+import subprocess
 import sys
 import time
 from pathlib import Path
 
-from .bench import REPO, run_navigate
+REPO = Path(__file__).resolve().parents[1]
+RUN_TIMEOUT_S = 1800     # wall s for one navigate run (start-up included)
 
 AIM_XY_M, AIM_YAW_DEG = 0.05, 2.0
 PAPER_XY_M, PAPER_YAW_DEG = 0.10, 5.0
@@ -27,6 +29,19 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="as navigate's (default amcl, as the paper)")
     parser.add_argument("--rate", type=float, default=1.0, help="sim seconds per wall second (default 1)")
     parser.add_argument("-o", "--out", help="folder for the runs (default out/paper-<date>-<time>)")
+
+
+def run_navigate(cmd: list[str], log: Path) -> dict:
+    """One navigate run: its JSON summary, or a failed row saying why (the log keeps the details)."""
+    with open(log, "wb") as sink:
+        try:
+            done = subprocess.run(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=sink, timeout=RUN_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            return {"success": False, "error": f"no result within {RUN_TIMEOUT_S} wall s; see {log}"}
+    lines = done.stdout.decode(errors="replace").strip().splitlines()
+    if done.returncode in (0, 1) and lines:
+        return json.loads(lines[-1])
+    return {"success": False, "error": f"navigate exit {done.returncode}; see {log}"}
 
 
 def main(args: argparse.Namespace) -> int:

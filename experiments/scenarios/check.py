@@ -1,0 +1,43 @@
+"""Is a generated world fair to the robot? Checked before it is written; a world that fails is
+drawn again from the next sub-seed.
+
+- the start and the goal are free for the footprint grown by CLEARANCE_M, and the goal can be
+  reached from the start on the world rasterised at RESOLUTION (sim/reachability.py: the global
+  planner core, a disk of the footprint's inscribed radius);
+- every mover's loop keeps its radius plus CLEARANCE_M from the static obstacles (people do not
+  walk through furniture), and keeps off the robot standing at its start or its goal (the robot
+  must be able to wait there without being run over).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ...sim.reachability import ReachabilityParams, mission_problems
+from ...sim.world import World, point_segment_distance
+from .layout import polyline_length
+
+RESOLUTION = 0.05       # m, as `navigate` rasterises a world into its map
+CLEARANCE_M = 0.1       # m, as the shipped worlds keep the footprint from everything at the start
+SAMPLE_M = 0.05         # m between the points checked along a mover's loop
+
+
+def _loop_points(loop: np.ndarray) -> np.ndarray:
+    arcs = polyline_length(loop)
+    samples = np.arange(0.0, arcs[-1], SAMPLE_M)
+    return np.column_stack([np.interp(samples, arcs, loop[:, 0]), np.interp(samples, arcs, loop[:, 1])])
+
+
+def world_problems(world: World) -> list[str]:
+    """One line per reason the world is unfair; empty when it is fine."""
+    problems = mission_problems(world.rasterize(RESOLUTION), world.robot.footprint, world.robot.start, world.goals,
+                                ReachabilityParams(clearance_m=CLEARANCE_M))
+    footprint = world.robot.footprint
+    reach = float(np.hypot(*footprint.T).max())
+    ends = np.vstack([world.robot.start[:2], world.goals[:, :2]])
+    for k, (loop, radius) in enumerate(zip(world.movers.loops, world.movers.radius)):
+        points = _loop_points(loop)
+        if world.distance(points).min() < radius + CLEARANCE_M:
+            problems.append(f"mover {k} walks into a static obstacle")
+        if point_segment_distance(ends[:, None], loop[None, :-1], loop[None, 1:]).min() < reach + radius + CLEARANCE_M:
+            problems.append(f"mover {k} walks over the robot's start or goal")
+    return problems
