@@ -149,11 +149,12 @@ def robot_params(profile: Profile | None) -> dict[str, dict]:
 
 
 def compose_for(world: World, world_file: Path, map_file: Path, drive: str, localization: str, recording: Path,
-                seed: int, rate: float, robot: str, profile: Profile | None = None) -> dict:
+                seed: int, rate: float, robot: str, profile: Profile | None = None,
+                sim_dt: float | None = None) -> dict:
     """The compose mapping of a mission (absolute paths: `up` may run anywhere). `profile`: the
     robot (cli/profile.py), else the world's robot with the sample parameters. With localization
     `odom` there is no map: no map_server, no localizer, and a global costmap of the robot's own
-    scans (map→odom stays the start pose)."""
+    scans (map→odom stays the start pose). `sim_dt`: the simulator's step (default its own)."""
     x, y, yaw = (float(v) for v in world.robot.start)
     start = {"initial_pose_x": x, "initial_pose_y": y, "initial_pose_a": yaw}
     common = profile.costmap_common_params if profile is not None else PARAMS / "costmap_common_params.yaml"
@@ -163,7 +164,7 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
     services = [
         {"name": "recorder", "service": "recorder", "params": {"output": str(recording)}},
         {"name": "sim", "service": "sim", "params": {"world": str(world_file), "drive": drive, "seed": seed,
-                                                     "rate": rate}},
+                                                     "rate": rate, **({"dt": sim_dt} if sim_dt else {})}},
         {"name": "chassis", "service": "chassis", "params": {"drive": drive}},
         {"name": "lidar", "service": "lidar", "params": {"world": str(world_file)}},
     ]

@@ -43,6 +43,7 @@ TIME_LIMIT_S = 100.0           # s from the moment the robot starts moving
 MOVING_M = 0.01                # m from the start: the robot has started moving
 START_WAIT_S = 10.0            # sim s a robot may stand before it starts moving (then it times out)
 PROFILE = "jackal"
+SIM_DT = 0.02                  # s: the physics step; half the default's steps, 4 cm apart at 2 m/s
 ROBOT = "r1"
 # the challenge's published baseline (README): move_base with DWA, 50 worlds × 10 runs
 REFERENCE = {"name": "move_base DWA (published)", "success_rate": 0.88, "collision_rate": 0.048,
@@ -122,7 +123,8 @@ def barn_mission(world: World, seed: int) -> list[dict]:
     """The services of a BARN run: the Jackal, no map, goal from the rules."""
     profile = load_profile(PROFILE)
     world_file = Path(world.source).resolve()
-    return compose_for(world, world_file, None, profile.drive, "odom", None, seed, 1.0, ROBOT, profile)["services"]
+    return compose_for(world, world_file, None, profile.drive, "odom", None, seed, 1.0, ROBOT, profile,
+                       sim_dt=SIM_DT)["services"]
 
 
 def run_world(world_file: Path, path_file: Path, seed: int) -> WorldResult:
