@@ -56,6 +56,8 @@ LOCALIZATIONS = ("amcl", "slam", "truth", "odom")
 # a robot that stands still for 10 s (move_base's oscillation check, off by default) recovers
 NAVIGATOR = {"xy_goal_tolerance": 0.03, "yaw_goal_tolerance": 0.03, "trans_stopped_vel": 0.02,
              "rot_stopped_vel": 0.02, "oscillation_timeout": 10.0, "oscillation_distance": 0.2}
+# without a map the plan was made through unknown space: replan as the scans fill it in
+MAPLESS_NAVIGATOR = {"planner_frequency": 2.0}
 SETTLE_S = 1.0          # sim s after the last goal ends: the robot comes to rest before the stop
 CANCEL_WAIT_S = 2.0     # sim s to wait for the navigator to confirm a cancel
 POLL_S = 0.1
@@ -158,9 +160,10 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
     x, y, yaw = (float(v) for v in world.robot.start)
     start = {"initial_pose_x": x, "initial_pose_y": y, "initial_pose_a": yaw}
     common = profile.costmap_common_params if profile is not None else PARAMS / "costmap_common_params.yaml"
-    own_files = {"global": "costmap_global_mapless_params.yaml" if localization == "odom" else
-                 "costmap_global_params.yaml", "local": "costmap_local_params.yaml"}
-    costmap_files = {f"{which}_costmap_files": [str(common), str(PARAMS / own)] for which, own in own_files.items()}
+    own_files = {"global": PARAMS / ("costmap_global_mapless_params.yaml" if localization == "odom" else
+                                     "costmap_global_params.yaml"),
+                 "local": (profile and profile.costmap_local_params) or PARAMS / "costmap_local_params.yaml"}
+    costmap_files = {f"{which}_costmap_files": [str(common), str(own)] for which, own in own_files.items()}
     services = [
         {"name": "recorder", "service": "recorder", "params": {"output": str(recording)}},
         {"name": "sim", "service": "sim", "params": {"world": str(world_file), "drive": drive, "seed": seed,
@@ -180,7 +183,8 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "local_planner", "service": "local_planner", "params": {**drive_params(drive), **start}},
         {"name": "velocity_smoother", "service": "velocity_smoother"},
         {"name": "collision_monitor", "service": "collision_monitor"},
-        {"name": "navigator", "service": "navigator", "params": {**start, **NAVIGATOR}},
+        {"name": "navigator", "service": "navigator",
+         "params": {**start, **NAVIGATOR, **(MAPLESS_NAVIGATOR if localization == "odom" else {})}},
     ]
     overrides = robot_params(profile)
     for service in services:

@@ -1,7 +1,7 @@
 """Robot profiles: a robot described as data (compose/profiles/NAME.yaml), not code.
 
 A profile names the robot's drive, its footprint and costmap footprint_padding, the costmaps'
-common parameter file (in compose/params) and parameters merged over the services' compose
+common parameter file and optionally the local costmap's (in compose/params), and parameters merged over the services' compose
 parameters (`params: {service: {name: value}}`). `compose_for` (cli/navigate.py) applies it: the
 footprint goes to the simulator, the local planner and the collision monitor, the padding to the
 local planner; the costmaps read theirs from the common file.
@@ -33,6 +33,7 @@ class Profile:
     footprint: tuple[tuple[float, float], ...]
     footprint_padding: float
     costmap_common_params: Path
+    costmap_local_params: Path | None = None       # None: the sample local costmap (compose/params)
     params: dict = field(default_factory=dict)     # service name -> parameters
 
 
@@ -70,14 +71,20 @@ def load_profile(name_or_path: str) -> Profile:
     padding = doc.get("footprint_padding", 0.0)
     if not (_finite(padding) and padding >= 0):
         fail("footprint_padding", f"expected a number ≥ 0 (m), got {padding!r}")
-    common = doc.get("costmap_common_params")
-    if not isinstance(common, str) or not (PARAMS_DIR / common).is_file():
-        fail("costmap_common_params", f"expected a parameter file in {PARAMS_DIR}, got {common!r}")
+    files = {}
+    for key, required in (("costmap_common_params", True), ("costmap_local_params", False)):
+        name = doc.get(key)
+        if name is None and not required:
+            files[key] = None
+        elif not isinstance(name, str) or not (PARAMS_DIR / name).is_file():
+            fail(key, f"expected a parameter file in {PARAMS_DIR}, got {name!r}")
+        else:
+            files[key] = PARAMS_DIR / name
     params = doc.get("params") or {}
     if not isinstance(params, dict) or not all(isinstance(v, dict) for v in params.values()):
         fail("params", f"expected a mapping of service names to parameter mappings, got {params!r}")
     return Profile(name=path.stem, drive=drive, footprint=tuple((float(x), float(y)) for x, y in footprint),
-                   footprint_padding=float(padding), costmap_common_params=PARAMS_DIR / common, params=params)
+                   footprint_padding=float(padding), params=params, **files)
 
 
 def _finite(value) -> bool:
