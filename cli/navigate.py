@@ -139,7 +139,7 @@ def drive_params(drive: str) -> dict:
 
 def robot_params(profile: Profile | None) -> dict[str, dict]:
     """Per service, the parameters a robot profile sets: its footprint where a service takes one,
-    then the profile's own `params`."""
+    then the profile's own `params`; the simulator's wheels are the chassis's."""
     if profile is None:
         return {}
     footprint = [list(p) for p in profile.footprint]
@@ -147,6 +147,7 @@ def robot_params(profile: Profile | None) -> dict[str, dict]:
            "local_planner": {"footprint": footprint, "footprint_padding": profile.footprint_padding}}
     for service, values in profile.params.items():
         out[service] = {**out.get(service, {}), **values}
+    out["sim"]["chassis"] = out.get("chassis", {})      # the simulated wheels are the chassis's
     return out
 
 
