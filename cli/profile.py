@@ -14,12 +14,12 @@ from pathlib import Path
 
 import yaml
 
+from ..services.chassis.kinematics import DRIVES
 from ..services.runtime.errors import UserError
 
 REPO = Path(__file__).resolve().parents[1]
 PROFILES_DIR = REPO / "compose" / "profiles"
 PARAMS_DIR = REPO / "compose" / "params"
-DRIVES = ("mecanum", "omni3", "diff")
 
 
 class ProfileError(UserError):

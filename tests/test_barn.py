@@ -14,7 +14,7 @@ from omninav.cli.navigate import compose_for
 from omninav.cli.profile import ProfileError, load_profile
 from omninav.experiments.barn import barn_score, optimal_time, reference_length, run_world
 from omninav.services.costmap.params import load_costmap_params
-from omninav.sim.node import open_world
+from omninav.sim.node import SimNodeParams, open_world
 from omninav.sim.world import WorldError, load_world, shared_data_dir
 
 BARN = shared_data_dir(Path(__file__)) / "barn"
@@ -93,6 +93,10 @@ def test_the_jackal_profile_sets_the_robot_of_every_service(tmp_path):
     for name in ("sim", "local_planner", "collision_monitor"):
         assert services[name]["params"]["footprint"] == [list(p) for p in profile.footprint]
     assert services["local_planner"]["params"]["max_vel_x"] == 2.0
+    sim = SimNodeParams(**services["sim"]["params"])
+    wheels = sim.chassis_params()
+    assert {**sim.chassis, "drive": profile.drive} == services["chassis"]["params"]   # the same wheels
+    assert wheels.wheel_radius * wheels.max_wheel_speed >= 2.0             # the simulated wheels reach 2 m/s
     assert services["lidar"]["params"]["fov"] == pytest.approx(math.radians(270))
     assert services["lidar"]["params"]["range_max"] == 30.0
     costmap = services["costmap"]["params"]
