@@ -212,19 +212,27 @@ def main(args: argparse.Namespace) -> int:
     say = (lambda text: print(text, file=sys.stderr, flush=True)) if args.json else print
     results: list[WorldResult] = []
     context = multiprocessing.get_context("spawn")      # numba and the runtime start clean in each worker
+    interrupted = False
     with context.Pool(min(args.workers, len(jobs))) as pool:
-        for result in pool.imap(_run_one, jobs):
-            results.append(result)
-            t = "-" if result.time_s is None else f"{result.time_s:6.1f} s"
-            say(f"world {result.world:3d}: {'success' if result.success else 'FAIL   '} collision {result.collision!s:5} "
-                f"timeout {result.timeout!s:5} time {t} (OT {result.ot_s:.1f} s) score {result.score:.3f}")
-    figures = {"all": tally(results), "even": tally([r for r in results if r.world % 2 == 0]),
+        try:
+            for result in pool.imap(_run_one, jobs):
+                results.append(result)
+                t = "-" if result.time_s is None else f"{result.time_s:6.1f} s"
+                say(f"world {result.world:3d}: {'success' if result.success else 'FAIL   '} collision "
+                    f"{result.collision!s:5} timeout {result.timeout!s:5} time {t} (OT {result.ot_s:.1f} s) "
+                    f"score {result.score:.3f}")
+        except KeyboardInterrupt:       # Ctrl-C: the figures of the worlds run so far, marked as such
+            interrupted = True
+            pool.terminate()
+    figures = {"interrupted": interrupted, "all": tally(results), "even": tally([r for r in results if r.world % 2 == 0]),
                "odd": tally([r for r in results if r.world % 2 == 1]), "reference": REFERENCE,
                "range": args.range, "only": args.only, "runs_per_world": args.runs,
                "worlds": [asdict(r) for r in results]}
     if args.json:
         print(json.dumps(figures))
     else:
+        if interrupted:
+            print(f"interrupted: the figures of the {len(results)} of {len(jobs)} runs that finished")
         for name in ("all", "even", "odd"):
             f = figures[name]
             if f["runs"]:

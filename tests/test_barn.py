@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from omninav.cli.main import main as cli_main
 from omninav.cli.navigate import compose_for
 from omninav.cli.profile import ProfileError, load_profile
 from omninav.experiments.barn import barn_score, optimal_time, reference_length, run_world
@@ -121,3 +122,15 @@ def test_a_barn_world_is_driven_through_without_a_map_or_a_collision():
     result = run_world(BARN / "worlds" / "world_2.world", BARN / "path_files" / "path_2.npy", seed=0)
     assert result.success and not result.collision and not result.timeout, result
     assert result.time_s < 100.0 and 0.125 <= result.score <= 0.5
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--worlds", "/no/such/folder"], "no such folder"),
+    (["--range", "9-2"], "expected FIRST-LAST"),
+    (["--range", "0-1", "--worlds", "{tmp}"], "world_0.world: no such file"),
+])
+def test_bench_barn_input_errors_are_one_line_and_exit_2(argv, message, tmp_path, capsys):
+    argv = [a.replace("{tmp}", str(tmp_path)) for a in argv]
+    assert cli_main(["bench", "barn", *argv]) == 2
+    err = capsys.readouterr().err.strip()
+    assert message in err and "\n" not in err
