@@ -17,6 +17,7 @@ BENCHES: dict[str, str] = {
     "missions": "omninav.experiments.missions_bench",
     "paper": "omninav.experiments.paper_bench",
     "scenarios": "omninav.experiments.scenarios.bench",
+    "barn": "omninav.experiments.barn",
 }
 
 

@@ -47,12 +47,13 @@ from ..services.runtime.zenoh_config import ROUTER_ENV, free_loopback_endpoint, 
 from ..sim.node import open_world
 from ..sim.reachability import mission_problems
 from ..sim.world import World, WorldError, world_path
+from .profile import Profile, load_profile
 
 REPO = Path(__file__).resolve().parents[1]
 PARAMS = REPO / "compose" / "params"
 SHIPPED_MAPS = {"room": REPO / "compose" / "maps" / "room.yaml"}   # shipped world name -> its map file
 MAP_RESOLUTION = 0.05
-LOCALIZATIONS = ("amcl", "slam", "truth")
+LOCALIZATIONS = ("amcl", "slam", "truth", "odom")
 # the navigator's arrival check, tighter than move_base's 0.10 m / 0.05 rad: the local planner's
 # final approach stops within 0.02 m / 0.02 rad, and a mission aims for 5 cm and 2°; success only
 # once nearly stopped, so the commands still on their way (about 0.1–0.3 s) cannot carry it past;
@@ -63,6 +64,8 @@ NAVIGATOR = {"xy_goal_tolerance": 0.03, "yaw_goal_tolerance": 0.03, "trans_stopp
 # the robot stands (a shove or a late correction is not left standing), and its recovery keeps its
 # weight averages and draws half its random poses near the estimate (a shove moves the robot a little)
 LOCALIZER_BEYOND_ROS = {"temporal_update": 0.2, "recovery_reset_after_injection": False, "recovery_local_share": 0.5}
+# without a map the plan was made through unknown space: replan as the scans fill it in
+MAPLESS_NAVIGATOR = {"planner_frequency": 2.0}
 SETTLE_S = 1.0          # sim s after the last goal ends: the robot comes to rest before the stop
 CANCEL_WAIT_S = 2.0     # sim s to wait for the navigator to confirm a cancel
 POLL_S = 0.1
@@ -142,26 +145,47 @@ def drive_params(drive: str) -> dict:
     return {} if drive != "diff" else {"holonomic_robot": False, "max_vel_y": 0.0, "min_vel_y": 0.0, "y_vels": []}
 
 
+def robot_params(profile: Profile | None) -> dict[str, dict]:
+    """Per service, the parameters a robot profile sets: its footprint where a service takes one,
+    then the profile's own `params`; the simulator's wheels are the chassis's."""
+    if profile is None:
+        return {}
+    footprint = [list(p) for p in profile.footprint]
+    out = {"sim": {"footprint": footprint}, "collision_monitor": {"footprint": footprint},
+           "local_planner": {"footprint": footprint, "footprint_padding": profile.footprint_padding}}
+    for service, values in profile.params.items():
+        out[service] = {**out.get(service, {}), **values}
+    out["sim"]["chassis"] = out.get("chassis", {})      # the simulated wheels are the chassis's
+    return out
+
+
 def compose_for(world: World, world_file: Path, map_file: Path, drive: str, localization: str, recording: Path,
-                seed: int, rate: float, robot: str) -> dict:
-    """The compose mapping of a mission (absolute paths: `up` may run anywhere)."""
+                seed: int, rate: float, robot: str, profile: Profile | None = None,
+                sim_dt: float | None = None) -> dict:
+    """The compose mapping of a mission (absolute paths: `up` may run anywhere). `profile`: the
+    robot (cli/profile.py), else the world's robot with the sample parameters. With localization
+    `odom` there is no map: no map_server, no localizer, and a global costmap of the robot's own
+    scans (map→odom stays the start pose). `sim_dt`: the simulator's step (default its own)."""
     x, y, yaw = (float(v) for v in world.robot.start)
     start = {"initial_pose_x": x, "initial_pose_y": y, "initial_pose_a": yaw}
-    costmap_files = {f"{which}_costmap_files": [str(PARAMS / "costmap_common_params.yaml"),
-                                                str(PARAMS / f"costmap_{which}_params.yaml")]
-                     for which in ("global", "local")}
+    common = profile.costmap_common_params if profile is not None else PARAMS / "costmap_common_params.yaml"
+    own_files = {"global": PARAMS / ("costmap_global_mapless_params.yaml" if localization == "odom" else
+                                     "costmap_global_params.yaml"),
+                 "local": (profile and profile.costmap_local_params) or PARAMS / "costmap_local_params.yaml"}
+    costmap_files = {f"{which}_costmap_files": [str(common), str(own)] for which, own in own_files.items()}
     services = [
         {"name": "recorder", "service": "recorder", "params": {"output": str(recording)}},
         {"name": "sim", "service": "sim", "params": {"world": str(world_file), "drive": drive, "seed": seed,
-                                                     "rate": rate}},
+                                                     "rate": rate, **({"dt": sim_dt} if sim_dt else {})}},
         {"name": "chassis", "service": "chassis", "params": {"drive": drive}},
         {"name": "lidar", "service": "lidar", "params": {"world": str(world_file)}},
     ]
-    if localization != "slam":      # slam serves its own map
+    if localization in ("amcl", "truth"):      # slam serves its own map; odom has none
         services.append({"name": "map_server", "service": "map_server",
                          "params": {"yaml_filename": str(map_file), "publish_period_s": 1.0}})
+    if localization != "odom":
+        services.append(localization_service(localization, start, map_file, seed))
     services += [
-        localization_service(localization, start, map_file, seed),
         {"name": "costmap", "service": "costmap", "params": {**costmap_files, **start}},
         # slam's map is still being drawn (and where people walked): the evidence grid alone tells the
         # tracker the static world then
@@ -172,9 +196,13 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "cmd_vel_mux", "service": "cmd_vel_mux"},
         {"name": "velocity_smoother", "service": "velocity_smoother"},
         {"name": "collision_monitor", "service": "collision_monitor"},
-        {"name": "navigator", "service": "navigator", "params": {**start, **NAVIGATOR}},
+        {"name": "navigator", "service": "navigator",
+         "params": {**start, **NAVIGATOR, **(MAPLESS_NAVIGATOR if localization == "odom" else {})}},
     ]
+    overrides = robot_params(profile)
     for service in services:
+        if service["name"] in overrides:
+            service["params"] = {**service.get("params", {}), **overrides[service["name"]]}
         service["restart"] = "no"       # a service that dies ends the mission, it is not hidden by a restart
     return {"robot": robot, "services": services}
 
@@ -188,7 +216,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "in order (default: the world file's goals)")
     parser.add_argument("--drive", choices=DRIVES, help="the robot's drive (default: the world's)")
     parser.add_argument("--localization", choices=LOCALIZATIONS, default="amcl",
-                        help="amcl on the world's map (default), slam, or truth (the simulator's true pose)")
+                        help="amcl on the world's map (default), slam, truth (the simulator's true pose), or "
+                             "odom (no map: odometry alone, costmaps from the robot's own scans)")
+    parser.add_argument("--profile", help="a robot profile: a shipped one's name (jackal) or a profile file "
+                                          "(default: the world's robot)")
     parser.add_argument("--record", metavar="FILE", help="the recording (default OUT/run.mcap)")
     parser.add_argument("-o", "--out", help="folder for the compose file, map and logs "
                                             "(default out/navigate-<date>-<time>)")
@@ -367,7 +398,8 @@ def main(args: argparse.Namespace) -> int:
     except WorldError as exc:
         raise NavigateError(str(exc)) from None
     world_file = Path(world.source).resolve()
-    drive = args.drive or world.robot.drive
+    profile = load_profile(args.profile) if args.profile else None
+    drive = args.drive or (profile.drive if profile else world.robot.drive)
     goals = mission_goals(args, world)
     out = Path(args.out or REPO / "out" / time.strftime("navigate-%Y%m%d-%H%M%S")).resolve()
     out.mkdir(parents=True, exist_ok=True)
@@ -383,7 +415,7 @@ def main(args: argparse.Namespace) -> int:
     check_goals(map_file, world, goals)
     say(f"{len(goals)} goal(s) checked on the map {map_file.name}: free for the footprint and reachable from the start")
     compose = compose_for(world, world_file, map_file, drive, args.localization, recording, args.seed,
-                          args.rate, args.robot)
+                          args.rate, args.robot, profile)
     compose_file = out / "compose.yaml"
     compose_file.write_text(yaml.safe_dump(compose, sort_keys=False))
     try:

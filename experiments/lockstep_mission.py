@@ -104,12 +104,13 @@ def mission_nodes(services: list[dict], robot: str, progress: Callable[[str], No
 def run_mission(services: list[dict], world: World, goals: np.ndarray, *, timeout_s: float, robot: str = "r1",
                 recording: Path | None = None, max_sim_s: float | None = None,
                 watch: Callable[[str, bytes, int], None] | None = None,
-                progress: Callable[[str], None] | None = None) -> LockstepRun:
+                progress: Callable[[str], None] | None = None, until: Callable[[], bool] | None = None) -> LockstepRun:
     """Drive the goals through the stack in lockstep and score the mission against the truth.
 
     max_sim_s bounds the whole run (default: every goal's timeout, the cancels and the settling);
     `watch` sees every published (key, payload, stamp_ns), as InProcessRunner.tap does; `progress`
-    hears of each service as it starts.
+    hears of each service as it starts; `until` ends the run early once it turns true (a benchmark
+    that judges arrival itself).
     """
     nodes = mission_nodes(services, robot, progress)
     sequencer = GoalSequencer(goals, timeout_s, robot=robot)
@@ -124,7 +125,8 @@ def run_mission(services: list[dict], world: World, goals: np.ndarray, *, timeou
     sim = nodes["sim"]
     limit_s = max_sim_s or START_S + len(goals) * (timeout_s + CANCEL_WAIT_S) + SETTLE_S
     try:
-        runner.run_until(lambda: sequencer.finished, math.ceil(limit_s / sim.params.dt))
+        done = (lambda: sequencer.finished) if until is None else (lambda: sequencer.finished or until())
+        runner.run_until(done, math.ceil(limit_s / sim.params.dt))
         runner.close()
     finally:
         if writer is not None:

@@ -7,25 +7,46 @@ the sim applies whichever command has arrived by the time it steps.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from ..schemas.messages import Clock, Diagnostic, Obstacles, Odometry, Pose2D, Twist, WheelCommand, WheelState
+from ..services.chassis.kinematics import ChassisParams
 from ..services.runtime.node import NS_PER_S, Node
+from ..services.runtime.params import load_params
 from .physics import Readings, SimParams, Simulation
-from .world import WorldError, load_world, shipped_worlds, world_path
+from .world import World, WorldError, load_world, polygon_area, shipped_worlds, world_path
 
 
 @dataclass(frozen=True)
 class SimNodeParams(SimParams):
     world: str = "room"           # a shipped world's name or a world file's path
     rate: float = 1.0             # sim seconds per wall second
+    footprint: tuple[tuple[float, float], ...] = ()   # m, robot frame (a robot profile's); () = the world's
+    chassis: dict = field(default_factory=dict)       # ChassisParams by name: the wheels the chassis drives
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if not self.rate > 0:
             raise ValueError(f"rate must be positive, got {self.rate}")
+        if self.footprint and (len(self.footprint) < 3 or abs(polygon_area(np.array(self.footprint))) < 1e-6):
+            raise ValueError(f"footprint must be a polygon of at least 3 points enclosing an area, got {self.footprint}")
+        self.chassis_params()
+
+    def chassis_params(self) -> ChassisParams:
+        """The simulated wheels (geometry, speed limit): the chassis service's parameters."""
+        if not isinstance(self.chassis, dict):
+            raise ValueError(f"chassis must be a mapping of chassis parameter names to values, got {self.chassis!r}")
+        return load_params(ChassisParams, self.chassis, "sim.chassis")
+
+    def robot_world(self, world: World) -> World:
+        """The world with this robot's footprint (counter-clockwise) in place of the world file's."""
+        if not self.footprint:
+            return world
+        outline = np.array(self.footprint, np.float64)
+        outline = outline if polygon_area(outline) > 0 else outline[::-1].copy()
+        return replace(world, robot=replace(world.robot, footprint=outline))
 
 
 def open_world(name_or_path: str):
@@ -43,8 +64,8 @@ class SimNode(Node):
 
     def setup(self) -> None:
         p = self.params
-        self.world = open_world(p.world)
-        self.sim = Simulation(self.world, p)
+        self.world = p.robot_world(open_world(p.world))
+        self.sim = Simulation(self.world, p, p.chassis_params())
         self.step_ns = round(p.dt * NS_PER_S)
         self.wheel_state = self.publisher("wheel_state")
         self.truth = self.publisher("sim/truth")

@@ -22,12 +22,14 @@ from scipy import ndimage
 from ..schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
 from ..services.runtime.params import unknown_names
 from ..services.map_server.mapio import MapError, cell_to_world, grid_coords, load_map, read_yaml, world_to_cell
+from .barn import BarnWorldError, barn_world_doc
 
 WALL_THICKNESS = 0.1          # m, walls and the outer walls along the bounds
 # The mecanum paper's robot: 0.832 m long (x) and 0.636 m wide (y), centred on the robot's origin.
 DEFAULT_FOOTPRINT = np.array([[0.416, 0.318], [-0.416, 0.318], [-0.416, -0.318], [0.416, -0.318]])
 DRIVES = ("mecanum", "omni3", "diff")
 DATA_ENV = "OMNINAV_DATA"     # overrides where `map: {relative_to: data}` looks
+BARN_SUFFIX = ".world"        # a BARN Challenge world (Gazebo SDF), read by sim/barn.py
 GRID_OBSTACLE = 50            # map cells above this occupancy (percent) are obstacles
 _EPS = 1e-9                   # shapes that only touch a cell's border do not occupy it
 
@@ -334,7 +336,7 @@ class World:
             best = d.min(axis=(1, 2))
             corners = self.solids.reshape(-1, 2)                         # a solid inside the footprint
             best[points_in_polygons(corners[None], poly[:, None])[..., 0].any(axis=1)] = 0.0
-        circles = self.obstacle_circles(extra_circles)
+        circles = _may_be_nearest(self.obstacle_circles(extra_circles), poses, poly, self.robot.footprint)
         if len(circles):
             centres = np.broadcast_to(circles[None, None, :, :2], (len(poses), 1, len(circles), 2))
             d = point_segment_distance(centres, a[:, :, None, :], b[:, :, None, :]) - circles[None, None, :, 2]
@@ -385,6 +387,20 @@ class World:
             hit = gap < r - _EPS
             data[rows[hit], cols[hit]] = 100
         return OccupancyGrid(header=Header(frame_id="map"), info=info, data=data)
+
+
+def _may_be_nearest(circles: np.ndarray, poses: np.ndarray, outlines: np.ndarray, footprint: np.ndarray) -> np.ndarray:
+    """The circles that can be the nearest to some footprint (outlines (Q, P, 2) at poses (Q, 3)):
+    those whose distance from the pose's origin, less the footprint's reach, is not above the
+    distance from a corner of that footprint to the nearest circle (a clutter of hundreds of
+    cylinders has a handful near the robot)."""
+    if len(circles) == 0:
+        return circles
+    reach = float(np.hypot(*footprint.T).max())
+    radius = circles[None, :, 2]
+    lower = np.hypot(poses[:, None, 0] - circles[None, :, 0], poses[:, None, 1] - circles[None, :, 1]) - reach - radius
+    upper = np.hypot(outlines[:, :1, 0] - circles[None, :, 0], outlines[:, :1, 1] - circles[None, :, 1]) - radius
+    return circles[(lower <= upper.min(axis=1, keepdims=True)).any(axis=0)]
 
 
 def _cells_under(info: MapMetaData, lo, hi):
@@ -489,9 +505,17 @@ WORLD_KEYS = ("name", "bounds", "origin", "map", "walls", "boxes", "circles", "m
 
 
 def load_world(path: str | Path) -> World:
-    """Read and validate a world file; raises WorldError naming the file and key on any problem."""
+    """Read and validate a world file (a YAML world, or a BARN `.world` file: sim/barn.py); raises
+    WorldError naming the file and key on any problem."""
     path = Path(path)
-    return world_from_mapping(read_yaml(path, WorldError), path)
+    if path.suffix == BARN_SUFFIX:
+        try:
+            doc = barn_world_doc(path)
+        except BarnWorldError as exc:
+            raise WorldError(str(exc)) from None
+    else:
+        doc = read_yaml(path, WorldError)
+    return world_from_mapping(doc, path)
 
 
 def world_from_mapping(doc: dict, path: str | Path) -> World:
@@ -597,7 +621,7 @@ WORLDS_DIR = Path(__file__).resolve().parent / "worlds"
 def world_path(name_or_path: str | Path) -> Path:
     """A shipped world by name ('room') or any world file by path."""
     candidate = Path(name_or_path)
-    if candidate.suffix in (".yaml", ".yml") or candidate.exists():
+    if candidate.suffix in (".yaml", ".yml", BARN_SUFFIX) or candidate.exists():
         return candidate
     return WORLDS_DIR / f"{name_or_path}.yaml"
 

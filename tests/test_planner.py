@@ -161,12 +161,34 @@ def test_unreachable_and_invalid_goals_get_a_status():
     assert in_wall.status == GOAL_IN_OBSTACLE and "has cost 254" in in_wall.message
     on_border = planner.plan(costs, info, centre(info, (20, 5)), centre(info, (0, 5)))
     assert on_border.status == GOAL_IN_OBSTACLE and "border" in on_border.message
-    off = planner.plan(costs, info, centre(info, (20, 5)), (50.0, 1.0, 0.0))
+    known_only = GlobalPlanner(GlobalPlannerParams(use_dijkstra=False, allow_unknown=False))
+    off = known_only.plan(costs, info, centre(info, (20, 5)), (50.0, 1.0, 0.0))
     assert off.status == OFF_MAP and "goal" in off.message
-    off = planner.plan(costs, info, (-1.0, 1.0, 0.0), centre(info, (20, 5)))
+    off = known_only.plan(costs, info, (-1.0, 1.0, 0.0), centre(info, (20, 5)))
     assert off.status == OFF_MAP and "start" in off.message
     same = planner.plan(costs, info, centre(info, (20, 5)), centre(info, (20, 5), 2.0))
     assert same.ok and same.poses[-1, 2] == 2.0 and same.cost == 0.0
+
+
+def test_a_goal_off_the_costmap_is_planned_to_through_unknown_space():
+    # the costmap knows a 2 m x 2 m square: a wall across it with a gap at the top, unknown beyond
+    data = np.zeros((40, 40), np.int8)
+    data[:32, 20] = 100
+    costmap = inflated(data)
+    costs, info = costmap.costs, costmap.info
+    start, goal = centre(info, (20, 5)), (3.0, 1.0, 0.0)          # the goal lies 1 m beyond the right edge
+    plan = GlobalPlanner(ASTAR).plan(costs, info, start, goal)
+    assert plan.ok, plan.message
+    assert plan.poses[0, :2].tolist() == pytest.approx(start[:2]) and plan.poses[-1, :2].tolist() == pytest.approx(goal[:2])
+    steps = np.hypot(*np.diff(plan.poses[:, :2], axis=0).T)
+    assert steps.max() < 2 * info.resolution                        # one connected path
+    # on the known grid it keeps out of the wall and its inflation
+    on_grid = plan.poses[(plan.poses[:, 0] < 2.0) & (plan.poses[:, 1] < 2.0)]
+    u, v = grid_coords(info, on_grid[:, 0], on_grid[:, 1])
+    assert (costs[v.astype(int), u.astype(int)] < 253).all()
+    # known free space is cheaper than unknown: the path goes through the gap, not around the wall's far end
+    assert on_grid[:, 1].max() > 32 * info.resolution
+    assert plan.poses[:, 1].min() > -0.1
 
 
 def test_goal_in_an_obstacle_moves_to_the_nearest_reachable_cell():

@@ -116,10 +116,13 @@ def test_unreachable_goals_get_an_error_naming_the_reason():
     node = planner_with(costmap)
     with pytest.raises(QueryError, match=r"^goal_in_obstacle: the goal cell .* has cost 254"):
         ask(node, start="1.2,1.0", goal="5,4")            # the pillar
+    with pytest.raises(QueryError, match=r"^no_path: no path from cell"):
+        ask(node, start="1.2,1.0", goal="50,4")           # unknown space beyond the room's walls (allow_unknown)
+    known_only = planner_with(costmap, allow_unknown=False)
     with pytest.raises(QueryError, match=r"^off_map: the goal \(50.00, 4.00\) is off the costmap"):
-        ask(node, start="1.2,1.0", goal="50,4")
+        ask(known_only, start="1.2,1.0", goal="50,4")
     with pytest.raises(QueryError, match=r"^off_map: the start"):
-        ask(node, start="-3,1", goal="8,7")
+        ask(known_only, start="-3,1", goal="8,7")
     # a free pocket walled in on every side
     walled = room_costmap()
     u, v = grid_coords(walled.info, 3.0, 7.0)

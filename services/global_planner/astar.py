@@ -17,7 +17,9 @@ towards the goal. Both run in numba over a binary heap.
 A goal in an impassable cell moves to the nearest passable cell within default_tolerance that the
 start can reach; so does a goal the start cannot reach. Orientations along the path follow ROS's
 OrientationFilter (orientation_mode) and the last pose takes the goal's yaw. Every failure is a
-PlanResult with a status, never an exception.
+PlanResult with a status, never an exception. With allow_unknown, a start or goal off the grid
+is in unknown space: the grid grows with unknown cells to hold it (grown_to_hold), and the
+result's cells are those of the grown grid.
 """
 from __future__ import annotations
 
@@ -401,6 +403,30 @@ def passable(costs: np.ndarray, rows, cols, params: GlobalPlannerParams) -> np.n
     return ok
 
 
+GROWTH_MARGIN = 2        # cells of unknown beyond a start or goal the grid grows to hold (outline_map)
+
+
+def grown_to_hold(costs: np.ndarray, info: MapMetaData, poses) -> tuple[np.ndarray, MapMetaData]:
+    """The costs and geometry grown with unknown cells until they hold every pose (x, y, …) with
+    GROWTH_MARGIN to spare: a goal not yet seen lies in unknown space, which allow_unknown plans
+    through (move_base's planner does the same on a costmap sized to hold it). Unchanged when every
+    pose is on the grid already."""
+    u, v = grid_coords(info, [float(pose[0]) for pose in poses], [float(pose[1]) for pose in poses])
+    cols, rows = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+    if in_grid(info, rows, cols).all():
+        return costs, info
+    below = max(0, GROWTH_MARGIN - int(rows.min()))
+    left = max(0, GROWTH_MARGIN - int(cols.min()))
+    height = max(info.height, int(rows.max()) + 1 + GROWTH_MARGIN) + below
+    width = max(info.width, int(cols.max()) + 1 + GROWTH_MARGIN) + left
+    grown = np.full((height, width), NO_INFORMATION, np.uint8)
+    grown[below:below + info.height, left:left + info.width] = costs
+    x0, y0 = cell_to_world(info, -below - 0.5, -left - 0.5)     # the corner of the new first cell
+    origin = MapMetaData(resolution=info.resolution, width=width, height=height,
+                         origin=type(info.origin)(float(x0), float(y0), info.origin.theta))
+    return grown, origin
+
+
 class GlobalPlanner:
     def __init__(self, params: GlobalPlannerParams | None = None):
         self.params = params or GlobalPlannerParams()
@@ -424,6 +450,8 @@ class GlobalPlanner:
         costs = np.ascontiguousarray(costs, np.uint8)
         if costs.shape != (info.height, info.width):
             raise ValueError(f"costs of shape {costs.shape} do not match the grid's {info.height} x {info.width}")
+        if p.allow_unknown:
+            costs, info = grown_to_hold(costs, info, (start, goal))
         (su, sv), (gu, gv) = ((float(t) for t in grid_coords(info, pose[0], pose[1])) for pose in (start, goal))
         s_cell, g_cell = (int(math.floor(sv)), int(math.floor(su))), (int(math.floor(gv)), int(math.floor(gu)))
         for what, pose, cell in (("start", start, s_cell), ("goal", goal, g_cell)):
