@@ -17,7 +17,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import multiprocessing
 import re
 import sys
@@ -32,7 +31,7 @@ from ..schemas.codec import decode
 from ..schemas.keys import KeyLayout, type_for_key
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..sim.barn import GOAL, START
-from ..sim.world import World, WorldError, load_world, shared_data_dir
+from ..sim.world import World, load_world, shared_data_dir
 from .lockstep_mission import START_S, run_mission
 
 CELL = 0.15                    # m, BARN's lattice

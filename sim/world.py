@@ -501,7 +501,9 @@ def _grid_extent(grid: OccupancyGrid) -> tuple[tuple[float, float], tuple[float,
     return (float(xs.min()), float(ys.min())), (float(xs.max() - xs.min()), float(ys.max() - ys.min()))
 
 
-WORLD_KEYS = ("name", "bounds", "origin", "map", "walls", "boxes", "circles", "movers", "robot", "goals")
+# `generated` says how a generated world was made (kind, seed: docs/scenarios.md); the loader reads
+# nothing from it
+WORLD_KEYS = ("name", "bounds", "origin", "map", "walls", "boxes", "circles", "movers", "robot", "goals", "generated")
 
 
 def load_world(path: str | Path) -> World:
