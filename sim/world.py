@@ -482,7 +482,12 @@ def _grid_extent(grid: OccupancyGrid) -> tuple[tuple[float, float], tuple[float,
 def load_world(path: str | Path) -> World:
     """Read and validate a world file; raises WorldError naming the file and key on any problem."""
     path = Path(path)
-    doc = read_yaml(path, WorldError)
+    return world_from_mapping(read_yaml(path, WorldError), path)
+
+
+def world_from_mapping(doc: dict, path: Path) -> World:
+    """Validate a world file's mapping (a generated world before it is written); `path` names it in
+    errors and anchors a relative `map:` file."""
     keys = _Keys(str(path))
 
     name = doc.get("name", path.stem)
