@@ -15,6 +15,7 @@ BENCHES: dict[str, str] = {
     "local": "omninav.services.local_planner.bench",
     "missions": "omninav.services.navigator.bench",
     "paper": "omninav.services.navigator.paper_bench",
+    "explore": "omninav.experiments.explore_bench",
 }
 
 
