@@ -1,21 +1,26 @@
-"""Frontier exploration: frontiers on hand-made maps, the choice of goal, and a whole exploration of
-the room world in the simulator through the navigation stack."""
+"""Frontier exploration: frontiers on hand-made maps, the choice of goal, the retry of failed
+frontiers, and whole explorations of the room world and a small generated maze in the simulator
+through the navigation stack."""
 import dataclasses
 
 import numpy as np
 import pytest
+import yaml
+from scipy import ndimage
 
+from omninav.experiments.scenarios.maze import generate as generate_maze
 from omninav.schemas import decode
 from omninav.schemas.messages import (CancelGoal, Goal, Header, MapMetaData, NavStatus, OccupancyGrid, Pose2D,
                                       PoseWithCovariance)
-from omninav.services.slam.explore import (INSCRIBED, Explorer, ExploreParams, find_frontiers, frontier_cells,
-                                           still_frontier)
+from omninav.services.slam.explore import (INSCRIBED, Explorer, ExploreParams, FailedFrontiers, find_frontiers,
+                                           frontier_cells, known_area, still_frontier)
 from omninav.services.runtime.node import NS_PER_S
 from omninav.services.slam.explore_node import ExploreNode, ExploreNodeParams
 from omninav.services.slam.mapping import build_map, compare_with_truth, explored_share, slam_params_for
 from omninav.sim.node import open_world
 
 RES = 0.1
+SMALL_MAZE_SEED = 195     # a 7.2 m × 5.3 m maze of 3 × 2 rooms (the bench reports on seeds from 0)
 FREE, OCC, UNKNOWN = 0, 100, -1
 
 
@@ -72,7 +77,7 @@ def test_frontiers_are_clustered_sized_filtered_and_given_up():
 
 
 def test_costs_keep_the_robot_off_walls():
-    params = ExploreParams(robot_radius=0.3, clearance=0.1, inflation_radius=1.0)
+    params = ExploreParams(robot_radius=0.3, inscribed_radius=0.3, clearance=0.1, inflation_radius=1.0)
     costs = Explorer(params, RES).costs(grid_of(rooms()))
     assert costs[0, 10] == 254 and costs[25, 45] == 255 and costs[13, 45] == INSCRIBED   # wall; unknown; near one
     assert costs[15, 4] >= INSCRIBED and costs[15, 5] < INSCRIBED     # 0.4 m and 0.5 m from the west wall
@@ -80,7 +85,7 @@ def test_costs_keep_the_robot_off_walls():
 
 
 def test_the_reachable_frontier_is_chosen():
-    params = ExploreParams(robot_radius=0.3, clearance=0.1, approach_distance=1.0, min_frontier_size=0.5)
+    params = ExploreParams(robot_radius=0.3, inscribed_radius=0.3, clearance=0.1, approach_distance=1.0, min_frontier_size=0.5)
     explorer = Explorer(params, RES)
     grid = grid_of(rooms())
     costs = explorer.costs(grid)
@@ -107,7 +112,7 @@ def test_the_nearer_frontier_wins_unless_the_farther_is_much_larger():
     data[1:-1, -1] = UNKNOWN         # and at x = 7.85 m
     data[1:10, -1] = OCC             # … of which only 1.9 m
     grid = grid_of(data)
-    params = ExploreParams(robot_radius=0.3, clearance=0.1, approach_distance=0.5)
+    params = ExploreParams(robot_radius=0.3, inscribed_radius=0.3, clearance=0.1, approach_distance=0.5)
     near_the_short_one = (6.5, 1.5, 0.0)
     for gain, side in ((0.3, "east"), (20.0, "west")):
         explorer = Explorer(dataclasses.replace(params, gain_scale=gain), RES)
@@ -116,13 +121,75 @@ def test_the_nearer_frontier_wins_unless_the_farther_is_much_larger():
 
 
 def test_a_robot_too_close_to_a_wall_can_still_leave():
-    params = ExploreParams(robot_radius=0.3, clearance=0.1)
+    params = ExploreParams(robot_radius=0.3, inscribed_radius=0.3, clearance=0.1)
     explorer = Explorer(params, RES)
     grid = grid_of(rooms())
     costs = explorer.costs(grid)
     assert costs[15, 2] >= INSCRIBED
     goal = explorer.choose(grid, costs, (0.25, 1.55, 0.0))     # 0.15 m from the west wall
     assert goal is not None and round(goal.frontier.size_m, 2) == 1.6
+
+
+def test_a_failed_frontier_is_held_back_until_the_robot_moved_or_the_map_grew():
+    params = ExploreParams(retry_distance=1.0, retry_known_area=1.0, max_failures=3)
+    failed = FailedFrontiers(params)
+    gap = np.column_stack([np.full(16, 3.05), np.arange(7, 23) * RES + RES / 2])
+    failed.fail(gap, "aborted: no plan", robot_xy=(1.0, 1.5), known_m2=10.0)
+    assert len(failed.held_back((1.0, 1.5), 10.0)) == len(gap)       # nothing changed: held back
+    assert len(failed.held_back((1.5, 1.9), 10.9)) == len(gap)       # moved 0.64 m, 0.9 m² more known
+    assert len(failed.held_back((2.1, 1.5), 10.0)) == 0              # moved 1.1 m: tried again
+    assert len(failed.held_back((1.0, 1.5), 11.0)) == 0              # 1 m² more known: tried again
+    # failing again where it failed (its cells shifted by a cell) is the same frontier; another is not
+    failed.fail(gap + [RES, 0.0], "no progress", robot_xy=(2.1, 1.5), known_m2=10.0)
+    failed.fail(np.array([[6.0, 2.0], [6.0, 2.1]]), "aborted", robot_xy=(2.1, 1.5), known_m2=10.0)
+    assert [f.reasons for f in failed.waiting] == [("aborted: no plan", "no progress"), ("aborted",)]
+    assert not failed.dropped
+    dropped = failed.fail(gap[3:5], "aborted", robot_xy=(5.0, 1.5), known_m2=20.0)
+    assert dropped.reasons == ("aborted: no plan", "no progress", "aborted") and failed.dropped == [dropped]
+    assert [f.reasons for f in failed.waiting] == [("aborted",)]
+    # dropped for good: held back however far the robot goes
+    assert len(failed.held_back((9.0, 9.0), 100.0)) == len(dropped.xy) == len(failed.dropped_xy())
+
+
+def test_a_failed_frontier_is_tried_again_when_no_other_is_left_and_never_once_dropped():
+    params = ExploreParams(robot_radius=0.3, inscribed_radius=0.3, clearance=0.1, max_failures=2)
+    explorer = Explorer(params, RES)
+    data = rooms()
+    data[1:29, 0] = UNKNOWN          # a second frontier: the west wall unseen, 2.8 m, beside the robot
+    grid, here = grid_of(data), (0.8, 1.5, 0.0)
+    failed = FailedFrontiers(params)
+    first = explorer.next_goal(grid, here, (), failed)
+    assert first.xy[0] < 1.0                                           # the west frontier, close by
+    failed.fail(first.frontier.xy, "aborted", here[:2], known_area(grid))
+    second = explorer.next_goal(grid, here, (), failed)
+    assert second.xy[0] > 2.0                                          # the gap instead
+    failed.fail(second.frontier.xy, "aborted", here[:2], known_area(grid))
+    again = explorer.next_goal(grid, here, (), failed)                 # both held back: the better one again
+    assert again.xy == first.xy
+    failed.fail(again.frontier.xy, "aborted", here[:2], known_area(grid))
+    assert len(failed.dropped) == 1
+    assert explorer.next_goal(grid, here, (), failed).xy == second.xy
+    failed.fail(second.frontier.xy, "aborted", here[:2], known_area(grid))
+    assert explorer.next_goal(grid, here, (), failed) is None          # both dropped: nothing is left
+
+
+def test_goals_keep_the_robot_turned_any_way_clear_while_paths_need_only_its_inscribed_radius():
+    # a 1.0 m door: the round robot of radius 0.45 m (+ 0.1 m) cannot pass it turned any way, a
+    # footprint with a 0.3 m inscribed radius can, turned the right way
+    data = rooms()
+    data[7:23, 30] = OCC
+    data[10:20, 30] = FREE
+    data[1:29, 31:59] = FREE
+    data[0, 30:60] = data[29, 30:60] = OCC
+    data[1:29, 59] = UNKNOWN          # the far room's east side unseen
+    grid, here = grid_of(data), (1.0, 1.5, 0.0)
+    for inscribed, reaches in ((0.45, False), (0.3, True)):
+        params = ExploreParams(robot_radius=0.45, inscribed_radius=inscribed, clearance=0.1)
+        explorer = Explorer(params, RES)
+        goal = explorer.next_goal(grid, here, (), FailedFrontiers(params))
+        assert (goal is not None) == reaches
+    wall = ndimage.distance_transform_edt(grid.data != OCC) * RES
+    assert wall[goal.cell] > 0.45 + 0.1
 
 
 def test_bad_parameters_are_named():
@@ -140,7 +207,7 @@ class ExploreProbe:
     """An explore node fed by hand, recording the goals and cancels it sends."""
 
     def __init__(self):
-        self.node = ExploreNode(ExploreNodeParams(robot_radius=0.3, clearance=0.1, approach_distance=1.0))
+        self.node = ExploreNode(ExploreNodeParams(robot_radius=0.3, inscribed_radius=0.3, clearance=0.1, approach_distance=1.0))
         self.goals, self.cancels = [], []
         self.node.goal_pub.sink = lambda pub, payload, stamp: self.goals.append(decode(payload, Goal))
         self.node.cancel_pub.sink = lambda pub, payload, stamp: self.cancels.append(decode(payload, CancelGoal))
@@ -159,7 +226,7 @@ class ExploreProbe:
                                                               distance_remaining=distance_remaining))
 
 
-def test_the_explore_node_sends_frontiers_as_goals_and_gives_up_the_aborted_ones():
+def test_the_explore_node_sends_frontiers_as_goals_and_drops_one_that_keeps_failing():
     probe = ExploreProbe()
     probe.pose(0.5, 1.0, 1.5)
     probe.map(1.0, rooms())
@@ -169,9 +236,17 @@ def test_the_explore_node_sends_frontiers_as_goals_and_gives_up_the_aborted_ones
     probe.status(1.8, "explore-1", "aborted")       # takes effect 0.3 s later: not on the map at 2.0 s
     probe.map(2.0, rooms())
     assert len(probe.goals) == 1 and not probe.node.finished
-    probe.map(3.0, rooms())                         # given up: the gap was the only frontier
-    assert len(probe.goals) == 1 and not probe.node.finished and not probe.cancels
-    probe.map(4.0, rooms())                         # a second map without one: done
+    failures = probe.node.params.max_failures
+    for attempt in range(2, failures + 1):          # the gap is the only frontier: tried again at once
+        probe.map(attempt + 1.0, rooms())
+        assert [g.goal_id for g in probe.goals][-1] == f"explore-{attempt}"
+        assert probe.goals[-1].pose.x == goal.pose.x and probe.goals[-1].pose.y == goal.pose.y
+        probe.status(attempt + 1.5, f"explore-{attempt}", "aborted")
+    probe.map(failures + 2.0, rooms())              # dropped at its last failure: nothing left
+    assert len(probe.goals) == failures and not probe.node.finished and not probe.cancels
+    assert probe.node.counters["frontiers_dropped"] == 1
+    assert probe.node.failed.dropped[0].reasons == ("aborted",) * failures
+    probe.map(failures + 3.0, rooms())              # a second map without one: done
     assert probe.node.finished and not probe.cancels
 
 
@@ -213,3 +288,12 @@ def test_exploring_the_room_maps_its_reachable_free_space_without_collision():
     assert explored_share(result.grid, world) >= 0.95
     comparison = compare_with_truth(result.grid, world)
     assert comparison.agreement >= 0.95 and comparison.within_one_cell >= 0.95
+
+
+def test_exploring_a_small_generated_maze_maps_its_reachable_free_space_without_collision(tmp_path):
+    path = tmp_path / "maze.yaml"
+    path.write_text(yaml.safe_dump(generate_maze(np.random.default_rng(SMALL_MAZE_SEED))))
+    world = open_world(str(path))
+    result = build_map(str(path), params=slam_params_for(world, {"particles": 10}), max_sim_s=600.0)
+    assert result.finished and result.collisions == 0
+    assert explored_share(result.grid, world) >= 0.95

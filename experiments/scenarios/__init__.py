@@ -14,7 +14,7 @@ import yaml
 
 from ...services.runtime.errors import UserError
 from ...sim.world import WorldError, world_from_mapping
-from . import clutter, crossing, crowd, doorway, headon, overtake
+from . import clutter, crossing, crowd, doorway, headon, maze, overtake
 from .check import world_problems
 
 KINDS: dict[str, Callable[[np.random.Generator], dict]] = {
@@ -24,6 +24,7 @@ KINDS: dict[str, Callable[[np.random.Generator], dict]] = {
     "crowd": crowd.generate,
     "doorway": doorway.generate,
     "clutter": clutter.generate,
+    "maze": maze.generate,
 }
 DYNAMIC_KINDS = ("crossing", "headon", "overtake", "crowd", "doorway")
 ATTEMPTS = 100          # sub-seeds tried before a seed is given up

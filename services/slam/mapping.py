@@ -27,19 +27,21 @@ from ...schemas.messages import OccupancyGrid
 from ...sim.node import SimNode, SimNodeParams
 from ...sim.world import GRID_OBSTACLE, World
 from ..chassis.node import ChassisNode, ChassisNodeParams
+from ..costmap.footprint import radii
 from ..costmap.node import CostmapNode, CostmapNodeParams
 from ..global_planner.node import PlannerNode, PlannerNodeParams
 from ..lidar.node import LidarNode, LidarNodeParams
 from ..cmd_vel_mux.node import CmdVelMuxNode
 from ..local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
 from ..local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
-from ..localizer.evaluate import ROUTES, Harness, HarnessParams, Route, circumscribed_radius, route_problems
+from ..localizer.evaluate import ROUTES, Harness, HarnessParams, Route, route_problems
 from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
 from ..navigator.node import NavigatorNode, NavigatorNodeParams
 from ..runtime.inprocess import InProcessRunner
 from ..runtime.node import Node
 from ..runtime.params import load_params
 from ..tracker.node import TrackerNode, TrackerNodeParams
+from .explore import Failure
 from .explore_node import ExploreNode, ExploreNodeParams
 from .node import SlamNode, SlamNodeParams
 
@@ -85,6 +87,7 @@ class BuildResult:
     finished: bool      # the route driven `laps` times, or no reachable frontier left
     laps: int           # with a route
     goals: int          # frontiers driven to, when exploring
+    dropped: tuple[str, ...]    # when exploring: the frontiers dropped for good, where and why
     updates: int
     collisions: int
     malformed: int
@@ -133,7 +136,8 @@ def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, param
         drivers = [driver]
         done = lambda: driver.laps >= laps   # noqa: E731
     else:
-        driver = ExploreNode(ExploreNodeParams(robot_radius=circumscribed_radius(world)))
+        inscribed, circumscribed = radii(world.robot.footprint)
+        driver = ExploreNode(ExploreNodeParams(robot_radius=circumscribed, inscribed_radius=inscribed))
         drivers = [*navigation_stack(world, drive), driver]
         done = lambda: driver.finished   # noqa: E731
     slam = SlamNode(params or slam_params_for(world, seed=seed))
@@ -144,8 +148,14 @@ def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, param
     exploring = isinstance(driver, ExploreNode)
     return BuildResult(grid=slam.current_map(), sim_s=sim.now_ns * 1e-9, finished=done(),
                        laps=0 if exploring else driver.laps, goals=driver.counters["goals"] if exploring else 0,
+                       dropped=tuple(dropped_text(f) for f in driver.failed.dropped) if exploring else (),
                        updates=slam.counters["filter_updates"], collisions=sim.sim.collisions,
                        malformed=sum(v for k, v in slam.counters.items() if k.startswith("malformed/")))
+
+
+def dropped_text(failure: Failure) -> str:
+    x, y = failure.xy.mean(axis=0)
+    return f"({x:.2f}, {y:.2f}): " + "; ".join(failure.reasons)
 
 
 @dataclass(frozen=True)
