@@ -8,6 +8,7 @@ import subprocess
 import sys
 
 from omninav.schemas import decode
+from omninav.services.runtime.acl import CREDENTIALS_ENV
 from omninav.services.runtime.zenoh_config import ROUTER_ENV, open_client
 
 from conftest import REPO, wait_until
@@ -32,7 +33,7 @@ def omninav(endpoint, *args, timeout=120):
     return done.returncode, done.stdout + done.stderr
 
 
-def test_up_introspect_restart_record_replay(up, endpoint, router_endpoint, tmp_path):
+def test_up_introspect_restart_record_replay(up, endpoint, router_endpoint, tmp_path, monkeypatch):
     recording = tmp_path / "demo.mcap"
     launcher = up(DEMO.format(output=recording))
     pids = wait_until(lambda: len(p := service_pids(launcher.pid)) == 3 and p, 60, what="three services up")
@@ -71,7 +72,8 @@ def test_up_introspect_restart_record_replay(up, endpoint, router_endpoint, tmp_
     assert code == 0, out
     assert "1 earlier run(s) of listener: comparing the last" in out and "byte for byte" in out
 
-    replayed = []   # up and its router are gone: live replay onto another bus
+    replayed = []   # up and its router are gone: live replay onto another bus, one without identities
+    monkeypatch.delenv(CREDENTIALS_ENV)
     with open_client(router_endpoint) as session:
         sub = session.declare_subscriber("omninav/r1/chatter", lambda s: replayed.append(decode(s.payload.to_bytes())))
         code, out = omninav(router_endpoint, "replay", str(recording), "--rate", "20", "--keys", "omninav/r1/chatter")
