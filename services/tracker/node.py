@@ -84,6 +84,12 @@ class TrackerNode(Node):
         if self.frames.odom is None:
             self.counters["scans_before_odometry"] += 1
             return
+        if self.core.stamp_s is not None and t / NS_PER_S < self.core.stamp_s:
+            # stamp order makes this impossible on the bus; a replayed or injected scan can be older
+            key = self.keys.resolve("scan")
+            self.reject(key, MessageError(f"stamp {t / NS_PER_S} s is older than the last scan's, "
+                                          f"{self.core.stamp_s} s", type_name="LaserScan", key=key))
+            return
         laser = compose(self.frames.odom, self.laser)
         points = scan_points(msg, laser, inf_is_valid=False)
         tracks = self.core.update(t / NS_PER_S, laser[:2], points, self.frames.map_odom)
