@@ -104,7 +104,7 @@ def test_a_ros2_layout_loads(tmp_path):
 def test_an_unknown_parameter_is_named(tmp_path):
     path = tmp_path / "amcl.yaml"
     path.write_text(MECANUM_AMCL + "laser_max_beam: 30\n")
-    with pytest.raises(ParamError, match=r"unknown parameter\(s\) \['laser_max_beam'\]") as err:
+    with pytest.raises(ParamError, match=r"unknown parameter 'laser_max_beam' \(did you mean 'laser_max_beams'\?\)") as err:
         load_params_file(AmclParams, path)
     assert str(path) in str(err.value)
 

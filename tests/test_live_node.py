@@ -31,4 +31,4 @@ def test_unknown_service_and_bad_parameter_fail_clearly(processes):
     bad = processes.omninav("run", "nosuch")
     assert bad.wait(30) == 2 and "unknown service 'nosuch'" in processes.log_of(bad)
     bad = processes.omninav("run", "listener", "--set", "gian=2")
-    assert bad.wait(30) == 2 and "unknown parameter(s) ['gian']" in processes.log_of(bad)
+    assert bad.wait(30) == 2 and "unknown parameter 'gian' (did you mean 'gain'?)" in processes.log_of(bad)

@@ -287,7 +287,7 @@ def small_recording(tmp_path):
     (["{missing}", "--into", "listener"], "no such recording"),
     (["{garbage}", "--into", "listener"], "not a readable MCAP recording"),
     (["{small}", "--into", "nosuch"], "unknown service 'nosuch'"),
-    (["{small}", "--into", "listener", "--set", "gian=2"], "unknown parameter(s) ['gian']"),
+    (["{small}", "--into", "listener", "--set", "gian=2"], "unknown parameter 'gian' (did you mean 'gain'?)"),
     (["{small}", "--into", "listener", "--params", "{missing}"], "no such file"),
     (["{small}", "--into", "talker"], "talker has no inputs"),
     (["{small}", "--into", "listener", "--out", "{small}"], "is the recording itself"),
