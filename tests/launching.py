@@ -75,3 +75,9 @@ def echo_subscriber(session, echoes: list):
 
 def count_echoes(echoes: list) -> int:
     return sum(m.text.startswith("echo:") for m in list(echoes))
+
+
+def command_chain(processes) -> list:
+    """The gates between teleop and the chassis as processes: teleop puts cmd_vel_teleop, the mux
+    passes it to the smoother, and only the collision monitor puts cmd_vel."""
+    return [processes.omninav("run", name) for name in ("cmd_vel_mux", "velocity_smoother", "collision_monitor")]

@@ -11,6 +11,7 @@ import pytest
 import zenoh
 from scipy import ndimage
 
+from launching import command_chain
 from conftest import REPO, wait_until
 from omninav.schemas import decode, encode
 from omninav.schemas.attachment import pack_attachment
@@ -369,7 +370,7 @@ def test_a_live_run_replays_byte_for_byte_into_the_costmap_and_the_planner(proce
     recorder = processes.omninav("record", "-o", str(recording))
     wait_until(lambda: "recording" in processes.log_of(recorder), 60, what="the recorder to start")
     services = [processes.omninav("run", "sim"), processes.omninav("run", "chassis"),
-                processes.omninav("run", "lidar"),
+                processes.omninav("run", "lidar"), *command_chain(processes),
                 processes.omninav("run", "map_server", "--set", "yaml_filename=compose/maps/room.yaml",
                                   "--set", "publish_period_s=1.0"),
                 processes.omninav("run", "costmap", *ROOM_START),

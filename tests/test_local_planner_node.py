@@ -157,8 +157,8 @@ REPLAYED = (("local_planner", ["--set", "initial_pose_x=1.2", "--set", "initial_
             ("velocity_smoother", []), ("collision_monitor", []))
 # live, on a loaded machine the sim starves and then catches up in bursts of up to 10 steps, so the
 # gates' inputs may trail the clock by more than their default margins (40 and 50 ms)
-LIVE = (REPLAYED[0], ("velocity_smoother", ["--set", "command_delay_s=0.3"]),
-        ("collision_monitor", ["--set", "scan_delay_s=0.3"]))
+LIVE = (REPLAYED[0], ("cmd_vel_mux", ["--set", "command_delay_s=0.3"]),
+        ("velocity_smoother", ["--set", "command_delay_s=0.3"]), ("collision_monitor", ["--set", "scan_delay_s=0.3"]))
 
 
 def _replays_byte_for_byte(recording, capsys, services=REPLAYED) -> None:

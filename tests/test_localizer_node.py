@@ -24,6 +24,7 @@ from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.raycast import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path
 
+from launching import command_chain
 from conftest import wait_until
 
 LIDAR = LidarParams(beams=360, range_max=10.0, noise_std=0.01)
@@ -406,7 +407,7 @@ def test_a_live_run_replays_into_the_localizer_byte_for_byte(processes, room_map
     localizer = processes.omninav("run", "localizer", *settings)
     wait_until(lambda: "started" in processes.log_of(localizer), 60, what="the localizer to start")
     services = [processes.omninav("run", "sim", "--set", "rate=2"), processes.omninav("run", "chassis"),
-                processes.omninav("run", "lidar")]
+                processes.omninav("run", "lidar"), *command_chain(processes)]
     teleop = processes.omninav("teleop", "--script", SCRIPT)
     assert teleop.wait(180) == 0, processes.log_of(teleop)
     for proc in [localizer, *reversed(services)]:    # the localizer's last diagnostic gets recorded

@@ -8,6 +8,7 @@ import numpy as np
 from omninav.schemas import decode
 from omninav.services.recorder.mcap_io import read_records
 
+from launching import command_chain
 from conftest import wait_alive, wait_until
 
 # forward 0.9 m, turn in place, strafe right: clear of the room's furniture from the start pose
@@ -26,8 +27,8 @@ def test_drive_record_replay_and_report(processes, router_endpoint, tmp_path):
     wait_until(lambda: "recording" in processes.log_of(recorder), 60, what="the recorder to start")
     services = [processes.omninav("run", "sim", "--set", "rate=2"),
                 processes.omninav("run", "chassis"),
-                processes.omninav("run", "lidar")]
-    wait_alive(router_endpoint, ["sim", "chassis", "lidar"])
+                processes.omninav("run", "lidar"), *command_chain(processes)]
+    wait_alive(router_endpoint, ["sim", "chassis", "lidar", "cmd_vel_mux", "velocity_smoother", "collision_monitor"])
     code, log = run_omninav(processes, "teleop", "--script", SCRIPT)
     assert code == 0, log
     for proc in reversed(services):      # lidar and chassis first: their final diagnostics get recorded

@@ -21,6 +21,7 @@ from omninav.services.se2 import compose
 from omninav.services.slam.mapping import RouteDriver, compare_with_truth, slam_params_for
 from omninav.services.slam.node import SlamNode
 from omninav.sim.node import SimNode, SimNodeParams, open_world
+from launching import command_chain
 from conftest import wait_until
 
 ROUTE = ((1.3, 0.8), (4.5, 0.8))     # along the bottom wall and back
@@ -179,7 +180,7 @@ def test_a_live_run_replays_into_slam_byte_for_byte(processes, tmp_path):
     wait_until(lambda: "recording" in processes.log_of(recorder), 60, what="the recorder to start")
     # the sensors first: slam starts into flowing streams, so it never waits for a silent one
     services = [processes.omninav("run", "sim", "--set", "rate=2"), processes.omninav("run", "chassis"),
-                processes.omninav("run", "lidar")]
+                processes.omninav("run", "lidar"), *command_chain(processes)]
     for proc in services:
         wait_until(lambda: "started" in processes.log_of(proc), 60, what="the sim, chassis and lidar to start")
     slam = processes.omninav("run", "slam", *LIVE_SLAM)
