@@ -29,6 +29,7 @@ from omninav.services.navigator.mission import (MissionError, MissionRecord, loa
 from omninav.services.navigator.truth_pose import TruthPoseNode, TruthPoseParams
 from omninav.services.map_server.mapio import load_map
 from omninav.services.recorder.mcap_io import read_records, recording_summary
+from omninav.services.runtime.acl import TOOL
 from omninav.services.runtime.compose import load_compose
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
@@ -390,7 +391,7 @@ def test_navigate_stops_everything_and_names_a_service_that_dies_mid_mission(tmp
     try:
         router = _wait_for(lambda: _router_of(out / "services.log"), navigate, "router")
         steering = threading.Event()
-        with open_client(router) as session:
+        with open_client(router, credentials=str(out / "credentials" / TOOL)) as session:    # the ACL is on
             local_cmd = session.declare_subscriber(
                 KeyLayout().resolve("local_cmd"),
                 lambda sample: decode(sample.payload.to_bytes()).goal_id == "g1" and steering.set())
