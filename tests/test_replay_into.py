@@ -285,7 +285,7 @@ def small_recording(tmp_path):
 
 @pytest.mark.parametrize("argv, error", [
     (["{missing}", "--into", "listener"], "no such recording"),
-    (["{garbage}", "--into", "listener"], "not a readable MCAP recording"),
+    (["{garbage}", "--into", "listener"], "not an MCAP file"),
     (["{small}", "--into", "nosuch"], "unknown service 'nosuch'"),
     (["{small}", "--into", "listener", "--set", "gian=2"], "unknown parameter 'gian' (did you mean 'gain'?)"),
     (["{small}", "--into", "listener", "--params", "{missing}"], "no such file"),
