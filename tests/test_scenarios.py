@@ -52,7 +52,7 @@ def _drivable(world):
     return grid, (grid.data == 0) & (clear > inscribed)
 
 
-@pytest.mark.parametrize("kind", sorted(KINDS))
+@pytest.mark.parametrize("kind", sorted(set(KINDS) - {"maze"}))     # a maze has no goal: tests/test_maze.py
 def test_every_world_is_solvable(worlds, kind):
     for seed in SEEDS:
         world = worlds[kind, seed]
@@ -68,7 +68,7 @@ def test_every_world_is_solvable(worlds, kind):
             assert world.distance(loop).min() > radius, (kind, seed)
 
 
-@pytest.mark.parametrize("kind", sorted(KINDS))
+@pytest.mark.parametrize("kind", sorted(set(KINDS) - {"maze"}))
 def test_movers_never_give_way_and_their_numbers_fit_the_kind(worlds, kind):
     low, high = MOVERS[kind]
     for seed in SEEDS:

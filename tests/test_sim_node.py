@@ -4,7 +4,7 @@ import logging
 import numpy as np
 import pytest
 
-from omninav.schemas import decode, encode
+from omninav.schemas import MessageError, decode, encode
 from omninav.schemas.messages import Clock, Header, Obstacles, Odometry, WheelCommand, WheelState
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client
@@ -76,11 +76,14 @@ def test_a_command_for_another_robot_is_rejected_logged_once_and_counted(caplog)
     with caplog.at_level(logging.WARNING):
         command(node, [1.0, 1.0], drive="diff")
         command(node, [1.0, 1.0], drive="diff")
-        command(node, [1.0, 1.0, 1.0], drive="mecanum")
+        command(node, [1.0, 1.0, 1.0], drive="omni3")
+    with pytest.raises(MessageError, match="3 wheel velocities for a mecanum drive of 4 wheels"):
+        command(node, [1.0, 1.0, 1.0], drive="mecanum")       # the codec refuses it before the sim sees it
     assert node.counters["rejected/omninav/r1/wheel_cmd"] == 3
     warnings = [r.getMessage() for r in caplog.records if "rejected" in r.getMessage()]
     assert len(warnings) == 2          # once per kind of problem
     assert "diff drive with 2 wheels" in warnings[0] and "mecanum drive with 4 wheels" in warnings[0]
+    assert "omni3 drive with 3 wheels" in warnings[1]
     node.tick()
     assert not node.sim.wheel_speeds.any()                   # none of them was applied
     diag = node.diagnostic()
