@@ -23,7 +23,6 @@ class RecordingSource(Node):
 
     def __init__(self, path: str | Path, keys: list[str]):
         self.records: list[Record] = sorted(read_records(path, keys), key=lambda r: (r.stamp_ns, r.seq))
-        self.wanted = keys
         super().__init__()
 
     def setup(self) -> None:
