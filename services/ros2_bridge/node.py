@@ -1,0 +1,120 @@
+"""The ROS 2 bridge as a service: omninav's bus on one side, a ROS 2 robot's rmw_zenoh router on the other.
+
+omninav side (a Node like every service, so `up` grants it exactly this): it puts sim/clock, scan,
+odom and goal (what the robot's sensors and a ROS user's goal become) and subscribes to cmd_vel (the
+collision monitor's output: the bridge takes the chassis's place), map, pose and plan, all sporadic.
+ROS side (a second Zenoh session, a client of the robot's router, loopback only, without omninav's
+credentials): one ROS node with a subscription per input topic and a publisher per output topic,
+each announced by its liveliness token as rmw_zenoh does (rmw.py), so `ros2 topic list` and
+`ros2 node list` on the robot show them. ROS samples wait in an inbox that the node drains on its
+own thread (it is paced like a source), so the Node's state is touched by one thread only.
+"""
+from __future__ import annotations
+
+import queue
+import threading
+from collections.abc import Callable
+
+import zenoh
+
+from ..runtime.live import LiveRunner
+from ..runtime.node import Node
+from ..runtime.zenoh_config import check_loopback, foreign_client_config
+from .bridge import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, RosTopic
+from .rmw import PUBLISHER, SUBSCRIPTION, NodeIdentity, entity_gid, pack_attachment, topic_key
+
+POLL_S = 0.01       # wall s between drains of the ROS inbox (a source's pace: it adds at most this latency)
+
+
+class Ros2BridgeNode(Node):
+    service = "ros2_bridge"
+    Params = Ros2BridgeParams
+
+    def setup(self) -> None:
+        p = self.params
+        check_loopback(p.ros_router)
+        if p.domain < 0:
+            raise ValueError(f"{self.name}: domain must be a ROS domain id ≥ 0, got {p.domain}")
+        self.bridge = Bridge(p)
+        self.inbox: queue.SimpleQueue[tuple[RosTopic, bytes]] = queue.SimpleQueue()
+        # (ROS topic, CDR payload, stamp_ns) -> the robot; set by the ROS session (or a test)
+        self.ros_sink: Callable[[RosTopic, bytes, int], None] | None = None
+        self._reported: set[str] = set()
+        self.to_stack = {name: self.publisher(name) for name in ("sim/clock", "scan", "odom", "goal")}
+        for topic in OUTPUTS:
+            self.subscribe(topic.omninav, lambda msg, t=topic: self._to_robot(t, msg), synced=False)
+
+    def pace_s(self) -> float:
+        return POLL_S
+
+    def tick(self) -> None:
+        while True:
+            try:
+                topic, payload = self.inbox.get_nowait()
+            except queue.Empty:
+                return
+            self.from_robot(topic, payload)
+
+    def from_robot(self, topic: RosTopic, payload: bytes) -> None:
+        """One ROS sample into the stack (a sample that does not decode is counted and logged once)."""
+        key = f"ros2{topic.name}"     # how counters and logs name a ROS topic
+        self.counters[f"received/{key}"] += 1
+        try:
+            pairs = self.bridge.from_ros(topic, payload)
+        except Exception as exc:    # rosbags raises several kinds on a bad payload
+            self.handler_failed(key, exc)
+            return
+        for problem in self.bridge.problems:
+            if problem not in self._reported:
+                self._reported.add(problem)
+                self.log.error("%s", problem)
+        for name, msg in pairs:
+            self.now_ns = max(self.now_ns, msg.header.stamp_ns)
+            self.to_stack[name].publish(msg)
+
+    def _to_robot(self, topic: RosTopic, msg) -> None:
+        if self.ros_sink is not None:
+            self.ros_sink(topic, self.bridge.to_ros(topic, msg), msg.header.stamp_ns)
+            self.counters[f"sent/{topic.name}"] += 1
+
+    def diagnostic(self):
+        diag = super().diagnostic()
+        diag.values.update(self.bridge.counts)
+        return diag
+
+    def run_live(self, router: str | None, stop_event: threading.Event) -> None:
+        runner = LiveRunner(self, router)
+        runner.stop_event = stop_event      # `omninav run`'s signal handlers set this one
+        with zenoh.open(foreign_client_config(self.params.ros_router)) as ros:
+            handles = self._declare_ros(ros)
+            runner.run()
+            self.ros_sink = None
+            for handle in handles:
+                handle.undeclare()
+
+    def _declare_ros(self, ros: zenoh.Session) -> list:
+        p = self.params
+        me = NodeIdentity(p.domain, str(ros.info.zid()), p.node_name, p.namespace)
+        handles = [ros.liveliness().declare_token(me.node_token())]
+        publishers = {}
+        for entity_id, topic in enumerate((*INPUTS, *OUTPUTS), start=me.nid + 1):
+            type_hash = self.bridge.store.hash_rihs01(topic.msgtype)
+            key = topic_key(p.domain, topic.name, topic.msgtype, type_hash)
+            kind = SUBSCRIPTION if topic in INPUTS else PUBLISHER
+            token = me.entity_token(entity_id, kind, topic.name, topic.msgtype, type_hash, topic.qos)
+            if kind == SUBSCRIPTION:
+                handles.append(ros.declare_subscriber(
+                    key, lambda sample, t=topic: self.inbox.put((t, sample.payload.to_bytes()))))
+            else:
+                publishers[topic.name] = (ros.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
+                                                                reliability=zenoh.Reliability.RELIABLE),
+                                          entity_gid(token), [0])
+                handles.append(publishers[topic.name][0])
+            handles.append(ros.liveliness().declare_token(token))
+
+        def sink(topic: RosTopic, payload: bytes, stamp_ns: int) -> None:
+            publisher, gid, seq = publishers[topic.name]
+            seq[0] += 1
+            publisher.put(payload, attachment=pack_attachment(seq[0], stamp_ns, gid))
+        self.ros_sink = sink
+        return handles
