@@ -1,7 +1,8 @@
 """The bridge's pure core: ROS 2 topics (CDR, through `rosbags`) to omninav messages and back.
 
 In from the robot: /scan (sensor_msgs/LaserScan) -> scan, /odom (nav_msgs/Odometry) -> odom,
-/goal_pose (geometry_msgs/PoseStamped, map frame) -> goal, /tf and /tf_static (tf2_msgs/TFMessage):
+/goal_pose (geometry_msgs/PoseStamped, map frame) -> goal, /initialpose (RViz's "2D Pose Estimate",
+geometry_msgs/PoseWithCovarianceStamped) -> initialpose, /tf and /tf_static (tf2_msgs/TFMessage):
 the laser's mounting on base_link. Out to the robot: cmd_vel -> /cmd_vel (geometry_msgs/Twist),
 map -> /map (nav_msgs/OccupancyGrid), pose -> /amcl_pose (geometry_msgs/PoseWithCovarianceStamped),
 plan -> /plan (nav_msgs/Path). Poses are projected to the plane as the bag importer does (x, y and
@@ -51,6 +52,7 @@ INPUTS = (
     RosTopic("/tf", "tf2_msgs/msg/TFMessage", "", Qos(depth=100)),
     RosTopic("/tf_static", "tf2_msgs/msg/TFMessage", "", Qos(durability=TRANSIENT_LOCAL, depth=1)),
     RosTopic("/goal_pose", "geometry_msgs/msg/PoseStamped", "goal"),
+    RosTopic("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", "initialpose"),
 )
 OUTPUTS = (
     RosTopic("/cmd_vel", "geometry_msgs/msg/Twist", "cmd_vel"),
@@ -71,6 +73,11 @@ def typestore():
 
 def stamp_ns(time) -> int:
     return int(time.sec) * NS_PER_S + int(time.nanosec)
+
+
+def planar_pose(pose) -> Pose2D:
+    p, q = pose.position, pose.orientation
+    return Pose2D(float(p.x), float(p.y), yaw_of(q.x, q.y, q.z, q.w))
 
 
 @dataclass
@@ -137,6 +144,8 @@ class Bridge:
             return []
         if topic.omninav == "goal":
             return self._goal(msg)
+        if topic.omninav == "initialpose":
+            return self._initial_pose(msg)
         stamp = stamp_ns(msg.header.stamp)
         if topic.omninav == "scan":
             if not self._mount_agrees(msg.header.frame_id):
@@ -168,17 +177,29 @@ class Bridge:
                              f"laser_yaw={p.laser_yaw}: set those in the compose file; scans are held back")
         return False
 
-    def _goal(self, msg) -> list[tuple[str, object]]:
+    def _request_header(self, msg, topic: str) -> Header | None:
+        """A request's header in the map frame, stamped now at the earliest (a goal stamped 0, as
+        `ros2 topic pub` sends it, or in the past takes effect now); None when in another frame."""
         frame = msg.header.frame_id.lstrip("/") or self.params.map_frame
         if frame != self.params.map_frame:
-            self.problems.append(f"/goal_pose in frame {frame!r}: only goals in {self.params.map_frame!r} are taken")
+            self.problems.append(f"{topic} in frame {frame!r}: only poses in {self.params.map_frame!r} are taken")
+            return None
+        return Header(stamp_ns=max(stamp_ns(msg.header.stamp), self.clock_ns or 0), frame_id=frame)
+
+    def _goal(self, msg) -> list[tuple[str, object]]:
+        header = self._request_header(msg, "/goal_pose")
+        if header is None:
             return []
         self.goals += 1
-        p, q = msg.pose.position, msg.pose.orientation
-        # a goal stamped 0 (ros2 topic pub) or in the past takes effect now
-        stamp = max(stamp_ns(msg.header.stamp), self.clock_ns or 0)
-        return [("goal", Goal(header=Header(stamp_ns=stamp, frame_id=frame), goal_id=f"ros2-{self.goals}",
-                              pose=Pose2D(float(p.x), float(p.y), yaw_of(q.x, q.y, q.z, q.w))))]
+        return [("goal", Goal(header=header, goal_id=f"ros2-{self.goals}", pose=planar_pose(msg.pose)))]
+
+    def _initial_pose(self, msg) -> list[tuple[str, object]]:
+        header = self._request_header(msg, "/initialpose")
+        if header is None:
+            return []
+        covariance = np.asarray(msg.pose.covariance, np.float64).reshape(6, 6)[np.ix_(_PLANAR, _PLANAR)]
+        return [("initialpose", PoseWithCovariance(header=header, pose=planar_pose(msg.pose.pose),
+                                                   covariance=np.ascontiguousarray(covariance)))]
 
     def _count(self, what: str) -> None:
         self.counts[what] = self.counts.get(what, 0) + 1

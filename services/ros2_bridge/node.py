@@ -1,7 +1,7 @@
 """The ROS 2 bridge as a service: omninav's bus on one side, a ROS 2 robot's rmw_zenoh router on the other.
 
 omninav side (a Node like every service, so `up` grants it exactly this): it puts sim/clock, scan,
-odom and goal (what the robot's sensors and a ROS user's goal become) and subscribes to cmd_vel (the
+odom, goal and initialpose (what the robot's sensors and a ROS user's goal become) and subscribes to cmd_vel (the
 collision monitor's output: the bridge takes the chassis's place), map, pose and plan, all sporadic.
 ROS side (a second Zenoh session, a client of the robot's router, loopback only, without omninav's
 credentials): one ROS node with a subscription per input topic and a publisher per output topic,
@@ -40,7 +40,7 @@ class Ros2BridgeNode(Node):
         # (ROS topic, CDR payload, stamp_ns) -> the robot; set by the ROS session (or a test)
         self.ros_sink: Callable[[RosTopic, bytes, int], None] | None = None
         self._reported: set[str] = set()
-        self.to_stack = {name: self.publisher(name) for name in ("sim/clock", "scan", "odom", "goal")}
+        self.to_stack = {name: self.publisher(name) for name in ("sim/clock", "scan", "odom", "goal", "initialpose")}
         for topic in OUTPUTS:
             self.subscribe(topic.omninav, lambda msg, t=topic: self._to_robot(t, msg), synced=False)
 
