@@ -33,7 +33,11 @@ from omninav.services.ros2_bridge.bridge import INPUTS, OUTPUTS, Bridge, Ros2Bri
 from omninav.services.ros2_bridge.rmw import (ATTACHMENT_SIZE, PUBLISHER, SUBSCRIPTION, NodeIdentity, Qos,
                                               dds_type_name, entity_gid, pack_attachment, topic_key,
                                               unpack_attachment)
+from omninav.schemas import decode
+from omninav.schemas.keys import KeyLayout
+from omninav.schemas.messages import Diagnostic
 from omninav.services.runtime.run import build_node
+from omninav.services.runtime.zenoh_config import open_client
 
 pytest.importorskip("rosbags")
 BAG = SHARED_DATA / "bags" / "localization_bag1_2022-03-29-19-23-29.bag"
@@ -299,7 +303,7 @@ def test_bridge_ros2_sets_the_robots_values_in_every_service():
 
 # ---------------------------------------------------------------- loopback: a fake robot and the stack
 
-def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, router_endpoint, tmp_path, store):
+def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoint, router_endpoint, tmp_path, store):
     """The robot's router is router_endpoint (plain Zenoh, as rmw_zenohd); omninav's is up's. The bag's
     scans and odometry go in through the bridge, a goal 10 m down the corridor on /goal_pose, and the
     stack's command comes out on the robot's /cmd_vel key, with rmw_zenoh's attachment."""
@@ -336,6 +340,15 @@ def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, router
         tokens = [str(r.ok.key_expr) for r in robot_side.liveliness().get("@ros2_lv/0/**", timeout=2.0)
                   if r.ok is not None]
         subscriber.undeclare()
+    # the laser mounting came from /tf_static, published once before the bridge existed (from the
+    # robot's cache, as transient local is), and agreed with the stack's: no scan was held back
+    diagnostics = []
+    with open_client(endpoint) as omninav_side:
+        omninav_side.declare_subscriber(KeyLayout().diagnostics("ros2_bridge"),
+                                        lambda s: diagnostics.append(decode(s.payload.to_bytes(), Diagnostic)))
+        wait_until(lambda: any(d.values.get("scans_mounting_checked", 0) > 0 for d in diagnostics), 30,
+                   what="the bridge's diagnostic counting scans checked against /tf_static")
+    assert not any("scans_dropped_mounting" in d.values for d in diagnostics)
     # what `ros2 topic list` on the robot is built from: the bridge's node and its endpoints
     bridge_tokens = [k for k in tokens if "/omninav_bridge" in k]
     assert any(k.endswith("/NN/%/%/omninav_bridge") for k in bridge_tokens)

@@ -170,6 +170,7 @@ class Bridge:
         x, y, yaw = found
         off = max(abs(x - p.laser_x), abs(y - p.laser_y), abs(math.remainder(yaw - p.laser_yaw, math.tau)))
         if off <= p.mount_tolerance:
+            self._count("scans_mounting_checked")
             return True
         self._count("scans_dropped_mounting")
         self.problems.append(f"/tf mounts {frame!r} on {p.base_frame!r} at x={x:.4f} y={y:.4f} yaw={yaw:.4f}, but "

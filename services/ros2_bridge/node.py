@@ -6,7 +6,9 @@ collision monitor's output: the bridge takes the chassis's place), map, pose and
 ROS side (a second Zenoh session, a client of the robot's router, loopback only, without omninav's
 credentials): one ROS node with a subscription per input topic and a publisher per output topic,
 each announced by its liveliness token as rmw_zenoh does (rmw.py), so `ros2 topic list` and
-`ros2 node list` on the robot show them. ROS samples wait in an inbox that the node drains on its
+`ros2 node list` on the robot show them. Transient-local topics use Zenoh's advanced publisher and
+subscriber as rmw_zenoh does: /tf_static sent before the bridge started still reaches it, and /map
+reaches an RViz that starts later. ROS samples wait in an inbox that the node drains on its
 own thread (it is paced like a source), so the Node's state is touched by one thread only.
 """
 from __future__ import annotations
@@ -16,14 +18,23 @@ import threading
 from collections.abc import Callable
 
 import zenoh
+from zenoh.ext import CacheConfig, HistoryConfig, declare_advanced_publisher, declare_advanced_subscriber
 
 from ..runtime.live import LiveRunner
 from ..runtime.node import Node
 from ..runtime.zenoh_config import check_loopback, foreign_client_config
 from .bridge import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, RosTopic
-from .rmw import PUBLISHER, SUBSCRIPTION, NodeIdentity, entity_gid, pack_attachment, topic_key
+from .rmw import PUBLISHER, SUBSCRIPTION, TRANSIENT_LOCAL, NodeIdentity, entity_gid, pack_attachment, topic_key
 
 POLL_S = 0.01       # wall s between drains of the ROS inbox (a source's pace: it adds at most this latency)
+
+
+def ros_session_config(router: str) -> zenoh.Config:
+    """A client of the robot's router; samples carry timestamps, as in rmw_zenoh's sessions (Zenoh's
+    advanced publisher, for transient-local topics, orders by them)."""
+    conf = foreign_client_config(router)
+    conf.insert_json5("timestamping/enabled", "true")
+    return conf
 
 
 class Ros2BridgeNode(Node):
@@ -85,7 +96,7 @@ class Ros2BridgeNode(Node):
     def run_live(self, router: str | None, stop_event: threading.Event) -> None:
         runner = LiveRunner(self, router)
         runner.stop_event = stop_event      # `omninav run`'s signal handlers set this one
-        with zenoh.open(foreign_client_config(self.params.ros_router)) as ros:
+        with zenoh.open(ros_session_config(self.params.ros_router)) as ros:
             handles = self._declare_ros(ros)
             runner.run()
             self.ros_sink = None
@@ -102,13 +113,20 @@ class Ros2BridgeNode(Node):
             key = topic_key(p.domain, topic.name, topic.msgtype, type_hash)
             kind = SUBSCRIPTION if topic in INPUTS else PUBLISHER
             token = me.entity_token(entity_id, kind, topic.name, topic.msgtype, type_hash, topic.qos)
+            latched = topic.qos.durability == TRANSIENT_LOCAL
             if kind == SUBSCRIPTION:
-                handles.append(ros.declare_subscriber(
-                    key, lambda sample, t=topic: self.inbox.put((t, sample.payload.to_bytes()))))
+                # as rmw_zenoh's transient-local subscriptions: ask late-detected publishers' caches for
+                # what they sent before (robot_state_publisher's /tf_static, sent once at its start)
+                history = HistoryConfig(detect_late_publishers=True, max_samples=topic.qos.depth) if latched else None
+                handles.append(declare_advanced_subscriber(
+                    ros, key, lambda sample, t=topic: self.inbox.put((t, sample.payload.to_bytes())),
+                    history=history, subscriber_detection=latched))
             else:
-                publishers[topic.name] = (ros.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK,
-                                                                reliability=zenoh.Reliability.RELIABLE),
-                                          entity_gid(token), [0])
+                # a transient-local topic (/map) keeps its last samples for subscribers that come later
+                publishers[topic.name] = (declare_advanced_publisher(
+                    ros, key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE,
+                    cache=CacheConfig(max_samples=topic.qos.depth) if latched else None,
+                    publisher_detection=latched), entity_gid(token), [0])
                 handles.append(publishers[topic.name][0])
             handles.append(ros.liveliness().declare_token(token))
 
