@@ -262,11 +262,18 @@ def test_the_node_counts_a_bad_sample_and_carries_on():
     published = []
     for pub in node.outputs.values():
         pub.sink = lambda pub, payload, stamp: published.append(pub.key)
-    node.inbox.put((in_topic("/scan"), b"\x00\x01garbage"))
-    node.inbox.put((in_topic("/scan"), scan_cdr(typestore(), 10)))
+    gid = bytes(16)
+    node.inbox.put((in_topic("/scan"), b"\x00\x01garbage", pack_attachment(1, 0, gid)))
+    node.inbox.put((in_topic("/scan"), scan_cdr(typestore(), 10), pack_attachment(2, 0, gid)))
     node.tick()
     assert node.counters["handler_errors/ros2/scan"] == 1 and node.counters["received/ros2/scan"] == 2
     assert published == ["omninav/sim/clock", "omninav/r1/scan"]
+    # the publisher's numbering tells what never came; a sample without rmw_zenoh's attachment is counted
+    node.inbox.put((in_topic("/scan"), scan_cdr(typestore(), 20), pack_attachment(5, 0, gid)))
+    node.inbox.put((in_topic("/scan"), scan_cdr(typestore(), 30), b""))
+    node.tick()
+    assert node.counters["lost/ros2/scan"] == 2 and node.counters["no_attachment/ros2/scan"] == 1
+    assert published.count("omninav/r1/scan") == 3
     sent = []
     node.ros_sink = lambda topic, payload, stamp: sent.append((topic.name, stamp))
     node.process(0, Twist(header=Header(stamp_ns=11)))      # cmd_vel, the first input
@@ -349,6 +356,8 @@ def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoi
         wait_until(lambda: any(d.values.get("scans_mounting_checked", 0) > 0 for d in diagnostics), 30,
                    what="the bridge's diagnostic counting scans checked against /tf_static")
     assert not any("scans_dropped_mounting" in d.values for d in diagnostics)
+    # every sample came with rmw_zenoh's attachment, numbered without gaps
+    assert not [k for d in diagnostics for k in d.values if k.startswith(("lost/", "no_attachment/"))]
     # what `ros2 topic list` on the robot is built from: the bridge's node and its endpoints
     bridge_tokens = [k for k in tokens if "/omninav_bridge" in k]
     assert any(k.endswith("/NN/%/%/omninav_bridge") for k in bridge_tokens)

@@ -24,7 +24,8 @@ from ..runtime.live import LiveRunner
 from ..runtime.node import Node
 from ..runtime.zenoh_config import check_loopback, foreign_client_config
 from .bridge import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, RosTopic
-from .rmw import PUBLISHER, SUBSCRIPTION, TRANSIENT_LOCAL, NodeIdentity, entity_gid, pack_attachment, topic_key
+from .rmw import (PUBLISHER, SUBSCRIPTION, TRANSIENT_LOCAL, NodeIdentity, entity_gid, pack_attachment, topic_key,
+                  unpack_attachment)
 
 POLL_S = 0.01       # wall s between drains of the ROS inbox (a source's pace: it adds at most this latency)
 
@@ -37,6 +38,10 @@ def ros_session_config(router: str) -> zenoh.Config:
     return conf
 
 
+def _bytes(attachment: zenoh.ZBytes | None) -> bytes:
+    return b"" if attachment is None else attachment.to_bytes()
+
+
 class Ros2BridgeNode(Node):
     service = "ros2_bridge"
     Params = Ros2BridgeParams
@@ -47,7 +52,9 @@ class Ros2BridgeNode(Node):
         if p.domain < 0:
             raise ValueError(f"{self.name}: domain must be a ROS domain id ≥ 0, got {p.domain}")
         self.bridge = Bridge(p)
-        self.inbox: queue.SimpleQueue[tuple[RosTopic, bytes]] = queue.SimpleQueue()
+        # (topic, CDR payload, rmw_zenoh attachment or b"")
+        self.inbox: queue.SimpleQueue[tuple[RosTopic, bytes, bytes]] = queue.SimpleQueue()
+        self._last_seq: dict[bytes, int] = {}      # a ROS publisher's GID -> its last sequence number
         # (ROS topic, CDR payload, stamp_ns) -> the robot; set by the ROS session (or a test)
         self.ros_sink: Callable[[RosTopic, bytes, int], None] | None = None
         self._reported: set[str] = set()
@@ -61,15 +68,16 @@ class Ros2BridgeNode(Node):
     def tick(self) -> None:
         while True:
             try:
-                topic, payload = self.inbox.get_nowait()
+                topic, payload, attachment = self.inbox.get_nowait()
             except queue.Empty:
                 return
-            self.from_robot(topic, payload)
+            self.from_robot(topic, payload, attachment)
 
-    def from_robot(self, topic: RosTopic, payload: bytes) -> None:
+    def from_robot(self, topic: RosTopic, payload: bytes, attachment: bytes = b"") -> None:
         """One ROS sample into the stack (a sample that does not decode is counted and logged once)."""
         key = f"ros2{topic.name}"     # how counters and logs name a ROS topic
         self.counters[f"received/{key}"] += 1
+        self._count_lost(key, attachment)
         try:
             pairs = self.bridge.from_ros(topic, payload)
         except Exception as exc:    # rosbags raises several kinds on a bad payload
@@ -82,6 +90,19 @@ class Ros2BridgeNode(Node):
         for name, msg in pairs:
             self.now_ns = max(self.now_ns, msg.header.stamp_ns)
             self.to_stack[name].publish(msg)
+
+    def _count_lost(self, key: str, attachment: bytes) -> None:
+        """Samples a ROS publisher numbered but that never came (as rmw_zenoh's message-lost event);
+        one without rmw_zenoh's attachment (which rmw_zenoh itself would drop) is taken, and counted."""
+        try:
+            seq, _, gid = unpack_attachment(attachment)
+        except ValueError:
+            self.counters[f"no_attachment/{key}"] += 1
+            return
+        last = self._last_seq.get(gid)
+        if last is not None and seq > last + 1:
+            self.counters[f"lost/{key}"] += seq - last - 1
+        self._last_seq[gid] = seq
 
     def _to_robot(self, topic: RosTopic, msg) -> None:
         if self.ros_sink is not None:
@@ -119,7 +140,7 @@ class Ros2BridgeNode(Node):
                 # what they sent before (robot_state_publisher's /tf_static, sent once at its start)
                 history = HistoryConfig(detect_late_publishers=True, max_samples=topic.qos.depth) if latched else None
                 handles.append(declare_advanced_subscriber(
-                    ros, key, lambda sample, t=topic: self.inbox.put((t, sample.payload.to_bytes())),
+                    ros, key, lambda sample, t=topic: self.inbox.put((t, sample.payload.to_bytes(), _bytes(sample.attachment))),
                     history=history, subscriber_detection=latched))
             else:
                 # a transient-local topic (/map) keeps its last samples for subscribers that come later
