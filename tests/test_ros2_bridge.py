@@ -370,3 +370,24 @@ def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoi
     assert sequence == list(range(sequence[0], sequence[0] + len(sequence)))     # numbered, none lost
     assert all(gid == entity_gid(cmd_vel_token) for (_, _, gid), _ in seen)
     assert "goal sent" in log.read_text()
+
+
+def test_the_bridge_waits_for_the_robots_router_and_stops_when_asked(processes, router_endpoint):
+    """omninav's side comes up at once; the robot's graph is joined when its router answers."""
+    from omninav.services.runtime.zenoh_config import open_router
+    from conftest import free_port, wait_alive
+    robot_router = f"tcp/127.0.0.1:{free_port()}"
+    bridge = processes.omninav("run", "ros2_bridge", "--set", f"ros_router={robot_router}")
+    wait_alive(router_endpoint, ["ros2_bridge"], timeout=120)
+    wait_until(lambda: "waiting for the robot's router" in processes.log_of(bridge), 30, what="the waiting notice")
+    with open_router(robot_router) as robot_side:
+        def bridge_node_token():
+            return [r for r in robot_side.liveliness().get("@ros2_lv/0/**/NN/%/%/omninav_bridge", timeout=1.0)
+                    if r.ok is not None]
+        wait_until(bridge_node_token, 60, what="the bridge's node on the robot's graph")
+        assert processes.stop(bridge) == 0
+        wait_until(lambda: not bridge_node_token(), 30, what="the bridge's node leaving the robot's graph")
+    # one still waiting for the robot stops as promptly
+    waiting = processes.omninav("run", "ros2_bridge", "--name", "waiting_bridge", "--set", f"ros_router={robot_router}")
+    wait_alive(router_endpoint, ["waiting_bridge"], timeout=120)
+    assert processes.stop(waiting) == 0

@@ -13,6 +13,7 @@ own thread (it is paced like a source), so the Node's state is touched by one th
 """
 from __future__ import annotations
 
+import json
 import queue
 import threading
 from collections.abc import Callable
@@ -28,13 +29,16 @@ from .rmw import (PUBLISHER, SUBSCRIPTION, TRANSIENT_LOCAL, NodeIdentity, entity
                   unpack_attachment)
 
 POLL_S = 0.01       # wall s between drains of the ROS inbox (a source's pace: it adds at most this latency)
+RETRY_S = 1.0       # wall s between attempts to reach the robot's router
 
 
 def ros_session_config(router: str) -> zenoh.Config:
-    """A client of the robot's router; samples carry timestamps, as in rmw_zenoh's sessions (Zenoh's
-    advanced publisher, for transient-local topics, orders by them)."""
+    """A client of the robot's router that gives up after RETRY_S if it does not answer; samples carry
+    timestamps, as in rmw_zenoh's sessions (Zenoh's advanced publisher, for transient-local topics,
+    orders by them)."""
     conf = foreign_client_config(router)
     conf.insert_json5("timestamping/enabled", "true")
+    conf.insert_json5("connect/timeout_ms", json.dumps(round(RETRY_S * 1000)))    # give up, to be retried
     return conf
 
 
@@ -107,7 +111,7 @@ class Ros2BridgeNode(Node):
     def _to_robot(self, topic: RosTopic, msg) -> None:
         if self.ros_sink is not None:
             self.ros_sink(topic, self.bridge.to_ros(topic, msg), msg.header.stamp_ns)
-            self.counters[f"sent/{topic.name}"] += 1
+            self.counters[f"sent/ros2{topic.name}"] += 1
 
     def diagnostic(self):
         diag = super().diagnostic()
@@ -115,14 +119,39 @@ class Ros2BridgeNode(Node):
         return diag
 
     def run_live(self, router: str | None, stop_event: threading.Event) -> None:
+        """omninav's side on this thread; the robot's side joined on another as soon as its router
+        answers, and left only after the last omninav input was handled."""
         runner = LiveRunner(self, router)
         runner.stop_event = stop_event      # `omninav run`'s signal handlers set this one
-        with zenoh.open(ros_session_config(self.params.ros_router)) as ros:
-            handles = self._declare_ros(ros)
+        finished = threading.Event()
+        robot = threading.Thread(target=self._join_robot, args=(stop_event, finished), name="ros2-session")
+        robot.start()
+        try:
             runner.run()
-            self.ros_sink = None
-            for handle in handles:
-                handle.undeclare()
+        finally:
+            finished.set()
+            robot.join()
+
+    def _join_robot(self, stop: threading.Event, finished: threading.Event) -> None:
+        p, waiting = self.params, False
+        while not stop.is_set():
+            try:
+                ros = zenoh.open(ros_session_config(p.ros_router))
+            except zenoh.ZError:
+                if not waiting:
+                    waiting = True
+                    self.log.warning("waiting for the robot's router at %s (rmw_zenohd)", p.ros_router)
+                stop.wait(RETRY_S)
+                continue
+            with ros:
+                handles = self._declare_ros(ros)
+                self.log.info("on the robot's ROS 2 graph (domain %d, router %s) as node %s", p.domain,
+                              p.ros_router, p.node_name)
+                finished.wait()
+                self.ros_sink = None
+                for handle in handles:
+                    handle.undeclare()
+            return
 
     def _declare_ros(self, ros: zenoh.Session) -> list:
         p = self.params
