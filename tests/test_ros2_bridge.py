@@ -2,16 +2,17 @@
 loopback run where a fake rmw_zenoh robot feeds the racecar bag and the stack answers on /cmd_vel.
 
 Reference values, and where they come from:
-- type hashes (RIHS01) of ROS 2 Jazzy, as ROS itself reports them. Seen in public text found by
-  exact search: `ros2 topic info -v` output on Jazzy systems for geometry_msgs/Twist (turtlesim's
-  /turtle1/cmd_vel), tf2_msgs/TFMessage (Nav2's /robot1/tf), nav_msgs/OccupancyGrid (RViz's /map)
-  and nav_msgs/Odometry; the rest (LaserScan, PoseStamped, PoseWithCovarianceStamped, Path) in the
-  golden-hash tables and generated types of independent rmw_zenoh clients (Rust, Elixir, C++), every
-  one agreeing; std_msgs/String's is the one in rmw_zenoh's own design notes' token example;
+- type hashes (RIHS01) of ROS 2 Jazzy, as ROS itself reports them, found by exact search of public
+  text: `ros2 topic info -v` output of live Jazzy systems for geometry_msgs/Twist (turtlesim's
+  /turtle1/cmd_vel, e.g. kagenokeiyou/ros-notes start/03-topic/01-introduction.md),
+  tf2_msgs/TFMessage (Nav2's /robot1/tf), nav_msgs/OccupancyGrid (RViz's /map) and
+  nav_msgs/Odometry; the others (LaserScan, PoseStamped, PoseWithCovarianceStamped, Path) in the
+  golden-hash tables and generated types of independent rmw_zenoh clients (Rust, Elixir, C++, Go),
+  all agreeing; std_msgs/String's is the one of rmw_zenoh's token examples (its chatter demo);
 - key and token layout, QoS part, GID and attachment: rmw_zenoh_cpp's sources (rmw.py's docstring
   names the files and commits); the token of a /tf subscription with depth 100,
-  `.../MS/%/%/<node>/%tf/tf2_msgs::msg::dds_::TFMessage_/RIHS01_e369…/::,100:,:,:,,`, as a
-  published client declares it to be seen by rmw_zenoh;
+  `.../MS/%/%/<node>/%tf/tf2_msgs::msg::dds_::TFMessage_/RIHS01_e369…/::,100:,:,:,,`, as ZettaScale's
+  (Zenoh's authors') zenoh-cpp example that joins an rmw_zenoh graph declares it;
 - the attachment's bytes: zenoh's own zenoh-ext serializer (the one rmw_zenoh uses), called here.
 """
 from __future__ import annotations
