@@ -29,7 +29,7 @@ import yaml
 
 from conftest import REPO, SHARED_DATA, wait_until
 from omninav.schemas.messages import Goal, Header, LaserScan, OccupancyGrid, MapMetaData, Odometry, Path, Pose2D
-from omninav.schemas.messages import PoseWithCovariance, Twist
+from omninav.schemas.messages import PoseWithCovariance, Transform, Twist
 from omninav.services.ros2_bridge.bridge import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, typestore
 from omninav.services.ros2_bridge.rmw import (ATTACHMENT_SIZE, PUBLISHER, SUBSCRIPTION, NodeIdentity, Qos,
                                               dds_type_name, entity_gid, pack_attachment, topic_key,
@@ -168,6 +168,15 @@ def test_outputs_encode_as_rosbags_serializes_the_same_values(store):
         t["geometry_msgs/msg/PoseStamped"](header=h, pose=pose3d(t, 1.0, 0.5, math.sin(-0.5), math.cos(-0.5)))])
     path = Path(header=Header(stamp_ns=stamp, frame_id="map"), poses=np.array([[0.0, 0.0, 0.0], [1.0, 0.5, -1.0]]))
     assert bridge.to_ros(out_topic("plan"), path) == bytes(store.serialize_cdr(ros_path, "nav_msgs/msg/Path"))
+
+    ros_tf = t["tf2_msgs/msg/TFMessage"](transforms=[t["geometry_msgs/msg/TransformStamped"](
+        header=h, child_frame_id="odom", transform=t["geometry_msgs/msg/Transform"](
+            translation=vector(x=2.0, y=-1.5, z=0.0),
+            rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(0.1), w=math.cos(0.1))))])
+    map_odom = Transform(header=Header(stamp_ns=stamp, frame_id="map"), child_frame_id="odom",
+                         transform=Pose2D(2.0, -1.5, 0.2))
+    assert bridge.to_ros(out_topic("tf/map_odom"), map_odom) == \
+        bytes(store.serialize_cdr(ros_tf, "tf2_msgs/msg/TFMessage"))
 
 
 # ---------------------------------------------------------------- CDR in
@@ -334,8 +343,16 @@ def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoi
         if abs(twist.linear.x) > 1e-3 or abs(twist.angular.z) > 1e-3:
             moving.set()
 
+    tf_key = topic_key(0, "/tf", "tf2_msgs/msg/TFMessage", JAZZY_HASHES["tf2_msgs/msg/TFMessage"])
+    frames = set()
+
+    def on_tf(sample):
+        for stamped in store.deserialize_cdr(sample.payload.to_bytes(), "tf2_msgs/msg/TFMessage").transforms:
+            frames.add((stamped.header.frame_id, stamped.child_frame_id))
+
     with zenoh.open(foreign_client_config(router_endpoint)) as robot_side:
         subscriber = robot_side.declare_subscriber(twist_key, on_cmd_vel)
+        tf_subscriber = robot_side.declare_subscriber(tf_key, on_tf)
         launcher = up(yaml.safe_dump(data, sort_keys=False))
         log = tmp_path / "fake_robot.log"
         robot = subprocess.Popen([sys.executable, str(REPO / "tests" / "fake_ros2_robot.py"), router_endpoint,
@@ -348,6 +365,8 @@ def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoi
         tokens = [str(r.ok.key_expr) for r in robot_side.liveliness().get("@ros2_lv/0/**", timeout=2.0)
                   if r.ok is not None]
         subscriber.undeclare()
+        tf_subscriber.undeclare()
+    assert ("map", "odom") in frames        # the localizer's map -> odom, for RViz
     # the laser mounting came from /tf_static, published once before the bridge existed (from the
     # robot's cache, as transient local is), and agreed with the stack's: no scan was held back
     diagnostics = []

@@ -5,7 +5,8 @@ In from the robot: /scan (sensor_msgs/LaserScan) -> scan, /odom (nav_msgs/Odomet
 geometry_msgs/PoseWithCovarianceStamped) -> initialpose, /tf and /tf_static (tf2_msgs/TFMessage):
 the laser's mounting on base_link. Out to the robot: cmd_vel -> /cmd_vel (geometry_msgs/Twist),
 map -> /map (nav_msgs/OccupancyGrid), pose -> /amcl_pose (geometry_msgs/PoseWithCovarianceStamped),
-plan -> /plan (nav_msgs/Path). Poses are projected to the plane as the bag importer does (x, y and
+plan -> /plan (nav_msgs/Path), tf/map_odom -> /tf (map -> odom, as amcl broadcasts it: RViz then
+places the robot's odom -> base_link in the map). Poses are projected to the plane as the bag importer does (x, y and
 the quaternion's heading; the (x, y, yaw) rows and columns of 6 x 6 covariances) and lifted back
 with z = 0, roll = pitch = 0.
 
@@ -27,7 +28,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...schemas.messages import Clock, Goal, Header, OccupancyGrid, Path, Pose2D, PoseWithCovariance, Twist
+from ...schemas.messages import (Clock, Goal, Header, OccupancyGrid, Path, Pose2D, PoseWithCovariance, Transform,
+                                 Twist)
 from ..importers.rosbag import laser_scan, odometry, yaw_of
 from ..se2 import compose
 from .rmw import BEST_EFFORT, TRANSIENT_LOCAL, Qos
@@ -59,6 +61,7 @@ OUTPUTS = (
     RosTopic("/map", "nav_msgs/msg/OccupancyGrid", "map", Qos(durability=TRANSIENT_LOCAL, depth=1)),
     RosTopic("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", "pose"),
     RosTopic("/plan", "nav_msgs/msg/Path", "plan"),
+    RosTopic("/tf", "tf2_msgs/msg/TFMessage", "tf/map_odom", Qos(depth=100)),
 )
 
 
@@ -208,7 +211,8 @@ class Bridge:
     # ------------------------------------------------------------ to the robot
 
     def to_ros(self, topic: RosTopic, msg) -> bytes:
-        build = {"cmd_vel": self._twist, "map": self._grid, "pose": self._pose, "plan": self._path}[topic.omninav]
+        build = {"cmd_vel": self._twist, "map": self._grid, "pose": self._pose, "plan": self._path,
+                 "tf/map_odom": self._transform}[topic.omninav]
         return bytes(self.store.serialize_cdr(build(msg), topic.msgtype))
 
     def _header(self, header: Header, frame: str | None = None):
@@ -243,6 +247,15 @@ class Bridge:
         with_cov = t["geometry_msgs/msg/PoseWithCovariance"](pose=self._pose3d(msg.pose.x, msg.pose.y, msg.pose.theta),
                                                              covariance=covariance.ravel())
         return t["geometry_msgs/msg/PoseWithCovarianceStamped"](header=self._header(msg.header), pose=with_cov)
+
+    def _transform(self, msg: Transform):
+        t, pose = self.types, msg.transform
+        stamped = t["geometry_msgs/msg/TransformStamped"](
+            header=self._header(msg.header), child_frame_id=msg.child_frame_id,
+            transform=t["geometry_msgs/msg/Transform"](
+                translation=t["geometry_msgs/msg/Vector3"](x=float(pose.x), y=float(pose.y), z=0.0),
+                rotation=self._pose3d(0.0, 0.0, pose.theta).orientation))
+        return t["tf2_msgs/msg/TFMessage"](transforms=[stamped])
 
     def _path(self, msg: Path):
         t = self.types
