@@ -40,7 +40,7 @@ _PLANAR = (0, 1, 5)         # x, y, yaw among ROS's (x, y, z, roll, pitch, yaw) 
 
 @dataclass(frozen=True)
 class RosTopic:
-    """One ROS topic the bridge speaks: its default name, type, the omninav topic it maps to and the QoS
+    """One ROS topic the bridge speaks: its name, type, the omninav topic it maps to and the QoS
     it is offered or asked with (as the usual ROS 2 drivers and Nav2 do)."""
     name: str
     msgtype: str

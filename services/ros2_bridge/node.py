@@ -1,8 +1,9 @@
 """The ROS 2 bridge as a service: omninav's bus on one side, a ROS 2 robot's rmw_zenoh router on the other.
 
 omninav side (a Node like every service, so `up` grants it exactly this): it puts sim/clock, scan,
-odom, goal and initialpose (what the robot's sensors and a ROS user's goal become) and subscribes to cmd_vel (the
-collision monitor's output: the bridge takes the chassis's place), map, pose and plan, all sporadic.
+odom, goal and initialpose (what the robot's sensors and a ROS user's requests become) and subscribes
+to cmd_vel (the collision monitor's output: the bridge takes the chassis's place), map, pose, plan
+and tf/map_odom, all sporadic.
 ROS side (a second Zenoh session, a client of the robot's router, loopback only, without omninav's
 credentials): one ROS node with a subscription per input topic and a publisher per output topic,
 each announced by its liveliness token as rmw_zenoh does (rmw.py), so `ros2 topic list` and
@@ -168,9 +169,10 @@ class Ros2BridgeNode(Node):
                 # as rmw_zenoh's transient-local subscriptions: ask late-detected publishers' caches for
                 # what they sent before (robot_state_publisher's /tf_static, sent once at its start)
                 history = HistoryConfig(detect_late_publishers=True, max_samples=topic.qos.depth) if latched else None
+                # only the robot's samples: not what the bridge itself puts on /tf
                 handles.append(declare_advanced_subscriber(
                     ros, key, lambda sample, t=topic: self.inbox.put((t, sample.payload.to_bytes(), _bytes(sample.attachment))),
-                    history=history, subscriber_detection=latched))
+                    allowed_origin=zenoh.Locality.REMOTE, history=history, subscriber_detection=latched))
             else:
                 # a transient-local topic (/map) keeps its last samples for subscribers that come later
                 publishers[topic.name] = (declare_advanced_publisher(
