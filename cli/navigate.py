@@ -233,6 +233,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "as the CPU computes, the same recording every time at any machine load (--rate "
                              "does not apply)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no progress lines (services starting and up, goals sent and ended); the summary only")
 
 
 def mission_goals(args: argparse.Namespace, world: World) -> np.ndarray:
@@ -407,8 +409,8 @@ def main(args: argparse.Namespace) -> int:
     if recording.exists():
         raise NavigateError(f"{recording} exists already; give another --record")
     log = out / "services.log"
-    say = (lambda text: print(f"navigate: {text}", file=sys.stderr, flush=True)) if args.json else \
-        (lambda text: print(f"navigate: {text}", flush=True))
+    say = (lambda text: None) if args.quiet else \
+        (lambda text: print(f"navigate: {text}", file=sys.stderr if args.json else sys.stdout, flush=True))
 
     map_file = map_for(world, args.world, out)
     check_goals(map_file, world, goals)

@@ -41,9 +41,11 @@ NAV2 = ForeignNames(
              "lambda_short": "laser_lambda_short", "z_hit": "laser_z_hit", "z_max": "laser_z_max",
              "z_rand": "laser_z_rand", "z_short": "laser_z_short"},
     convert={"robot_model_type": _nav2_motion_model},
-    # topics (wired by keys here), sim time (always), and Nav2's initial-pose switches (omninav starts
-    # from initial_pose_x/y/a, or from `initial_pose` below, always)
-    ignored=frozenset({"scan_topic", "map_topic", "use_sim_time", "set_initial_pose", "always_reset_initial_pose"}))
+    # topics (wired by keys here), sim time (always), Nav2's initial-pose switches (omninav starts
+    # from initial_pose_x/y/a, or from `initial_pose` below, always; its own saved pose is pose_file),
+    # the free-space downsampling of its likelihood field and its own seed (ours is the node's seed)
+    ignored=frozenset({"scan_topic", "map_topic", "use_sim_time", "set_initial_pose", "always_reset_initial_pose",
+                       "initialize_at_saved_pose", "saved_pose_filepath", "freespace_downsampling", "random_seed"}))
 
 
 @dataclass(frozen=True)
