@@ -313,18 +313,17 @@ def test_the_controller_takes_dwbs_names(nav2_file, caplog):
     assert all(name in warned for name in ("decel_lim_x", "critics", "general_goal_checker", "progress_checker"))
 
 
-@pytest.mark.parametrize("old, new, needle", [
-    ("max_vel_x: 0.26", "max_vel_xx: 0.26", "unknown parameter 'max_vel_xx' (did you mean 'max_vel_x'?)"),
-    ('plugin: "dwb_core::DWBLocalPlanner"', 'plugin: "nav2_mppi_controller::MPPIController"',
+@pytest.mark.parametrize("service, old, new, needle", [
+    ("local_planner", "max_vel_x: 0.26", "max_vel_xx: 0.26",
+     "unknown parameter 'max_vel_xx' (did you mean 'max_vel_x'?)"),
+    ("local_planner", 'plugin: "dwb_core::DWBLocalPlanner"', 'plugin: "nav2_mppi_controller::MPPIController"',
      "type 'nav2_mppi_controller::MPPIController' is not implemented here"),
-    ('plugin: "nav2_navfn_planner/NavfnPlanner"', 'plugin: "nav2_smac_planner/SmacPlannerHybrid"',
+    ("global_planner", 'plugin: "nav2_navfn_planner/NavfnPlanner"', 'plugin: "nav2_smac_planner/SmacPlannerHybrid"',
      "type 'nav2_smac_planner/SmacPlannerHybrid' is not implemented here"),
-    ("tolerance: 0.5", "tolerence: 0.5", "unknown parameter 'tolerence' (did you mean 'tolerance'?)"),
+    ("global_planner", "tolerance: 0.5", "tolerence: 0.5", "unknown parameter 'tolerence' (did you mean 'tolerance'?)"),
 ])
-def test_an_unknown_nav2_controller_or_planner_name_is_named(tmp_path, old, new, needle):
+def test_an_unknown_nav2_controller_or_planner_name_is_named(tmp_path, service, old, new, needle):
     path = tmp_file(tmp_path, NAV2_PARAMS.replace(old, new))
-    service = "local_planner" if "planner_server" not in needle and "Navfn" not in old and "tolerance" not in old \
-        else "global_planner"
     with pytest.raises(ParamError) as err:
         build_params(service, path)
     assert needle in str(err.value)
