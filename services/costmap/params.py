@@ -379,7 +379,7 @@ def costmap_params_from_mapping(mapping: dict, source: str = "costmap") -> Costm
                     IGNORED["costmap"] | unused_sections, source)
     problem = unknown_names(rest, top_names | consumed, "parameter")
     if problem:
-        raise ParamError(f"{source}: costmap: {problem} (and the plugins' and the sources' sections)")
+        raise ParamError(f"{source}: {problem} (and the plugins' and the sources' sections)")
     values = {k: v for k, v in mapping.items() if k in top_names}
     if "footprint" in values:
         values["footprint"] = _footprint(values["footprint"], source)
