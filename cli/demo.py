@@ -7,12 +7,15 @@ map, global costmap, planned and driven paths, scans."""
 from __future__ import annotations
 
 import argparse
+import math
 import subprocess
 import sys
 import time
 from pathlib import Path
 
 import yaml
+
+from .goal_args import add_goal_argument
 
 REPO = Path(__file__).resolve().parents[1]
 # across the room to the square table's side, then back past the pillar to the dining table
@@ -22,9 +25,8 @@ STEP_TIMEOUT_S = 900
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--out", help="output folder (default out/demo-<date>-<time>)")
-    parser.add_argument("--goal", nargs=3, type=float, action="append", metavar=("X", "Y", "YAW"),
-                        help="a goal in the room (m, m, degrees); repeat for several (default: "
-                             + ", then ".join(f"({x:g}, {y:g}, {yaw:g}°)" for x, y, yaw in GOALS) + ")")
+    add_goal_argument(parser, "a goal in the room (default: "
+                      + ", then ".join(f"({x:g}, {y:g}, {yaw:g}°)" for x, y, yaw in GOALS) + ")")
     # real time by default: the chassis takes a command 50 ms of sim time after its stamp, and at twice real
     # time a loaded 2-core machine sometimes delivers one later than that (then the replay is not exact)
     parser.add_argument("--rate", type=float, default=1.0, help="sim speed, sim seconds per wall second (default 1)")
@@ -57,7 +59,8 @@ def main(args: argparse.Namespace) -> int:
     out.mkdir(parents=True, exist_ok=True)
     log = out / "demo.log"
     recording = out / "run.mcap"
-    goals = [str(v) for goal in (args.goal or GOALS) for v in ("--goal", *goal)]
+    goals = [str(v) for goal in (args.goal or [(x, y, math.radians(yaw)) for x, y, yaw in GOALS])
+             for v in ("--goal", *goal[:2], f"{goal[2]!r}rad")]
     navigated = _step("navigate --world room --localization amcl (every service its own process)",
                       _omninav("navigate", "--world", "room", *goals, "--localization", "amcl", "--rate", str(args.rate),
                                "-o", str(out), "--record", str(recording)), log, show_output=True)

@@ -26,9 +26,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     carmen.add_argument("--robot", default="r1", help="robot namespace of the keys (default r1)")
     carmen.add_argument("--force", action="store_true", help="overwrite the output file if it exists")
     carmen.set_defaults(run=_main_carmen)
-    bag = formats.add_parser("rosbag", help="a ROS 1 (.bag) or ROS 2 (folder) bag: LaserScan and Odometry "
+    bag = formats.add_parser("rosbag", help="a ROS 1 (.bag) or ROS 2 bag (folder; sqlite3 .db3 or MCAP, CDR): "
+                                            "LaserScan and Odometry "
                                             "(needs pip install 'omninav[rosbag]')")
-    bag.add_argument("bag", help="the .bag file, or the ROS 2 bag folder")
+    bag.add_argument("bag", help="the ROS 1 .bag file, or the ROS 2 bag folder (with metadata.yaml)")
     bag.add_argument("-o", "--output", required=True, help="the MCAP file to write")
     bag.add_argument("--scan-topic", default="/scan", help="sensor_msgs/LaserScan topic (default /scan)")
     bag.add_argument("--odom-topic", default="/vesc/odom", help="nav_msgs/Odometry topic (default /vesc/odom)")

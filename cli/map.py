@@ -202,6 +202,8 @@ def add_mapping_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE",
                         help="override a slam parameter (e.g. particles=10)")
     parser.add_argument("--force", action="store_true", help="overwrite existing files")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no progress lines (every 30 s of sim time: frontiers, mapped share, sim time)")
 
 
 @reports_errors
@@ -221,7 +223,9 @@ def main_mapping(args: argparse.Namespace) -> int:
                              f"{', '.join(MAPPING_ROUTES)}); give --waypoints or explore")
         route = parse_waypoints(args.waypoints) if args.waypoints else MAPPING_ROUTES[world.name] if args.route else None
         params = slam_params_for(world, parse_overrides(args.set), args.seed)
-        result = build_map(args.world, route, args.drive, args.seed, params, args.laps, args.max_time)
+        say = None if args.quiet else (lambda text: print(f"map: {text}", flush=True))
+        result = build_map(args.world, route, args.drive, args.seed, params, args.laps, args.max_time,
+                           progress=say)
     except (WorldError, ParamError, ValueError) as exc:
         raise CommandError(str(exc), 2) from None
     if result.grid is None:

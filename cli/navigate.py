@@ -47,6 +47,7 @@ from ..services.runtime.zenoh_config import ROUTER_ENV, free_loopback_endpoint, 
 from ..sim.node import open_world
 from ..sim.reachability import mission_problems
 from ..sim.world import World, WorldError, world_path
+from .goal_args import add_goal_argument
 from .profile import Profile, load_profile
 
 REPO = Path(__file__).resolve().parents[1]
@@ -211,9 +212,7 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--world", required=True, help="a shipped world's name (room, office, ...) or a world file")
-    parser.add_argument("--goal", nargs=3, type=float, action="append", metavar=("X", "Y", "YAW"),
-                        help="a goal in the map frame: metres, metres, degrees; repeat for several, visited "
-                             "in order (default: the world file's goals)")
+    add_goal_argument(parser, "a goal in the map frame (default: the world file's goals)")
     parser.add_argument("--drive", choices=DRIVES, help="the robot's drive (default: the world's)")
     parser.add_argument("--localization", choices=LOCALIZATIONS, default="amcl",
                         help="amcl on the world's map (default), slam, truth (the simulator's true pose), or "
@@ -234,12 +233,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "as the CPU computes, the same recording every time at any machine load (--rate "
                              "does not apply)")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
+    parser.add_argument("--quiet", action="store_true",
+                        help="no progress lines (services starting and up, goals sent and ended); the summary only")
 
 
 def mission_goals(args: argparse.Namespace, world: World) -> np.ndarray:
     """The goals (K, 3) in metres and radians; NavigateError if one lies outside the world's map."""
     if args.goal:
-        goals = np.array([(x, y, math.radians(yaw)) for x, y, yaw in args.goal])
+        goals = np.array(args.goal)            # radians already (goal_args)
     elif len(world.goals):
         goals = world.goals.copy()
     else:
@@ -408,8 +409,8 @@ def main(args: argparse.Namespace) -> int:
     if recording.exists():
         raise NavigateError(f"{recording} exists already; give another --record")
     log = out / "services.log"
-    say = (lambda text: print(f"navigate: {text}", file=sys.stderr, flush=True)) if args.json else \
-        (lambda text: print(f"navigate: {text}", flush=True))
+    say = (lambda text: None) if args.quiet else \
+        (lambda text: print(f"navigate: {text}", file=sys.stderr if args.json else sys.stdout, flush=True))
 
     map_file = map_for(world, args.world, out)
     check_goals(map_file, world, goals)

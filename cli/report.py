@@ -1,11 +1,14 @@
 """`omninav report FILE.mcap -o run.png`: one picture of what happened in a recorded run.
 
 It draws the world (or its map), the map the robot navigated on and the last global costmap when
-the recording has them (a navigation run), the global plans and goals, the true trajectory, the wheel-odometry trajectory (and the
-follower-wheel one) expressed in the world frame by aligning the first odometry pose with the truth
-at the same stamp, the scans at a few moments (endpoints placed with the true pose at the scan's
-stamp), the movers' traces, start and end; the title sums up duration, distance, the final
-odometry error and the collisions the sim counted.
+the recording has them (a navigation run), the global plans and goals, the true trajectory, the
+localizer's estimate (its pose key: path and final pose, in the map frame, which is the simulator's
+world frame), the wheel-odometry trajectory (and the follower-wheel one) expressed in the world frame
+by aligning the first odometry pose with the truth at the same stamp, the scans at a few moments
+(the returns within range_max, placed with the true pose at the scan's stamp), the movers' traces,
+start and end. The title sums up the sim time (of the mission, from the first goal to the last
+goal's end, when the recording has goals; else of the whole recording), distance, the final
+odometry and localizer errors and the collisions the sim counted.
 
 The drawing helpers (draw_world, draw_track, draw_scan, draw_footprint, draw_run) take a
 matplotlib Axes, so other tools can draw maps, costmaps and paths onto the same kind of figure.
@@ -30,7 +33,9 @@ from matplotlib.patches import Circle, Patch, Polygon
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..schemas import MessageError, decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
-from ..schemas.messages import Costmap, Diagnostic, Goal, LaserScan, Obstacles, OccupancyGrid, Odometry, Path as PathMsg
+from ..schemas.messages import (Costmap, Diagnostic, Goal, LaserScan, NavStatus, Obstacles, OccupancyGrid, Odometry,
+                                Path as PathMsg, PoseWithCovariance)
+from ..services.navigator.mission import TERMINAL
 from ..services.recorder.mcap_io import Record, RecordingError, read_records
 from ..services.se2 import compose, inverse, wrap_angle
 from ..sim.raycast import LidarParams, laser_pose
@@ -76,6 +81,7 @@ class Track:
 class RunData:
     truth: Track | None = None
     odom: Track | None = None
+    estimate: Track | None = None                       # the localizer's pose (map frame)
     follower: Track | None = None
     scans: list[LaserScan] = field(default_factory=list)
     mover_stamps: np.ndarray = field(default_factory=lambda: np.zeros(0, np.int64))
@@ -86,6 +92,7 @@ class RunData:
     costmap: Costmap | None = None                      # the last global costmap
     plans: list[PathMsg] = field(default_factory=list)  # the global plans with poses, in stamp order
     goals: list[Goal] = field(default_factory=list)
+    statuses: list[NavStatus] = field(default_factory=list)
 
     @property
     def span_ns(self) -> tuple[int, int] | None:
@@ -96,7 +103,7 @@ class RunData:
         return int(min(s.min() for s in stamps)), int(max(s.max() for s in stamps))
 
 
-def _track(messages: list[Odometry]) -> Track | None:
+def _track(messages: list[Odometry] | list[PoseWithCovariance]) -> Track | None:
     if not messages:
         return None
     stamps = np.array([m.header.stamp_ns for m in messages], np.int64)
@@ -119,7 +126,7 @@ def load_run(path: str | Path, robot: str = DEFAULT_ROBOT) -> RunData:
     wanted = {keys.sim_robot("truth"): "truth", keys.robot("odom"): "odom",
               keys.robot("odom_follower"): "follower", keys.robot("scan"): "scan", keys.sim("movers"): "movers",
               keys.robot("map"): "map", keys.robot("costmap/global"): "costmap", keys.robot("plan"): "plans",
-              keys.robot("goal"): "goals"}
+              keys.robot("goal"): "goals", keys.robot("pose"): "estimate", keys.robot("nav_status"): "statuses"}
     diag_prefix = keys.diagnostics("sim").rsplit("/", 1)[0] + "/"
     found: dict[str, list] = {name: [] for name in wanted.values()}
     run = RunData()
@@ -138,7 +145,8 @@ def load_run(path: str | Path, robot: str = DEFAULT_ROBOT) -> RunData:
         elif WORLD_KEY in msg.values and (sim_diag is None or (msg.header.stamp_ns, msg.header.seq)
                                           >= (sim_diag.header.stamp_ns, sim_diag.header.seq)):
             sim_diag = msg
-    run.truth, run.odom, run.follower = (_track(found[n]) for n in ("truth", "odom", "follower"))
+    run.truth, run.odom, run.follower, run.estimate = (_track(found[n])
+                                                       for n in ("truth", "odom", "follower", "estimate"))
     run.scans = sorted(found["scan"], key=lambda s: s.header.stamp_ns)
     movers: list[Obstacles] = sorted(found["movers"], key=lambda m: m.header.stamp_ns)
     if movers:
@@ -147,12 +155,13 @@ def load_run(path: str | Path, robot: str = DEFAULT_ROBOT) -> RunData:
         run.mover_stamps = np.array([m.header.stamp_ns for m in movers], np.int64)
         run.mover_circles = np.array([m.circles for m in movers], np.float64).reshape(len(movers), count, 3)
     run.sim_values = dict(sim_diag.values) if sim_diag is not None else {}
-    for name in ("map", "costmap", "plans", "goals"):
+    for name in ("map", "costmap", "plans", "goals", "statuses"):
         found[name].sort(key=lambda m: (m.header.stamp_ns, m.header.seq))
     run.map = found["map"][-1] if found["map"] else None
     run.costmap = found["costmap"][-1] if found["costmap"] else None
     run.plans = [p for p in found["plans"] if len(p.poses)]
     run.goals = found["goals"]
+    run.statuses = found["statuses"]
     return run
 
 
@@ -164,36 +173,62 @@ def in_world_frame(track: Track, truth: Track) -> Track:
 
 @dataclass(frozen=True)
 class Summary:
-    duration_s: float | None
+    duration_s: float | None              # sim s: of the mission when there are goals, else of the recording
+    start_s: float | None                 # sim time where that span starts
+    mission: bool                         # the span is the mission's (first goal to the last goal's end)
     distance_m: float | None              # along the true trajectory (else the odometry's)
     odom_error_m: float | None            # at the last odometry pose, against the truth then
     odom_heading_error_rad: float | None
+    estimate_error_m: float | None        # at the localizer's last pose, against the truth then
     collisions: int | None
 
 
-def summarize(run: RunData) -> Summary:
+def mission_span_ns(run: RunData) -> tuple[int, int] | None:
+    """From the first goal's stamp to the last status of the last goal that ended it (or the end of
+    the recording, when it never ended); None without goals."""
     span = run.span_ns
+    if not run.goals or span is None:
+        return None
+    start = min(g.header.stamp_ns for g in run.goals)
+    last_goal = max(run.goals, key=lambda g: (g.header.stamp_ns, g.header.seq)).goal_id
+    ends = [s.header.stamp_ns for s in run.statuses if s.goal_id == last_goal and s.status in TERMINAL]
+    return start, min(ends) if ends else span[1]
+
+
+def _error_at_end(track: Track, truth: Track) -> tuple[float, float]:
+    true_end = truth.at(track.stamps[-1:])[0]
+    return (float(np.hypot(*(track.poses[-1, :2] - true_end[:2]))),
+            abs(float(wrap_angle(track.poses[-1, 2] - true_end[2]))))
+
+
+def summarize(run: RunData) -> Summary:
+    mission = mission_span_ns(run)
+    span = mission or run.span_ns
     track = run.truth if run.truth is not None else run.odom
-    error = heading = None
+    error = heading = estimate_error = None
     if run.truth is not None and run.odom is not None:
-        odom = in_world_frame(run.odom, run.truth)
-        true_end = run.truth.at(odom.stamps[-1:])[0]
-        error = float(np.hypot(*(odom.poses[-1, :2] - true_end[:2])))
-        heading = abs(float(wrap_angle(odom.poses[-1, 2] - true_end[2])))
+        error, heading = _error_at_end(in_world_frame(run.odom, run.truth), run.truth)
+    if run.truth is not None and run.estimate is not None:
+        estimate_error = _error_at_end(run.estimate, run.truth)[0]
     collisions = run.sim_values.get("collisions")
-    return Summary((span[1] - span[0]) / NS_PER_S if span else None, track.length if track else None,
-                   error, heading, int(collisions) if isinstance(collisions, (int, float)) else None)
+    return Summary((span[1] - span[0]) / NS_PER_S if span else None, span[0] / NS_PER_S if span else None,
+                   mission is not None, track.length if track else None, error, heading, estimate_error,
+                   int(collisions) if isinstance(collisions, (int, float)) else None)
 
 
 def title_of(summary: Summary, name: str) -> str:
     parts = [name]
     if summary.duration_s is not None:
-        parts.append(f"{summary.duration_s:.1f} s")
+        what = "mission" if summary.mission else "recording"
+        parts.append(f"{what} {summary.duration_s:.1f} s of sim time "
+                     f"(from t = {summary.start_s:.1f} s)")
     if summary.distance_m is not None:
         parts.append(f"{summary.distance_m:.2f} m driven")
     if summary.odom_error_m is not None:
         parts.append(f"final odometry error {summary.odom_error_m:.3f} m, "
                      f"{math.degrees(summary.odom_heading_error_rad):.1f}°")
+    if summary.estimate_error_m is not None:
+        parts.append(f"final localizer error {summary.estimate_error_m:.3f} m")
     parts.append("collisions: unknown" if summary.collisions is None else f"{summary.collisions} collisions")
     return " | ".join(parts)
 
@@ -260,11 +295,12 @@ def draw_footprint(ax: Axes, pose, footprint: np.ndarray = DEFAULT_FOOTPRINT, **
 
 
 def scan_points(scan: LaserScan, pose, lidar: LidarParams = LidarParams()) -> np.ndarray:
-    """World coordinates (M, 2) of a scan's returns, for the robot at `pose` and the lidar's mount."""
+    """World coordinates (M, 2) of a scan's returns, for the robot at `pose` and the lidar's mount:
+    readings within [range_min, range_max] (beyond range_max a driver reports no return, REP 117)."""
     x, y, yaw = laser_pose(pose, lidar)
     angles = yaw + scan.angle_min + np.arange(len(scan.ranges)) * scan.angle_increment
     ranges = np.asarray(scan.ranges, np.float64)
-    hit = np.isfinite(ranges) & (ranges > 0)
+    hit = np.isfinite(ranges) & (ranges > 0) & (ranges >= scan.range_min) & (ranges <= scan.range_max)
     return np.column_stack([x + ranges[hit] * np.cos(angles[hit]), y + ranges[hit] * np.sin(angles[hit])])
 
 
@@ -327,6 +363,12 @@ def draw_run(ax: Axes, run: RunData, world: World | None = None, scan_moments: i
     if odom is not None:
         handles.append(draw_track(ax, odom, color="tab:blue", linewidth=1.2, linestyle="--", zorder=6,
                                   label="wheel odometry" + (" (aligned at start)" if truth is not None else "")))
+    if run.estimate is not None:
+        handles.append(draw_track(ax, run.estimate, color="tab:cyan", linewidth=1.2, linestyle="-.", zorder=6,
+                                  label="localizer estimate"))
+        draw_footprint(ax, run.estimate.poses[-1], footprint, edgecolor="tab:cyan", linewidth=1.4, zorder=7)
+        handles.append(ax.plot(*run.estimate.poses[-1, :2], "D", color="tab:cyan", markersize=7, zorder=7,
+                               label="localizer's final pose")[0])
     if run.follower is not None:
         follower = in_world_frame(run.follower, truth) if truth is not None else run.follower
         handles.append(draw_track(ax, follower, color="tab:orange", linewidth=1.2, linestyle=":", zorder=6,

@@ -119,7 +119,7 @@ local_costmap:
 
 
 @pytest.mark.parametrize("text,needle", [
-    ("global_costmap: {inflation_radus: 0.5}", "unknown parameter(s) ['inflation_radus']"),
+    ("global_costmap: {inflation_radus: 0.5}", "unknown parameter 'inflation_radus' (did you mean 'inflation_radius'?)"),
     ("global_costmap: {update_frequency: fast}", "'update_frequency' must be a number"),
     ("global_costmap: {plugins: [{name: x, type: 'costmap_2d::FancyLayer'}]}",
      "'costmap_2d::FancyLayer' is not supported"),

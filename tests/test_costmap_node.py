@@ -331,7 +331,7 @@ def test_bad_configurations_are_refused_naming_what_is_wrong(tmp_path):
         build_node("costmap", overrides={"global_costmap_files": [str(missing)]})
     typo = tmp_path / "typo.yaml"
     typo.write_text("global_costmap:\n  inflation_raduis: 0.5\n")
-    with pytest.raises(ParamError, match=r"typo.yaml: global_costmap: unknown parameter\(s\) \['inflation_raduis'\]"):
+    with pytest.raises(ParamError, match=r"typo.yaml: global_costmap: unknown parameter 'inflation_raduis' \(did you mean 'inflation_radius'\?\)"):
         build_node("costmap", overrides={"global_costmap_files": [str(typo)]})
     frame = tmp_path / "frame.yaml"
     frame.write_text("local_costmap:\n  global_frame: base_link\n")

@@ -4,11 +4,11 @@ import numpy as np
 import pytest
 
 from omninav.cli.main import main
-from omninav.cli.report import in_world_frame, load_run, report_figure, summarize
+from omninav.cli.report import in_world_frame, load_run, report_figure, scan_points, summarize, title_of
 from omninav.schemas import encode
-from omninav.schemas.messages import (Costmap, Diagnostic, Goal, Header, MapMetaData, Obstacles, OccupancyGrid,
-                                      Odometry, Path, Pose2D)
-from omninav.services.recorder.mcap_io import RecordingWriter
+from omninav.schemas.messages import (Costmap, Diagnostic, Goal, Header, LaserScan, MapMetaData, NavStatus, Obstacles,
+                                      OccupancyGrid, Odometry, Path, Pose2D, PoseWithCovariance)
+from omninav.services.recorder.mcap_io import RecordingWriter, read_records
 from omninav.services.se2 import integrate
 from omninav.sim.raycast import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path
@@ -154,3 +154,47 @@ def test_a_navigation_run_brings_its_map_costmap_plans_and_goals(tmp_path):
     out = tmp_path / "nav.png"
     report_figure(run, load_world(world_path("room")), "room").savefig(out)
     assert out.read_bytes()[:8] == PNG_MAGIC
+
+
+def test_the_localizer_estimate_is_drawn_and_the_title_gives_the_missions_sim_time(tmp_path, capsys):
+    """Goals sent at 2 s, the last ended at 5 s: the mission is 3 s of sim time in a 6 s recording; the
+    localizer's poses (0.1 m beside the truth at the end) are drawn as a path with a final pose."""
+    recording = tmp_path / "nav.mcap"
+    true_poses, _ = write_run(recording)
+    steps = len(true_poses)
+    with RecordingWriter(tmp_path / "mission.mcap") as writer:
+        for record in read_records(recording):
+            writer.write_record(record)
+
+        def put(key, msg, t_s, seq=1):
+            msg.header.stamp_ns, msg.header.seq = round(t_s * 1e9), seq
+            writer.write(key, type(msg).__name__, encode(msg), seq, msg.header.stamp_ns, msg.header.stamp_ns)
+        for k in range(0, steps, 10):
+            x, y, theta = true_poses[k]
+            put("omninav/r1/pose", PoseWithCovariance(pose=Pose2D(x + 0.1 * k / (steps - 1), y, theta)), k * DT, k + 1)
+        put("omninav/r1/goal", Goal(goal_id="g1", pose=Pose2D(2.0, 2.0, 0.0)), 2.0)
+        put("omninav/r1/goal", Goal(goal_id="g2", pose=Pose2D(3.0, 2.0, 0.0)), 3.0, 2)
+        put("omninav/r1/nav_status", NavStatus(goal_id="g1", status="succeeded"), 3.0)
+        put("omninav/r1/nav_status", NavStatus(goal_id="g2", status="active"), 3.5, 2)
+        put("omninav/r1/nav_status", NavStatus(goal_id="g2", status="succeeded"), 5.0, 3)
+    run = load_run(tmp_path / "mission.mcap")
+    summary = summarize(run)
+    assert summary.mission and summary.duration_s == pytest.approx(3.0) and summary.start_s == pytest.approx(2.0)
+    assert summary.estimate_error_m == pytest.approx(0.1, abs=1e-6)
+    assert title_of(summary, "room").startswith("room | mission 3.0 s of sim time (from t = 2.0 s)")
+    assert "final localizer error 0.100 m" in title_of(summary, "room")
+    assert len(run.estimate) == len(range(0, steps, 10))
+    fig = report_figure(run, load_world(world_path("room")), "room")
+    labels = [text.get_text() for text in fig.axes[0].get_legend().get_texts()]
+    assert "localizer estimate" in labels and "localizer's final pose" in labels
+    assert main(["report", str(tmp_path / "mission.mcap"), "-o", str(tmp_path / "mission.png")]) == 0
+    assert "mission 3.0 s of sim time" in capsys.readouterr().out
+    # without goals the title says it is the recording's span
+    assert title_of(summarize(load_run(recording)), "room").startswith("room | recording 6.0 s of sim time")
+
+
+def test_scan_readings_beyond_range_max_are_not_drawn():
+    msg = LaserScan(header=Header(frame_id="laser"), angle_min=0.0, angle_max=0.3, angle_increment=0.1,
+                    range_min=0.2, range_max=4.0, ranges=np.array([1.0, 4.0, 12.0, 0.1], np.float32))
+    points = scan_points(msg, np.zeros(3), LidarParams(mount_x=0.0, mount_y=0.0, mount_yaw=0.0))
+    assert np.allclose(np.hypot(points[:, 0], points[:, 1]), [1.0, 4.0])

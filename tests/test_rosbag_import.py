@@ -76,8 +76,11 @@ def test_a_file_that_is_no_bag_is_a_clear_error(tmp_path):
 
 # ---------------------------------------------------------------- a ROS 2 bag
 
-def _write_ros2_bag(path):
-    from rosbags.rosbag2 import Writer
+STORAGES = ("sqlite3", "mcap")      # the two storage plugins of ROS 2 bags: .db3 files, .mcap files (CDR in both)
+
+
+def _write_ros2_bag(path, storage: str = "sqlite3"):
+    from rosbags.rosbag2 import StoragePlugin, Writer
     from rosbags.typesys import Stores, get_typestore
 
     store = get_typestore(Stores.ROS2_HUMBLE)
@@ -85,7 +88,8 @@ def _write_ros2_bag(path):
     Time, Header = t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"]
     Vec, Quat, Point = t["geometry_msgs/msg/Vector3"], t["geometry_msgs/msg/Quaternion"], t["geometry_msgs/msg/Point"]
     scan_type, odom_type = "sensor_msgs/msg/LaserScan", "nav_msgs/msg/Odometry"
-    with Writer(path, version=8) as writer:
+    plugin = {"sqlite3": StoragePlugin.SQLITE3, "mcap": StoragePlugin.MCAP}[storage]
+    with Writer(path, version=8, storage_plugin=plugin) as writer:
         scans = writer.add_connection("/scan", scan_type, typestore=store)
         odoms = writer.add_connection("/odom", odom_type, typestore=store)
         other = writer.add_connection("/chatter", "std_msgs/msg/String", typestore=store)
@@ -113,9 +117,11 @@ def _write_ros2_bag(path):
 
 
 @needs_rosbags
-def test_a_ros2_bag_converts(tmp_path):
+@pytest.mark.parametrize("storage", STORAGES)
+def test_a_ros2_bag_converts(tmp_path, storage):
     path = tmp_path / "ros2bag"
-    _write_ros2_bag(path)
+    _write_ros2_bag(path, storage)
+    assert [f.suffix for f in path.iterdir() if f.name != "metadata.yaml"] == [{"sqlite3": ".db3", "mcap": ".mcap"}[storage]]
     contents = read_bag(path, "/scan", "/odom")
     assert [s.header.stamp_ns for s in contents.scans] == [100 * 10 ** 9 + 5, 101 * 10 ** 9 + 5, 102 * 10 ** 9 + 5]
     assert contents.scans[2].ranges.tolist() == [1.0, np.inf, 4.5] and contents.scans[0].range_max == 8.0
@@ -123,6 +129,26 @@ def test_a_ros2_bag_converts(tmp_path):
     assert contents.unstamped == {"/odom": 1}
     assert contents.odometry[2].pose.x == pytest.approx(0.2) and contents.odometry[2].pose.theta == pytest.approx(0.4)
     assert contents.topics["/chatter"] == ("std_msgs/msg/String", 1)
+
+
+@needs_rosbags
+@pytest.mark.parametrize("storage", STORAGES)
+def test_import_rosbag_writes_a_ros2_bag_of_either_storage_as_a_recording(tmp_path, capsys, storage):
+    bag, out = tmp_path / "ros2bag", tmp_path / "bag.mcap"
+    _write_ros2_bag(bag, storage)
+    assert omninav(["import", "rosbag", str(bag), "-o", str(out), "--odom-topic", "/odom"]) == 0
+    printed = capsys.readouterr().out
+    assert "3 scans from /scan" in printed and "3 odometry messages from /odom" in printed
+    assert "not converted: /chatter" in printed
+    records = list(read_records(out))
+    scans = [decode(r.payload) for r in records if r.key == KEYS.robot("scan")]
+    odoms = [decode(r.payload) for r in records if r.key == KEYS.robot("odom")]
+    assert [s.ranges.tolist() for s in scans] == [[1.0, np.inf, 2.5], [1.0, np.inf, 3.5], [1.0, np.inf, 4.5]]
+    assert (scans[1].angle_min, scans[1].angle_increment, scans[1].range_max) == (-1.0, 1.0, 8.0)
+    assert [o.pose.x for o in odoms] == pytest.approx([0.0, 0.1, 0.2])
+    assert [o.pose.theta for o in odoms] == pytest.approx([0.0, 0.2, 0.4])
+    assert {(o.twist.linear_x, o.twist.angular_z) for o in odoms} == {(1.0, 0.2)}
+    assert [o.header.stamp_ns for o in odoms] == [100 * 10 ** 9 + 5, 101 * 10 ** 9 + 5, 102 * 10 ** 9 + 7]
 
 
 @needs_rosbags

@@ -105,6 +105,21 @@ def test_movers_are_cylinders_of_their_radius():
     assert [(c.pose.position.x, c.size.x) for c in entity.cylinders] == [(1.0, 0.6), (4.0, 1.0)]
 
 
+def test_tracks_are_cylinders_of_their_radius_with_an_arrow_along_their_velocity():
+    states = np.array([[1.0, 2.0, 0.0, -0.5], [4.0, -1.0, 0.0, 0.0]])
+    msg = m.Tracks(header("odom"), np.array([3, 9]), states, np.tile(np.eye(4), (2, 1, 1)), np.array([0.3, 0.2]))
+    (entity,) = decode_foxglove(convert.tracks(msg)).entities
+    assert entity.frame_id == "odom" and entity.id == "tracks"
+    assert [(c.pose.position.x, c.pose.position.y, c.size.x) for c in entity.cylinders] == [(1.0, 2.0, 0.6),
+                                                                                           (4.0, -1.0, 0.4)]
+    (arrow,) = entity.arrows            # a standing track has no arrow
+    assert (arrow.pose.position.x, arrow.pose.position.y) == (1.0, 2.0)
+    assert yaw_of(arrow.pose.orientation) == pytest.approx(-math.pi / 2)
+    assert arrow.shaft_length == pytest.approx(0.5 * convert.ARROW_SECONDS)
+    empty = decode_foxglove(convert.tracks(m.Tracks(header("odom"))))
+    assert list(empty.entities[0].cylinders) == []       # every track lost: the old ones are cleared
+
+
 def test_diagnostic_is_json_with_its_values():
     diag = m.Diagnostic(header("", 3.0), "costmap", 1, "late", {"received/x": 4, "params": "{}"})
     message = convert.diagnostic(diag)

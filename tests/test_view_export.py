@@ -7,10 +7,10 @@ from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
 from omninav.cli.main import main as cli_main
-from omninav.schemas.codec import encode
+from omninav.schemas.codec import decode, encode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Chatter, Header
-from omninav.services.recorder.mcap_io import RecordingWriter
+from omninav.services.recorder.mcap_io import RecordingWriter, read_records
 
 from view_fixtures import S, VIEW_CHANNELS, JsonDecoderFactory, stack_messages
 
@@ -59,6 +59,8 @@ def test_export_writes_every_view_channel_and_leaves_the_recording_alone(tmp_pat
     assert list(channels["/scan"][-1][2].ranges[:2]) == [1.0, 2.0]
     (mover,) = channels["/truth/movers"][0][2].entities[0].cylinders
     assert (mover.pose.position.x, mover.size.x) == (2.0, 0.6)
+    (track,) = channels["/tracks"][0][2].entities
+    assert (track.frame_id, track.cylinders[0].pose.position.x, track.arrows[0].shaft_length) == ("odom", 2.5, 0.8)
     assert np.allclose([p.position.x for p in channels["/plan"][0][2].poses], [0.0, 1.0])
     assert channels["/localizer/pose"][0][2].pose.position.y == 2.0
     assert channels["/diagnostics/costmap"][0][2]["values"] == {"received/scan": 3}
@@ -73,3 +75,43 @@ def test_export_refuses_to_overwrite_and_names_an_unreadable_recording(tmp_path,
     (tmp_path / "junk.mcap").write_bytes(b"junk")
     assert cli_main(["export", "--foxglove", str(tmp_path / "junk.mcap"), "-o", str(tmp_path / "out.mcap")]) == 2
     assert "not an MCAP file" in capsys.readouterr().err
+
+
+def test_an_exported_mission_recording_is_right_channel_by_channel(tmp_path, capsys):
+    """A short lockstep mission in the demo's room (its own recording, every service's keys), exported
+    and read back: each channel against the recorded messages it comes from."""
+    assert cli_main(["navigate", "--world", "room", "--lockstep", "--goal", "3.2", "0.9", "30", "--timeout", "2",
+                     "-o", str(tmp_path / "run"), "--json"]) == 1        # it cannot arrive in 2 s
+    recording, exported = tmp_path / "run" / "run.mcap", tmp_path / "foxglove.mcap"
+    assert cli_main(["export", "--foxglove", str(recording), "-o", str(exported)]) == 0
+    recorded: dict[str, list] = {}
+    for record in read_records(recording):
+        recorded.setdefault(record.key, []).append(decode(record.payload))
+    channels = read_export(exported)
+    key = KeyLayout("r1").resolve
+    services = {msg.name for k, msgs in recorded.items() if "/diagnostics/" in k for msg in msgs}
+    assert {"localizer", "costmap", "tracker", "navigator", "local_planner"} <= services
+    assert {topic: rows[0][0] for topic, rows in channels.items()} == \
+        VIEW_CHANNELS | {f"/diagnostics/{s}": "omninav.Diagnostic" for s in services}
+    # one exported message per recorded one (the grids: only when changed), log time = sim stamp
+    for topic, source in (("/scan", "scan"), ("/truth/robot", "sim/truth"), ("/truth/movers", "sim/movers"),
+                          ("/tracks", "tracks"), ("/localizer/pose", "pose"), ("/localizer/particles", "particlecloud"),
+                          ("/plan", "plan"), ("/local_plan", "local_plan"), ("/goal", "goal")):
+        assert [t for _, t, _ in channels[topic]] == [msg.header.stamp_ns for msg in recorded[key(source)]], topic
+    for topic in ("/map", "/costmap/global", "/costmap/local"):
+        assert 1 <= len(channels[topic]) <= len(recorded[key(topic[1:])]), topic
+    assert channels["/map"][0][2].data == recorded[key("map")][0].data.tobytes()
+    last_scan = recorded[key("scan")][-1]
+    assert np.array_equal(channels["/scan"][-1][2].ranges, last_scan.ranges.astype(float))
+    final_pose = recorded[key("pose")][-1].pose
+    position = channels["/localizer/pose"][-1][2].pose.position
+    assert (position.x, position.y) == (final_pose.x, final_pose.y)
+    truth_entity = channels["/truth/robot"][-1][2].entities[0]
+    assert truth_entity.frame_id == "world" and len(truth_entity.lines[0].points) >= 3
+    goal_poses = channels["/goal"][0][2].poses
+    assert (goal_poses[-1].position.x, goal_poses[-1].position.y) == (3.2, 0.9)
+    tree = {(t.parent_frame_id, t.child_frame_id) for _, _, tf in channels["/tf"] for t in tf.transforms}
+    assert {("world", "map"), ("map", "odom"), ("odom", "base_link"), ("base_link", "laser")} <= tree
+    tracks = [len(msg.ids) for msg in recorded[key("tracks")]]
+    assert [len(scene.entities[0].cylinders) for _, _, scene in channels["/tracks"]] == tracks
+    assert channels["/diagnostics/localizer"][-1][2]["name"] == "localizer"

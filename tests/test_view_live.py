@@ -145,6 +145,8 @@ def test_the_view_serves_every_channel_and_forwards_goals_only_to_the_goal_key(p
     assert list(client.decoded["/scan"][0].ranges[:2]) == [1.0, 2.0]
     assert TREE <= frames(client)
     assert client.decoded["/diagnostics/costmap"][0]["values"] == {"received/scan": 3}
+    (track,) = client.decoded["/tracks"][0].entities
+    assert (track.frame_id, track.cylinders[0].size.x, track.arrows[0].shaft_length) == ("odom", 0.5, 0.8)
     assert [(p.position.x, p.position.y) for p in client.decoded["/plan"][0].poses] == [(0.0, 0.0), (1.0, 0.5)]
     (goal,) = from_foxglove(heard["goal"])
     assert goal.header.frame_id == "map"

@@ -17,7 +17,7 @@ S = 1_000_000_000
 VIEW_CHANNELS = {
     "/map": "foxglove.Grid", "/costmap/global": "foxglove.Grid", "/costmap/local": "foxglove.Grid",
     "/scan": "foxglove.LaserScan", "/tf": "foxglove.FrameTransforms", "/truth/robot": "foxglove.SceneUpdate",
-    "/truth/movers": "foxglove.SceneUpdate", "/localizer/pose": "foxglove.PoseInFrame",
+    "/truth/movers": "foxglove.SceneUpdate", "/tracks": "foxglove.SceneUpdate", "/localizer/pose": "foxglove.PoseInFrame",
     "/localizer/particles": "foxglove.PosesInFrame", "/plan": "foxglove.PosesInFrame",
     "/local_plan": "foxglove.PosesInFrame", "/goal": "foxglove.PosesInFrame",
     "/diagnostics/costmap": "omninav.Diagnostic"}
@@ -72,5 +72,7 @@ def stack_messages(stamp_ns: int) -> dict[str, object]:
         keys.resolve("local_plan"): m.Path(h("odom"), poses, goal_id="g1"),
         keys.resolve("goal"): m.Goal(h("map"), "g1", m.Pose2D(3.0, 4.0, 0.0)),
         keys.resolve("sim/movers"): m.Obstacles(h("world"), np.array([[2.0, 2.0, 0.3]]), np.zeros((1, 2))),
+        keys.resolve("tracks"): m.Tracks(h("odom"), np.array([7]), np.array([[2.5, 1.5, 0.0, -0.8]]),
+                                          np.tile(np.eye(4), (1, 1, 1)), np.array([0.25])),
         keys.diagnostics("costmap"): m.Diagnostic(h(""), "costmap", 0, "ok", {"received/scan": 3}),
     }

@@ -17,12 +17,14 @@ the costmap level is copied into every plugin of the matching type and wins over
 (Costmap2DROS::copyParentParameters); an observation source's obstacle_range and raytrace_range are
 searched upwards (source, layer, costmap, then 2.5 / 3.0 m).
 
-Names ROS accepts that mean nothing for a 2-D laser costmap (voxel settings, obstacle heights,
-topic wiring handled by the node) are listed in IGNORED and accepted without effect; anything else
-unknown is an error naming the key and the file.
+Names ROS or Nav2 accept that mean nothing for a 2-D laser costmap (voxel settings, obstacle heights,
+topic wiring handled by the node) are listed in IGNORED and accepted without effect, with a warning
+naming them; so is a plugin's section that the plugin list does not name (Nav2 never reads it);
+anything else unknown is an error naming the key and the file, with the closest known name.
 """
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -30,7 +32,9 @@ from typing import Any, Union
 
 import yaml
 
-from ..runtime.params import ParamError, load_params, read_yaml
+from ..runtime.params import ParamError, load_params, read_yaml, unknown_names
+
+_log = logging.getLogger("omninav.params")
 
 COSTMAP_NAMES = ("global_costmap", "local_costmap")
 DEFAULT_OBSTACLE_RANGE = 2.5   # m, ObstacleLayer's fallback when no level sets obstacle_range
@@ -43,8 +47,10 @@ IGNORED = {
                 "use_sim_time", "max_obstacle_height", "map_vis_z"},
     "obstacle": {"max_obstacle_height", "publish_voxel_map", "origin_z", "z_resolution", "z_voxels",
                  "unknown_threshold", "mark_threshold", "transform_tolerance", "footprint_scale"},
-    "source": {"min_obstacle_height", "max_obstacle_height", "expected_update_rate"},
-    "layer": {"use_sim_time"},
+    # Nav2's min ranges: a laser's readings below range_min are dropped already
+    "source": {"min_obstacle_height", "max_obstacle_height", "expected_update_rate", "obstacle_min_range",
+               "raytrace_min_range"},
+    "layer": {"use_sim_time", "map_subscribe_transient_local"},
 }
 # Nav2 spells two observation-source ranges differently.
 SOURCE_ALIASES = {"obstacle_max_range": "obstacle_range", "raytrace_max_range": "raytrace_range"}
@@ -284,7 +290,12 @@ def _source_names(value: Any, source: str) -> list[str]:
     raise ParamError(f"{source}: 'observation_sources' must be a space-separated string, got {value!r}")
 
 
-def _without(values: dict, ignored: set[str]) -> dict:
+def _without(values: dict, ignored: set[str], source: str) -> dict:
+    """values less the names accepted without effect, which a warning lists."""
+    dropped = sorted(set(values) & ignored)
+    if dropped:
+        _log.warning("%s: parameters accepted without effect (nothing to do for a 2-D laser costmap): %s",
+                     source, ", ".join(dropped))
     return {k: v for k, v in values.items() if k not in ignored}
 
 
@@ -301,11 +312,11 @@ def _obstacle_layer(name: str, section: dict, parent: dict, source: str) -> Obst
             for level in (section, parent):
                 if key not in values and key in level:
                     values[key] = level[key]
-        sources.append(load_params(ObservationSource, {**_without(values, IGNORED["source"]), "name": src},
-                                   f"{where}/{src}"))
+        sources.append(load_params(ObservationSource, {**_without(values, IGNORED["source"], f"{where}/{src}"),
+                                                       "name": src}, f"{where}/{src}"))
     own = {k: v for k, v in section.items()
            if k not in names and k not in ("observation_sources", "obstacle_range", "raytrace_range", "plugin")}
-    own = _without(own, IGNORED["obstacle"] | IGNORED["layer"])
+    own = _without(own, IGNORED["obstacle"] | IGNORED["layer"], where)
     return load_params(ObstacleLayerParams, {**own, "name": name, "observation_sources": tuple(sources)}, where)
 
 
@@ -326,7 +337,7 @@ def _layer(name: str, kind: type, section: dict, parent: dict, source: str) -> L
             section[key] = parent[key]
     if kind is ObstacleLayerParams:
         return _obstacle_layer(name, section, parent, source)
-    values = _without({k: v for k, v in section.items() if k != "plugin"}, IGNORED["layer"])
+    values = _without({k: v for k, v in section.items() if k != "plugin"}, IGNORED["layer"], f"{source}/{name}")
     return load_params(kind, {**values, "name": name}, f"{source}/{name}")
 
 
@@ -362,10 +373,13 @@ def costmap_params_from_mapping(mapping: dict, source: str = "costmap") -> Costm
         layers.append(_layer("obstacle_layer", ObstacleLayerParams, obstacle_section, mapping, source))
         layers.append(_layer("inflation_layer", InflationLayerParams, {}, mapping, source))
         consumed = {"static_map", "observation_sources"} | _PARENT_COPIES_ALL
-    unknown = sorted(set(mapping) - top_names - consumed - sources_here - IGNORED["costmap"])
-    if unknown:
-        raise ParamError(f"{source}: unknown parameter(s) {unknown} for a costmap; known: {sorted(top_names)}, "
-                         "plugins and their sections, observation_sources and the sources' sections")
+    # a layer's section the plugin list does not name: Nav2 and ROS never read it
+    unused_sections = {k for k, v in mapping.items() if isinstance(v, dict) and "plugins" in mapping} - consumed
+    rest = _without({k: v for k, v in mapping.items() if k not in consumed | sources_here},
+                    IGNORED["costmap"] | unused_sections, source)
+    problem = unknown_names(rest, top_names | consumed, "parameter")
+    if problem:
+        raise ParamError(f"{source}: {problem} (and the plugins' and the sources' sections)")
     values = {k: v for k, v in mapping.items() if k in top_names}
     if "footprint" in values:
         values["footprint"] = _footprint(values["footprint"], source)

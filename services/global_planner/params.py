@@ -2,13 +2,15 @@
 
 ROS files load unchanged: names global_planner reads that have no meaning for this planner
 (the potential-field interpolation and publishing settings) are in IGNORED and accepted without
-effect; anything else unknown is an error naming the key.
+effect; anything else unknown is an error naming the key. Nav2's planner_server files load too (NAV2:
+the one plugin of planner_plugins, NavFn, flattened; `tolerance` is default_tolerance, `use_astar`
+the opposite of use_dijkstra).
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..runtime.params import load_params, require_at_least, require_nonnegative
+from ..runtime.params import ForeignNames, load_params, require_at_least, require_nonnegative
 
 ORIENTATION_MODES = {0: "none", 1: "forward", 2: "interpolate", 3: "forward_then_interpolate",
                      4: "backward", 5: "leftward", 6: "rightward"}
@@ -16,6 +18,15 @@ ORIENTATION_MODES = {0: "none", 1: "forward", 2: "interpolate", 3: "forward_then
 # ROS global_planner settings of its potential field and its topics: no effect on a graph search.
 IGNORED = frozenset({"old_navfn_behavior", "use_quadratic", "planner_window_x", "planner_window_y",
                      "publish_scale", "publish_potential", "planner_costmap_publish_frequency", "use_sim_time"})
+
+NAV2 = ForeignNames(
+    stack="Nav2", node="planner_server", plugin_list="planner_plugins",
+    plugin_types=frozenset({"nav2_navfn_planner/NavfnPlanner", "nav2_navfn_planner::NavfnPlanner"}),
+    renames={"tolerance": "default_tolerance", "use_astar": "use_dijkstra"},
+    convert={"use_astar": lambda use_astar: not use_astar if isinstance(use_astar, bool) else use_astar},
+    # the server's rate (replanning is the navigator's planner_frequency here), the plan's last pose
+    # orientation (orientation_mode says it), sim time (always)
+    ignored=frozenset({"expected_planner_frequency", "use_final_approach_orientation", "use_sim_time"}))
 
 
 @dataclass(frozen=True)
@@ -52,5 +63,6 @@ class GlobalPlannerParams:
 
     @classmethod
     def from_mapping(cls, values: dict | None, source: str = "global_planner") -> GlobalPlannerParams:
-        """From a ROS parameter mapping, dropping the names in IGNORED."""
-        return load_params(cls, {k: v for k, v in (values or {}).items() if k not in IGNORED}, source)
+        """From a ROS parameter mapping, dropping the names in IGNORED, or a Nav2 one (NAV2)."""
+        values = NAV2.translate(dict(values or {}), source)
+        return load_params(cls, {k: v for k, v in values.items() if k not in IGNORED}, source, NAV2.names)

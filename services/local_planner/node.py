@@ -51,7 +51,7 @@ from ..costmap.footprint import make_footprint
 from ..costmap.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, Ticks
-from ..runtime.params import ParamError, load_params, require_nonnegative
+from ..runtime.params import ForeignNames, ParamError, load_params, require_nonnegative
 from ..se2 import compose, inverse
 from .approach import FinalApproach
 from .dwa import DwaPlanner, footprint_check_cost, reachable, warm_up
@@ -85,6 +85,27 @@ ROS_WITHOUT_EFFECT = {
     "rot_stopped_vel", "stop_time_buffer", "scaling_speed", "max_scaling_factor", "twirling_scale",
     "acc_lim_trans", "max_vel_trans", "min_vel_trans", "max_trans_vel", "min_trans_vel", "use_sim_time",
 }
+
+# Nav2's controller_server with DWB (dwb_core::DWBLocalPlanner) as its one controller plugin: DWB's
+# names are dwa_local_planner's where it has them; its critics' scales are the biases here
+NAV2 = ForeignNames(
+    stack="Nav2", node="controller_server", plugin_list="controller_plugins",
+    plugin_types=frozenset({"dwb_core::DWBLocalPlanner"}),
+    renames={"linear_granularity": "sim_granularity", "PathDist.scale": "path_distance_bias",
+             "GoalDist.scale": "goal_distance_bias", "BaseObstacle.scale": "occdist_scale",
+             "PathAlign.forward_point_distance": "forward_point_distance",
+             "GoalAlign.forward_point_distance": "forward_point_distance"},
+    naming_ignored_sections=frozenset({"goal_checker_plugins", "progress_checker_plugin",
+                                       "progress_checker_plugins"}),
+    # the server's thresholds and checkers (the navigator judges progress and arrival here), DWB's
+    # speed norms, deceleration limits and critics without a counterpart in this DWA
+    ignored=frozenset({"use_sim_time", "min_x_velocity_threshold", "min_y_velocity_threshold",
+                       "min_theta_velocity_threshold", "failure_tolerance", "debug_trajectory_details",
+                       "min_speed_xy", "max_speed_xy", "min_speed_theta", "decel_lim_x", "decel_lim_y",
+                       "decel_lim_theta", "angular_granularity", "transform_tolerance", "trans_stopped_velocity",
+                       "short_circuit_trajectory_evaluation", "stateful", "critics", "prune_plan",
+                       "prune_distance", "PathAlign.scale", "GoalAlign.scale", "RotateToGoal.scale",
+                       "RotateToGoal.slowing_factor", "RotateToGoal.lookahead_time"}))
 
 
 @dataclass(frozen=True)
@@ -140,8 +161,14 @@ class LocalPlannerNodeParams(FrameParams, DwaParams, RotationShimParams):
 
     @classmethod
     def from_mapping(cls, values: dict | None, source: str = "local_planner") -> LocalPlannerNodeParams:
-        """Flat names, plus ROS TrajectoryPlannerROS / DWAPlannerROS sections as move_base reads them."""
+        """Flat names, plus ROS TrajectoryPlannerROS / DWAPlannerROS sections as move_base reads them, or
+        a Nav2 controller_server file with DWB (NAV2)."""
         values = dict(values or {})
+        nav2 = NAV2.plugin_list in NAV2.node_section(values)
+        if nav2:
+            values = NAV2.translate(values, source)
+            if "max_vel_theta" in values:
+                values.setdefault("min_vel_theta", -values["max_vel_theta"])   # DWB's limit is a magnitude
         for section, aliases in ROS_SECTIONS.items():
             ros = values.pop(section, None)
             if ros is None:
@@ -158,7 +185,7 @@ class LocalPlannerNodeParams(FrameParams, DwaParams, RotationShimParams):
                 values[name] = value
             if section == "DWAPlannerROS" and "max_vel_theta" in values:
                 values.setdefault("min_vel_theta", -values["max_vel_theta"])   # DWA's limits are magnitudes
-        return load_params(cls, values, source)
+        return load_params(cls, values, source, NAV2.names if nav2 else ())
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,11 @@ so a ROS 1 amcl YAML — flat, under `amcl:`, or in the ROS 2 `amcl: ros__parame
 loads unchanged through `load_params_file(AmclParams, path)`. Two ROS 1 defaults disagree between
 its documentation (wiki and AMCL.cfg: 0.0) and amcl_node.cpp (0.001 and 0.1):
 recovery_alpha_slow / recovery_alpha_fast. We take the documented 0.0 (recovery off), which Nav2
-also uses. Nav2's amcl renames many parameters and changes defaults; docs/localizer.md lists them.
+also uses. Nav2's amcl renames many parameters and changes defaults: a Nav2 file (`amcl:
+ros__parameters:`, alone or in a whole nav2_params.yaml) loads through AmclParams.from_mapping, its
+names mapped by NAV2 below (its motion models are ROS 1's corrected ones: Nav2's
+DifferentialMotionModel draws with the square root of the variance, as "diff-corrected" does);
+names it has that omninav does not implement are accepted without effect, with a warning.
 
 One group is not amcl's: temporal_update (off by default, so amcl's behaviour is the default) keeps
 the filter updating while the robot stands still; docs/localizer.md says why and how.
@@ -15,8 +19,33 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ..runtime.params import ForeignNames, ParamError, load_params
+
 LASER_MODELS = ("beam", "likelihood_field", "likelihood_field_prob")
 ODOM_MODELS = ("diff", "omni", "diff-corrected", "omni-corrected")
+
+NAV2_MOTION_MODELS = {"nav2_amcl::DifferentialMotionModel": "diff-corrected", "nav2_amcl::OmniMotionModel":
+                      "omni-corrected", "differential": "diff-corrected", "omnidirectional": "omni-corrected"}
+
+
+def _nav2_motion_model(value) -> str:
+    if value not in NAV2_MOTION_MODELS:
+        raise ValueError(f"{value!r} is not one of {', '.join(NAV2_MOTION_MODELS)}")
+    return NAV2_MOTION_MODELS[value]
+
+
+NAV2 = ForeignNames(
+    stack="Nav2", node="amcl",
+    renames={**{f"alpha{k}": f"odom_alpha{k}" for k in range(1, 6)}, "robot_model_type": "odom_model_type",
+             "max_beams": "laser_max_beams", "pf_err": "kld_err", "pf_z": "kld_z", "sigma_hit": "laser_sigma_hit",
+             "lambda_short": "laser_lambda_short", "z_hit": "laser_z_hit", "z_max": "laser_z_max",
+             "z_rand": "laser_z_rand", "z_short": "laser_z_short"},
+    convert={"robot_model_type": _nav2_motion_model},
+    # topics (wired by keys here), sim time (always), Nav2's initial-pose switches (omninav starts
+    # from initial_pose_x/y/a, or from `initial_pose` below, always; its own saved pose is pose_file),
+    # the free-space downsampling of its likelihood field and its own seed (ours is the node's seed)
+    ignored=frozenset({"scan_topic", "map_topic", "use_sim_time", "set_initial_pose", "always_reset_initial_pose",
+                       "initialize_at_saved_pose", "saved_pose_filepath", "freespace_downsampling", "random_seed"}))
 
 
 @dataclass(frozen=True)
@@ -128,3 +157,16 @@ class AmclParams:
     @property
     def odom_alphas(self) -> tuple[float, float, float, float, float]:
         return (self.odom_alpha1, self.odom_alpha2, self.odom_alpha3, self.odom_alpha4, self.odom_alpha5)
+
+    @classmethod
+    def from_mapping(cls, values: dict | None, source: str = "amcl"):
+        """From our (ROS 1) names or Nav2's (NAV2; `initial_pose: {x, y, yaw}` as initial_pose_x/y/a)."""
+        values = NAV2.translate(dict(values or {}), source)
+        initial = values.pop("initial_pose", None)
+        if initial is not None:
+            if not isinstance(initial, dict) or not set(initial) <= {"x", "y", "z", "yaw"}:
+                raise ParamError(f"{source}: initial_pose must be a mapping of x, y, z, yaw, got {initial!r}")
+            for axis, ours in (("x", "initial_pose_x"), ("y", "initial_pose_y"), ("yaw", "initial_pose_a")):
+                if axis in initial:
+                    values[ours] = initial[axis]
+        return load_params(cls, values, source, NAV2.names | {"initial_pose"})

@@ -13,7 +13,7 @@ from typing import Any
 
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout
 from .node import Node
-from .params import ParamError, load_params, load_params_file, read_yaml, unknown_names, unwrap_ros
+from .params import ParamError, load_node_params, read_params_mapping, read_yaml, unknown_names
 from .registry import UnknownService, node_class
 from .zenoh_config import check_loopback
 
@@ -130,8 +130,8 @@ def _params(entry: dict, where: str, base: Path, name: str, params_type: type) -
     if "params_file" in entry:
         file = base / entry["params_file"]
         try:
-            load_params_file(params_type, file, name)
-            merged = unwrap_ros(read_yaml(file), name)
+            merged = read_params_mapping(file, name)
+            load_node_params(params_type, merged, str(file))
         except ParamError as exc:
             raise ComposeError(f"{where}.params_file: {exc}") from None
     inline = entry.get("params") or {}
@@ -139,7 +139,7 @@ def _params(entry: dict, where: str, base: Path, name: str, params_type: type) -
         raise ComposeError(f"{where}.params: must be a mapping of parameter names to values")
     merged = {**merged, **inline}
     try:
-        load_params(params_type, merged, f"{where}.params")
+        load_node_params(params_type, merged, f"{where}.params")
     except ParamError as exc:
         raise ComposeError(str(exc)) from None
     return merged

@@ -7,7 +7,7 @@ import signal
 import sys
 
 from .live import LiveRunner
-from .params import ParamError, load_params, parse_overrides, read_params_mapping
+from .params import ParamError, load_node_params, parse_overrides, read_params_mapping
 from .registry import UnknownService, node_class
 
 
@@ -25,9 +25,7 @@ def build_node(service: str, params_file: str | None = None, overrides: dict | N
     source = " with overrides".join(filter(None, [params_file or service, "" if overrides else None]))
     if base is not None:
         source += " over the recorded parameters"
-    # a Params class with from_mapping (e.g. ROS names accepted without effect) loads itself
-    load = getattr(cls.Params, "from_mapping", None) or (lambda mapping, where: load_params(cls.Params, mapping, where))
-    params = load({**(base or {}), **values, **(overrides or {})}, source)
+    params = load_node_params(cls.Params, {**(base or {}), **values, **(overrides or {})}, source)
     return cls(params, robot=robot, name=name)
 
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 from scipy import ndimage
@@ -122,9 +123,12 @@ def navigation_stack(world: World, drive: str) -> list[Node]:
 
 
 def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, params: SlamNodeParams | None = None,
-              laps: int = 1, max_sim_s: float = 1800.0, speed: float = 0.4) -> BuildResult:
+              laps: int = 1, max_sim_s: float = 1800.0, speed: float = 0.4,
+              progress: Callable[[str], None] | None = None, progress_every_s: float = 30.0) -> BuildResult:
     """Explore (no route) or drive the route (a Route or waypoints) `laps` times at `speed`, at most
-    max_sim_s of sim time, while slam maps."""
+    max_sim_s of sim time, while slam maps. `progress` hears a line every progress_every_s of sim
+    time (frontier goals or laps, the share of the reachable space mapped, the sim time); it only
+    reads, so the map is the same with it or without."""
     sim = SimNode(SimNodeParams(world=world_name, drive=drive, seed=seed))
     world, drive = sim.world, sim.sim.drive
     if route is not None:
@@ -143,9 +147,18 @@ def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, param
     slam = SlamNode(params or slam_params_for(world, seed=seed))
     runner = InProcessRunner([sim, ChassisNode(ChassisNodeParams(drive=drive)),
                               LidarNode(LidarNodeParams(world=world_name, seed=seed + 1)), slam, *drivers])
-    runner.run_until(done, math.ceil(max_sim_s / sim.params.dt))
-    runner.close()
     exploring = isinstance(driver, ExploreNode)
+    max_steps, chunk = math.ceil(max_sim_s / sim.params.dt), max(1, round(progress_every_s / sim.params.dt))
+    taken = 0
+    while taken < max_steps and not done():
+        taken += runner.run_until(done, min(chunk, max_steps - taken) if progress else max_steps - taken)
+        if progress is not None:
+            grid = slam.current_map()
+            mapped = f"{100 * explored_share(grid, world):.1f} % of the reachable space mapped" if grid else "no map yet"
+            driven = (f"{driver.counters['goals']} frontier goals sent" if exploring
+                      else f"lap {min(driver.laps + 1, laps)} of {laps}")
+            progress(f"sim {sim.now_ns * 1e-9:.0f} s: {driven}, {mapped}")
+    runner.close()
     return BuildResult(grid=slam.current_map(), sim_s=sim.now_ns * 1e-9, finished=done(),
                        laps=0 if exploring else driver.laps, goals=driver.counters["goals"] if exploring else 0,
                        dropped=tuple(dropped_text(f) for f in driver.failed.dropped) if exploring else (),

@@ -4,7 +4,7 @@ The live view (node.py) and `omninav export --foxglove` (export.py) both route d
 through `ROUTES`, so a recording opens in Foxglove with the same channels as the running stack.
 Frames: world → map (identity: the simulator's maps are drawn in its world frame) → odom (the
 localizer's or SLAM's tf/map_odom) → base_link (wheel odometry) → laser (the lidar's mounting).
-Adding a message kind (e.g. tracked moving obstacles) is one function plus one Route.
+Adding a message kind is one function plus one Route.
 """
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from json import JSONDecodeError, loads
 from typing import Any, Callable
 
 import numpy as np
-from foxglove.messages import (Color, CylinderPrimitive, FrameTransform, FrameTransforms, Grid, LaserScan,
+from foxglove.messages import (ArrowPrimitive, Color, CylinderPrimitive, FrameTransform, FrameTransforms, Grid, LaserScan,
                                LinePrimitive, LinePrimitiveLineType, PackedElementField,
                                PackedElementFieldNumericType, Point3, Pose, PoseInFrame, PosesInFrame, Quaternion,
                                SceneEntity, SceneUpdate, Timestamp, Vector2, Vector3)
@@ -24,10 +24,13 @@ from ...schemas.keys import KeyLayout, type_for_key
 from ...sim.world import DEFAULT_FOOTPRINT
 
 NS_PER_S = 1_000_000_000
-WORLD_FRAME, MAP_FRAME, BASE_FRAME = "world", "map", "base_link"
+WORLD_FRAME, MAP_FRAME, ODOM_FRAME, BASE_FRAME = "world", "map", "odom", "base_link"
 TRUTH_COLOR = Color(r=0.1, g=0.8, b=0.2, a=1.0)
 MOVER_COLOR = Color(r=0.9, g=0.4, b=0.1, a=0.8)
 MOVER_HEIGHT_M = 0.5
+TRACK_COLOR = Color(r=0.8, g=0.1, b=0.8, a=0.6)
+TRACK_HEIGHT_M = 0.3            # lower than the movers, so a track and the mover it follows both show
+ARROW_SECONDS = 1.0             # a velocity arrow is as long as the track moves in this time
 MAX_SEC = 2**32 - 1
 
 
@@ -203,6 +206,23 @@ def movers(msg: m.Obstacles) -> SceneUpdate:
                                              cylinders=cylinders)])
 
 
+def tracks(msg: m.Tracks) -> SceneUpdate:
+    """Each tracked moving obstacle as a cylinder of its estimated radius with an arrow along its
+    velocity (as long as the way it covers in ARROW_SECONDS); one entity, so lost tracks disappear."""
+    cylinders, arrows = [], []
+    for (x, y, vx, vy), radius in zip(msg.states, msg.radii):
+        cylinders.append(CylinderPrimitive(pose=pose_3d(x, y, 0.0), size=Vector3(x=2 * radius, y=2 * radius,
+                                                                                  z=TRACK_HEIGHT_M),
+                                           bottom_scale=1.0, top_scale=1.0, color=TRACK_COLOR))
+        speed = math.hypot(vx, vy)
+        if speed > 0:
+            arrows.append(ArrowPrimitive(pose=pose_3d(x, y, math.atan2(vy, vx)), shaft_length=speed * ARROW_SECONDS,
+                                         shaft_diameter=0.04, head_length=0.1, head_diameter=0.1, color=TRACK_COLOR))
+    return SceneUpdate(entities=[SceneEntity(timestamp=timestamp(msg.header.stamp_ns),
+                                             frame_id=msg.header.frame_id or ODOM_FRAME, id="tracks",
+                                             cylinders=cylinders, arrows=arrows)])
+
+
 def diagnostic(msg: m.Diagnostic) -> JsonMessage:
     """A service's Diagnostic as JSON (Foxglove shows it in a Raw Messages panel)."""
     return JsonMessage("omninav.Diagnostic", DIAGNOSTIC_SCHEMA, {
@@ -242,6 +262,7 @@ ROUTES: tuple[Route, ...] = (
     Route("local_plan", _to("/local_plan", path)),
     Route("goal", _to("/goal", goal)),
     Route("sim/movers", _to("/truth/movers", movers)),
+    Route("tracks", _to("/tracks", tracks)),
     Route(DIAGNOSTICS, lambda msg, params: [(f"{DIAGNOSTICS_TOPIC}/{msg.name}", diagnostic(msg))]),
 )
 

@@ -3,7 +3,7 @@ from the view's own topic names, so the file and the channels cannot drift apart
 
     python -m omninav.services.view.layout docs/foxglove/omninav_layout.json     # after changing the view
 
-A 3D panel in the map frame with the grids, scan, robot, movers, plans, goals and the localizer, whose
+A 3D panel in the map frame with the grids, scan, robot, movers, tracks, plans, goals and the localizer, whose
 "Publish pose" tool sends goals on the view's goal channel; beside it the transform tree and one tab
 per service's Diagnostic.
 """
@@ -39,6 +39,7 @@ def three_d_panel() -> fl.ThreeDeePanel:
                                                        cube_outline=False, color_mode="flat", flat_color="#ff2020ff"),
         "/truth/robot": fl.BaseRendererSceneUpdateTopicSettings(visible=True),
         "/truth/movers": fl.BaseRendererSceneUpdateTopicSettings(visible=True),
+        "/tracks": fl.BaseRendererSceneUpdateTopicSettings(visible=True),
         "/plan": _poses("#2060ffff", "#20c0ffff"),
         "/local_plan": _poses("#ff9000ff", "#ffd000ff"),
         "/goal": _poses("#c000c0ff", "#c000c0ff", kind="arrow"),
