@@ -228,7 +228,19 @@ def test_summary_of_a_failed_mission(box_world):
     no_answer = summarize_mission(MissionRecord(stamps, poses, goals=[goal("g1", 4.0, 1.0, 0.5, 0.5)]), world)
     assert no_answer.goals[0].status == "none" and no_answer.collisions is None and not no_answer.success
     assert no_answer.time_s == pytest.approx(3.5)                # until the last truth
+    assert s.restarts == {} and "restarts: none" in text
 
+
+def test_a_partial_summary_counts_the_restarts(box_world):
+    """What a mission given up after restarts prints: the goals reached so far, the time, the restarts."""
+    stamps, poses = straight_run(np.arange(0.0, 4.01, 0.01))
+    record = MissionRecord(stamps, poses, goals=[goal("g1", 3.25, 1.0, 0.375, 0.5), goal("g2", 1.0, 1.0, 0.0, 3.5)],
+                           statuses=[status("g1", "succeeded", 3.0), status("g2", "active", 3.6)],
+                           sim_values={"collisions": 0}, restarts={"localizer": 2, "chassis": 1})
+    s = summarize_mission(record, box_world, goals_total=3)
+    assert not s.success and (s.goals_reached, s.goals_total) == (1, 3) and s.time_s == pytest.approx(3.5)
+    assert s.to_json()["restarts"] == {"localizer": 2, "chassis": 1}
+    assert "restarts: chassis 1, localizer 2" in summary_lines(s)
 
 def test_load_mission_reads_a_recording(tmp_path, box_world):
     from omninav.schemas import encode
@@ -246,11 +258,18 @@ def test_load_mission_reads_a_recording(tmp_path, box_world):
         put("omninav/r1/goal", goal("g1", 3.0, 1.0, 0.0, 1.0))
         put("omninav/r1/nav_status", status("g1", "succeeded", 3.0))
         put("omninav/r1/diagnostics/sim", Diagnostic(header=Header(stamp_ns=3 * NS_PER_S), name="sim",
-                                                     values={"collisions": 0}))
-    record = load_mission(path)
+                                                     values={"collisions": 0, "run_started_ns": 5}))
+        # the local planner's Diagnostics come from three runs (two restarts), the costmap's from one
+        for run, seq in ((10, 1), (10, 2), (20, 1), (30, 1), (30, 2)):
+            put("omninav/r1/diagnostics/local_planner", Diagnostic(header=Header(stamp_ns=seq, seq=seq),
+                                                                   name="local_planner", values={"run_started_ns": run}))
+        put("omninav/r1/diagnostics/costmap", Diagnostic(header=Header(seq=1), name="costmap",
+                                                         values={"run_started_ns": 7}))
+    record = load_mission(path, services=("sim", "costmap", "local_planner"))
     assert record.truth_poses[:, 0].tolist() == [1.0, 2.0, 3.0] and record.mover_circles.shape == (3, 1, 3)
+    assert record.restarts == {"local_planner": 2}
     s = summarize_mission(record, box_world, recording=str(path))
-    assert s.success and s.path_length_m == pytest.approx(2.0)
+    assert s.success and s.path_length_m == pytest.approx(2.0) and s.restarts == {"local_planner": 2}
     with pytest.raises(MissionError, match="no such recording"):
         load_mission(tmp_path / "missing.mcap")
     empty = tmp_path / "empty.mcap"
@@ -290,19 +309,26 @@ def test_navigate_refuses_a_goal_in_an_obstacle_or_out_of_reach_before_starting_
 
 
 @pytest.mark.parametrize("localization, service", [("amcl", "localizer"), ("slam", "slam"), ("truth", "truth_pose")])
-def test_mission_compose_has_every_service_without_restarts(localization, service, tmp_path):
+def test_mission_compose_restarts_every_service_but_the_sim_and_the_recorder(localization, service, tmp_path):
     world = load_world(world_path("office"))
     map_file = map_for(world, "office", tmp_path)
     assert map_file.parent == tmp_path and load_map(map_file).info.resolution == 0.05   # rasterized
     compose = compose_for(world, Path(world.source), map_file, "diff", localization, tmp_path / "run.mcap",
-                          seed=3, rate=1.0, robot="r1")
+                          seed=3, rate=1.0, robot="r1", state_dir=tmp_path / "state")
     names = [s["name"] for s in compose["services"]]
     assert names[0] == "recorder" and service in names       # the recorder first: it is stopped last
     assert {"sim", "chassis", "lidar", "costmap", "tracker", "global_planner", "local_planner", "velocity_smoother",
             "collision_monitor", "navigator"} <= set(names)
     assert ("map_server" in names) == (localization != "slam")
-    assert all(s["restart"] == "no" for s in compose["services"])
     by_name = {s["name"]: s for s in compose["services"]}
+    assert by_name["sim"]["restart"] == by_name["recorder"]["restart"] == "no"
+    assert all((s["restart"], s["max_restarts"]) == ("on-failure", 5) for s in compose["services"]
+               if s["name"] not in ("sim", "recorder"))
+    # what each resumes from lies in the run's state folder
+    assert by_name["chassis"]["params"]["odom_file"] == str(tmp_path / "state" / "chassis_odom.yaml")
+    assert by_name["navigator"]["params"]["goal_file"] == str(tmp_path / "state" / "navigator_goal.yaml")
+    if localization == "amcl":
+        assert by_name["localizer"]["params"]["pose_file"] == str(tmp_path / "state" / "localizer_pose.yaml")
     assert by_name["sim"]["params"]["drive"] == by_name["chassis"]["params"]["drive"] == "diff"
     assert by_name["global_planner"]["params"]["goal_topic"] == "plan_request"
     assert by_name["tracker"]["params"]["use_map"] == (localization != "slam")    # slam's map is being drawn
