@@ -28,7 +28,7 @@ from omninav.services.navigator.mission import (MissionError, MissionRecord, loa
                                                 summary_lines)
 from omninav.services.navigator.truth_pose import TruthPoseNode, TruthPoseParams
 from omninav.services.map_server.mapio import load_map
-from omninav.services.recorder.mcap_io import read_records, recording_summary
+from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.acl import TOOL
 from omninav.services.runtime.compose import load_compose
 from omninav.services.runtime.inprocess import InProcessRunner
@@ -409,13 +409,15 @@ def _wait_for(condition, process: subprocess.Popen, what: str, seconds: float = 
     raise AssertionError(f"no {what} within {seconds:g} s")
 
 
-def test_navigate_stops_everything_and_names_a_service_that_dies_mid_mission(tmp_path):
-    """The local planner is killed while it steers towards the goal: the command exits 2 with an error
-    naming it, leaves no process running, and the recording up to then is a finished MCAP file."""
+def test_a_mission_survives_a_local_planner_killed_mid_mission(tmp_path):
+    """The local planner is sent SIGKILL while it steers towards the goal: `up` restarts it, the
+    navigator sends the restarted one its path again, the goal is reached, and the summary says the
+    local planner was restarted once; afterwards no process is left running."""
     out = tmp_path / "run"
     navigate = subprocess.Popen([sys.executable, "-m", "omninav.cli.main", "navigate", "--world", "room",
-                                 "--goal", "3.2", "0.9", "30", "--localization", "truth", "--rate", "2",
-                                 "-o", str(out), "--json"], cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+                                 "--goal", "3.2", "0.9", "30", "--localization", "truth", "--rate", "1",
+                                 "--timeout", "600", "-o", str(out), "--json"],
+                                cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
         router = _wait_for(lambda: _router_of(out / "services.log"), navigate, "router")
         steering = threading.Event()
@@ -428,17 +430,18 @@ def test_navigate_stops_everything_and_names_a_service_that_dies_mid_mission(tmp
         killed = next(pids["local_planner"] for pids in map(service_pids, children(navigate.pid))
                       if "local_planner" in pids)
         os.kill(killed, signal.SIGKILL)
-        _, stderr = navigate.communicate(timeout=300)
+        stdout, stderr = navigate.communicate(timeout=900)
     finally:
         if navigate.poll() is None:     # a failure above: let navigate stop what it started
             navigate.send_signal(signal.SIGINT)
             navigate.communicate(timeout=300)
-    error = stderr.decode().strip().splitlines()[-1]
-    assert navigate.returncode == 2, stderr.decode()
-    assert error.startswith("omninav navigate: error: service(s) local_planner stopped"), error
+    log = (out / "services.log").read_text(errors="replace")
+    assert navigate.returncode == 0, stderr.decode() + log[-3000:]
+    summary = json.loads(stdout.decode().strip().splitlines()[-1])
+    assert summary["success"] and summary["goals_reached"] == 1 and summary["robot_fault_collisions"] == 0
+    assert summary["restarts"] == {"local_planner": 1}
+    assert "local_planner ended with signal SIGKILL" in log and "restarting in" in log
     assert processes_using(router) == []
-    recording = out / "run.mcap"
-    assert recording_summary(recording).statistics.message_count > 0       # finished: summary and statistics
-    commands = [decode(rec.payload) for rec in read_records(recording, ["omninav/r1/local_cmd"])]
-    assert any(cmd.goal_id == "g1" for cmd in commands)                     # what it sent before it died
-    assert [rec.key for rec in read_records(recording, ["omninav/r1/goal"])] == ["omninav/r1/goal"]
+    commands = [decode(rec.payload) for rec in read_records(out / "run.mcap", ["omninav/r1/local_cmd"])]
+    assert any(cmd.goal_id == "g1" for cmd in commands)
+    assert [rec.key for rec in read_records(out / "run.mcap", ["omninav/r1/goal"])] == ["omninav/r1/goal"]   # sent once
