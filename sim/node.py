@@ -3,9 +3,10 @@
 A source (pace_s/tick): each tick advances one step and publishes, all stamped with the new sim
 time, the robot's wheel states, the ground truth, the movers and, last, the Clock — so whoever
 sees the clock at t has been sent everything stamped t. Wheel commands are a sporadic input:
-the sim applies whichever command has arrived by the time it steps — until it is older than
-wheel_cmd_timeout_s of sim time by its stamp: then the wheels are commanded to stop, as a motor
-driver's watchdog does, so a robot whose chassis process died does not roll on.
+the sim applies whichever command has arrived by the time it steps — until none has arrived for
+wheel_cmd_timeout_s of sim time (its own steps): then the wheels are commanded to stop, as a motor
+driver's watchdog does, so a robot whose chassis process died does not roll on. Counted by arrival,
+not by the command's stamp: a chassis lagging behind on a loaded machine still drives.
 """
 from __future__ import annotations
 
@@ -28,7 +29,7 @@ class SimNodeParams(SimParams):
     rate: float = 1.0             # sim seconds per wall second
     footprint: tuple[tuple[float, float], ...] = ()   # m, robot frame (a robot profile's); () = the world's
     chassis: dict = field(default_factory=dict)       # ChassisParams by name: the wheels the chassis drives
-    wheel_cmd_timeout_s: float = 0.5   # sim s: a wheel command older than this stops the wheels; 0: held forever
+    wheel_cmd_timeout_s: float = 0.5   # sim s of steps without a wheel command that stop the wheels; 0: never
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -82,7 +83,7 @@ class SimNode(Node):
         self.queryable("sim/truth", lambda _params: self.last_truth)
         self.last_truth = self._truth(self.sim.pose, np.zeros(3))
         self._logged_problems: set[str] = set()
-        self.command_ns: int | None = None     # the stamp of the wheel command in effect; None: stopped
+        self.quiet_steps: int | None = None    # steps since the last wheel command; None: none in effect
 
     def pace_s(self) -> float:
         return self.params.dt / self.params.rate
@@ -98,16 +99,19 @@ class SimNode(Node):
                 self.log.warning("%s (further ones only counted)", problem)
             return
         self.sim.set_wheel_command(msg.velocities)
-        self.command_ns = msg.header.stamp_ns
+        self.quiet_steps = 0
 
     def _watchdog(self) -> None:
-        """Stop the wheels when their command has gone stale (the chassis is silent)."""
-        timeout_ns = round(self.params.wheel_cmd_timeout_s * NS_PER_S)
-        if timeout_ns and self.command_ns is not None and self.now_ns - self.command_ns > timeout_ns:
+        """Stop the wheels when no command has come for wheel_cmd_timeout_s (the chassis is silent)."""
+        p = self.params
+        if not p.wheel_cmd_timeout_s or self.quiet_steps is None:
+            return
+        self.quiet_steps += 1
+        if self.quiet_steps * p.dt > p.wheel_cmd_timeout_s:
             self.sim.set_wheel_command(np.zeros(self.sim.command.size))
-            self.command_ns = None
+            self.quiet_steps = None
             self.counters["wheel_cmd_timeouts"] += 1
-            self.log.warning("no wheel command for %.2f sim s: stopping the wheels", self.params.wheel_cmd_timeout_s)
+            self.log.warning("no wheel command for %.2f sim s: stopping the wheels", p.wheel_cmd_timeout_s)
 
     def tick(self) -> None:
         self._watchdog()

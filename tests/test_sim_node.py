@@ -73,7 +73,7 @@ def test_wheel_commands_drive_the_robot_and_truth_answers_get():
 
 def test_the_wheels_stop_when_their_command_goes_stale():
     """A chassis that dies leaves its last wheel command behind: the sim's watchdog stops the robot
-    wheel_cmd_timeout_s after that command's stamp, as a motor driver would."""
+    after wheel_cmd_timeout_s of its own steps without a new one, as a motor driver would."""
     node = SimNode(SimNodeParams(world="room", wheel_cmd_timeout_s=0.5).without_noise())
     out = capture(node)
     command(node, node.sim.kinematics.ik((0.5, 0.0, 0.0)))
