@@ -290,6 +290,31 @@ def test_a_localizer_restarted_while_the_robot_drove_on_resumes_where_the_robot_
     assert first.x - saved.initial_pose_x > 1.0
 
 
+def test_a_localizer_resumed_with_navigates_parameters_stays_converged(room, room_map, tmp_path):
+    """With navigate's amcl parameters (recovery on), a filter begun on a converged cloud (~3 cm)
+    lost its weights and injected random poses until it was lost metres away: a resumed localizer
+    starts no tighter than its initial covariance, and stays where the robot stands."""
+    from omninav.cli.navigate import LOCALIZER_BEYOND_ROS, PARAMS
+    from omninav.services.runtime.params import read_params_mapping
+    world, _ = room
+    pose_file = tmp_path / "pose.yaml"
+    params = {**read_params_mapping(PARAMS / "amcl_paper.yaml"), **LOCALIZER_BEYOND_ROS, "initial_cov_xx": 0.0025,
+              "initial_cov_yy": 0.0025, "initial_cov_aa": 0.0025, "pose_file": str(pose_file), "save_pose_rate": 2.0}
+    rng = np.random.default_rng(0)
+    node, _ = make_node(room_map, **params)
+    for k in range(30):
+        feed(node, "odom", odom(k * NS_PER_S // 10, (0, 0, 0), k + 1))
+        feed(node, "scan", laser(world, START, k * NS_PER_S // 10, rng))
+    assert read_saved_pose(pose_file).initial_cov_xx < 0.0025          # converged tighter than it began
+    restarted, out = make_node(room_map, **params)
+    for k in range(30, 130):
+        feed(restarted, "odom", odom(k * NS_PER_S // 10, (0, 0, 0), k + 1))
+        feed(restarted, "scan", laser(world, START, k * NS_PER_S // 10, rng))
+    last = of(out, "pose")[-1]
+    assert restarted.counters["random_poses_injected"] == 0
+    assert math.hypot(last.pose.x - START[0], last.pose.y - START[1]) < 0.1
+
+
 # ---------------------------------------------------------------- the whole pipeline in process
 
 class Script(Node):

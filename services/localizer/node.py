@@ -179,9 +179,13 @@ class LocalizerNode(Node):
             return None
         self.log.info("resuming from the pose saved in %s", path)
         self.counters["resumed_from_pose_file"] += 1
+        p = self.params
+        # no more certain than a fresh start: a filter begun on a cloud much tighter than its initial
+        # covariance (a converged one's, ~3 cm) loses its weights and injects random poses until lost
+        variances = np.maximum([saved.initial_cov_xx, saved.initial_cov_yy, saved.initial_cov_aa],
+                               [p.initial_cov_xx, p.initial_cov_yy, p.initial_cov_aa])
         self.resumed = (np.array([saved.initial_pose_x, saved.initial_pose_y, saved.initial_pose_a]),
-                        np.diag([saved.initial_cov_xx, saved.initial_cov_yy, saved.initial_cov_aa]),
-                        np.array([saved.odom_x, saved.odom_y, saved.odom_a]))
+                        np.diag(variances), np.array([saved.odom_x, saved.odom_y, saved.odom_a]))
         return ("pose", *self.resumed[:2])
 
     # ------------------------------------------------------------ inputs
