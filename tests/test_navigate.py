@@ -412,10 +412,12 @@ def _wait_for(condition, process: subprocess.Popen, what: str, seconds: float = 
 def test_a_mission_survives_a_local_planner_killed_mid_mission(tmp_path):
     """The local planner is sent SIGKILL while it steers towards the goal: `up` restarts it, the
     navigator sends the restarted one its path again, the goal is reached, and the summary says the
-    local planner was restarted once; afterwards no process is left running."""
+    local planner was restarted once; afterwards no process is left running. At half real time: on
+    a loaded machine the command chain lags, and the velocity smoother drops commands late by more
+    than its timeout in sim time."""
     out = tmp_path / "run"
     navigate = subprocess.Popen([sys.executable, "-m", "omninav.cli.main", "navigate", "--world", "room",
-                                 "--goal", "3.2", "0.9", "30", "--localization", "truth", "--rate", "1",
+                                 "--goal", "3.2", "0.9", "30", "--localization", "truth", "--rate", "0.5",
                                  "--timeout", "600", "-o", str(out), "--json"],
                                 cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
