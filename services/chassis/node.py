@@ -67,6 +67,7 @@ class SavedOdometry:
 class ChassisNode(Node):
     service = "chassis"
     Params = ChassisNodeParams
+    state_files = ("odom_file",)
 
     def setup(self) -> None:
         p = self.params

@@ -133,6 +133,7 @@ class OdomHistory:
 class LocalizerNode(Node):
     service = "localizer"
     Params = LocalizerParams
+    state_files = ("pose_file",)
 
     def setup(self) -> None:
         p = self.params

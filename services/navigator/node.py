@@ -104,6 +104,7 @@ def plan_result(plan: Path, request_id: int) -> PlanResult:
 class NavigatorNode(Node):
     service = "navigator"
     Params = NavigatorNodeParams
+    state_files = ("goal_file",)
 
     def setup(self) -> None:
         p = self.params
