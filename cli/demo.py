@@ -1,7 +1,7 @@
 """`omninav demo`: the main job. A navigation mission in the simulated room: `omninav navigate`
 starts every service as its own process (recorder, sim, chassis, lidar, map_server, AMCL on the
-room's map, costmap, global and local planner, velocity smoother, collision monitor, navigator),
-sends the goals one after another and scores the run against the ground truth; then the recording
+room's map, costmap, global and local planner, velocity smoother, collision monitor, navigator;
+each but the sim and the recorder restarted after a crash, resuming where it was), sends the goals one after another and scores the run against the ground truth; then the recording
 is replayed deterministically into the chassis (byte-for-byte compare) and drawn as a picture:
 map, global costmap, planned and driven paths, scans."""
 from __future__ import annotations
