@@ -1,7 +1,7 @@
 """`omninav demo`: the main job. A navigation mission in the simulated room: `omninav navigate`
 starts every service as its own process (recorder, sim, chassis, lidar, map_server, AMCL on the
-room's map, costmap, global and local planner, velocity smoother, collision monitor, navigator),
-sends the goals one after another and scores the run against the ground truth; then the recording
+room's map, costmap, global and local planner, velocity smoother, collision monitor, navigator;
+each but the sim and the recorder restarted after a crash, resuming where it was), sends the goals one after another and scores the run against the ground truth; then the recording
 is replayed deterministically into the chassis (byte-for-byte compare) and drawn as a picture:
 map, global costmap, planned and driven paths, scans."""
 from __future__ import annotations
@@ -49,9 +49,13 @@ def _step(title: str, cmd: list[str], log: Path, show_output: bool = False) -> i
 
 def _params_of(compose: Path, name: str) -> list[str]:
     """`--set k=v` for each parameter the mission's compose file gave a service: the replay must
-    run the service as the live run did."""
+    run the service as the live run did (but for its state files, which are the live run's own)."""
+    from ..services.runtime.registry import node_class
+
     service = next(s for s in yaml.safe_load(compose.read_text())["services"] if s["name"] == name)
-    return [arg for key, value in service.get("params", {}).items() for arg in ("--set", f"{key}={value}")]
+    state_files = node_class(service["service"]).state_files
+    return [arg for key, value in service.get("params", {}).items() if key not in state_files
+            for arg in ("--set", f"{key}={value}")]
 
 
 def main(args: argparse.Namespace) -> int:

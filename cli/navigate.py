@@ -1,7 +1,7 @@
 """`omninav navigate --world W --goal X Y YAW [--goal …]`: one navigation mission in the simulator.
 
 Every service runs as its own process under `omninav up` (a compose file written into the run's
-folder, every service with restart: no): recorder, sim, chassis, lidar, map_server (the world's
+folder): recorder, sim, chassis, lidar, map_server (the world's
 map; a world without a shipped map is rasterized into the run's folder), the localization (amcl:
 the localizer on that map starting at the world's start pose; slam: the slam service, which then
 serves the map; truth: truth_pose, the ground truth relayed as the pose), costmap, global_planner
@@ -11,8 +11,17 @@ with the sim clock); each ends with its nav_status (succeeded, aborted, canceled
 --timeout sim seconds, with a cancel. A failed goal ends the mission. Then everything is stopped
 (the recorder last) and the summary is computed from the recording (services/navigator/mission.py).
 
+A crash does not end the mission: `up` restarts every service but the sim and the recorder
+(restart: on-failure, at most MAX_RESTARTS times), and each resumes from a state file in the run's
+folder (state/): the localizer its pose, the chassis its odometry, the navigator its active goal;
+the costmap and the planners rebuild from the map the map server publishes every sim second. The
+summary counts the restarts (from the services' Diagnostics). The mission gives up when the sim or
+the recorder dies, when a service stays down longer than DOWN_LIMIT_S or when `up` ends: it then
+prints the summary of what the recording holds so far (a partial one) and exits 2.
+
 Exit status: 0 every goal reached without collision; 1 the mission failed; 2 a user error (unknown
-world, a goal outside the map) or a service that could not start or died — the recording is kept.
+world, a goal outside the map) or a service that could not start, or one the mission could not
+do without — the recording is kept.
 """
 from __future__ import annotations
 
@@ -37,7 +46,7 @@ from ..schemas.keys import DEFAULT_ROBOT, KeyLayout
 from ..schemas.messages import CancelGoal, Clock, Goal, Header, NavStatus, Pose2D
 from ..services.chassis.kinematics import DRIVES
 from ..services.map_server.mapio import MapError, load_map, save_map
-from ..services.navigator.mission import TERMINAL, load_mission, summarize_mission, summary_lines
+from ..services.navigator.mission import TERMINAL, MissionError, load_mission, summarize_mission, summary_lines
 from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
 from ..services.runtime.compose import ComposeError, load_compose
 from ..services.runtime.errors import UserError, exits_2_on_user_error
@@ -73,6 +82,12 @@ POLL_S = 0.1
 STOP_TIMEOUT_S = 120
 READY_TIMEOUT_S = 300   # wall s for every service to come up (numba warm-ups on a loaded machine)
 CLOCK_WAIT_S = 30.0     # wall s for the first clock once every service is alive
+# a restarted sim would start its clock again from 0, a restarted recorder its file afresh: without
+# either the mission cannot go on; every other service is restarted and resumes
+NOT_RESTARTED = ("sim", "recorder")
+MAX_RESTARTS = 5        # per service; a service that keeps dying is given up on
+DOWN_LIMIT_S = 180.0    # wall s a service may stay down (backoff, imports, numba on a loaded machine)
+SAVE_RATE_HZ = 2.0      # sim Hz at which the localizer saves its pose
 
 
 class NavigateError(UserError):
@@ -131,6 +146,16 @@ def map_for(world: World, name: str, folder: Path) -> Path:
     return save_map(world.rasterize(MAP_RESOLUTION), folder / f"{world.name}_map")
 
 
+def state_files(state_dir: Path | None) -> dict[str, dict]:
+    """Per service, the parameters that make it keep its state in `state_dir` and resume from it
+    after a restart; none without a folder."""
+    if state_dir is None:
+        return {}
+    return {"localizer": {"pose_file": str(state_dir / "localizer_pose.yaml"), "save_pose_rate": SAVE_RATE_HZ},
+            "chassis": {"odom_file": str(state_dir / "chassis_odom.yaml")},
+            "navigator": {"goal_file": str(state_dir / "navigator_goal.yaml")}}
+
+
 def localization_service(kind: str, start: dict, map_file: Path, seed: int) -> dict:
     if kind == "truth":
         return {"name": "truth_pose", "service": "truth_pose"}
@@ -162,11 +187,12 @@ def robot_params(profile: Profile | None) -> dict[str, dict]:
 
 def compose_for(world: World, world_file: Path, map_file: Path, drive: str, localization: str, recording: Path,
                 seed: int, rate: float, robot: str, profile: Profile | None = None,
-                sim_dt: float | None = None) -> dict:
+                sim_dt: float | None = None, state_dir: Path | None = None) -> dict:
     """The compose mapping of a mission (absolute paths: `up` may run anywhere). `profile`: the
     robot (cli/profile.py), else the world's robot with the sample parameters. With localization
     `odom` there is no map: no map_server, no localizer, and a global costmap of the robot's own
-    scans (map→odom stays the start pose). `sim_dt`: the simulator's step (default its own)."""
+    scans (map→odom stays the start pose). `sim_dt`: the simulator's step (default its own).
+    `state_dir`: where the localizer, chassis and navigator keep what they resume from after a restart."""
     x, y, yaw = (float(v) for v in world.robot.start)
     start = {"initial_pose_x": x, "initial_pose_y": y, "initial_pose_a": yaw}
     common = profile.costmap_common_params if profile is not None else PARAMS / "costmap_common_params.yaml"
@@ -200,11 +226,16 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "navigator", "service": "navigator",
          "params": {**start, **NAVIGATOR, **(MAPLESS_NAVIGATOR if localization == "odom" else {})}},
     ]
-    overrides = robot_params(profile)
+    overrides, resume = robot_params(profile), state_files(state_dir)
     for service in services:
-        if service["name"] in overrides:
-            service["params"] = {**service.get("params", {}), **overrides[service["name"]]}
-        service["restart"] = "no"       # a service that dies ends the mission, it is not hidden by a restart
+        name = service["name"]
+        extra = {**resume.get(name, {}), **overrides.get(name, {})}
+        if extra:
+            service["params"] = {**service.get("params", {}), **extra}
+        if name in NOT_RESTARTED:
+            service["restart"] = "no"
+        else:
+            service["restart"], service["max_restarts"] = "on-failure", MAX_RESTARTS
     return {"robot": robot, "services": services}
 
 
@@ -282,22 +313,28 @@ class ServiceDied(Exception):
 
 class Mission:
     """The running stack: `up`, the mission node, and a liveliness subscriber that notices a
-    service whose token goes away (its process ended)."""
+    service whose token goes away (its process ended; `up` restarts it) and comes back."""
 
-    def __init__(self, router: str, names: list[str], up: subprocess.Popen, robot: str, log: Path):
-        self.names, self.up, self.log = names, up, log
+    def __init__(self, router: str, names: list[str], up: subprocess.Popen, robot: str, log: Path, say):
+        self.names, self.up, self.log, self.say = names, up, log, say
         self.node = MissionNode(robot=robot)
         self.runner = LiveRunner(self.node, router)
         self.worker = threading.Thread(target=self.runner.run, name="navigate-bus", daemon=True)
         self.session = open_client(router)
         self.prefix = KeyLayout(robot).alive("x")[:-1]
-        self.gone: list[str] = []
+        self.down: dict[str, float] = {}        # service -> when (monotonic) its token went away
         self.watch = self.session.liveliness().declare_subscriber(self.prefix + "*", self._on_token)
 
     def _on_token(self, sample) -> None:
         name = str(sample.key_expr)[len(self.prefix):]
-        if sample.kind == zenoh.SampleKind.DELETE and name in self.names:
-            self.gone.append(name)
+        if name not in self.names:
+            return
+        if sample.kind == zenoh.SampleKind.DELETE:
+            self.down[name] = time.monotonic()
+            self.say(f"{name} stopped at sim {self.node.now_s:.1f} s" +
+                     ("" if name in NOT_RESTARTED else "; up restarts it"))
+        elif self.down.pop(name, None) is not None:
+            self.say(f"{name} is back at sim {self.node.now_s:.1f} s")
 
     def __enter__(self) -> "Mission":
         self.worker.start()
@@ -310,9 +347,13 @@ class Mission:
         self.session.close()
 
     def check_alive(self) -> None:
-        """ServiceDied naming the services whose liveliness token went away, or if `up` ended."""
-        if self.gone:
-            raise ServiceDied(f"service(s) {', '.join(self.gone)} stopped; see {self.log}")
+        """ServiceDied naming a service the mission cannot do without (the sim, the recorder) or
+        one down longer than DOWN_LIMIT_S, or if `up` ended."""
+        now = time.monotonic()
+        lost = sorted(name for name, since in self.down.items()
+                      if name in NOT_RESTARTED or now - since > DOWN_LIMIT_S)
+        if lost:
+            raise ServiceDied(f"service(s) {', '.join(lost)} stopped and did not come back; see {self.log}")
         if self.up.poll() is not None:
             raise ServiceDied(f"omninav up ended (exit {self.up.returncode}); see {self.log}")
 
@@ -415,8 +456,12 @@ def main(args: argparse.Namespace) -> int:
     map_file = map_for(world, args.world, out)
     check_goals(map_file, world, goals)
     say(f"{len(goals)} goal(s) checked on the map {map_file.name}: free for the footprint and reachable from the start")
+    state_dir = None if args.lockstep else out / "state"      # in one process nothing is restarted
+    if state_dir is not None:
+        shutil.rmtree(state_dir, ignore_errors=True)           # a previous run's state is not this run's to resume
+        state_dir.mkdir()
     compose = compose_for(world, world_file, map_file, drive, args.localization, recording, args.seed,
-                          args.rate, args.robot, profile)
+                          args.rate, args.robot, profile, state_dir=state_dir)
     compose_file = out / "compose.yaml"
     compose_file.write_text(yaml.safe_dump(compose, sort_keys=False))
     try:
@@ -426,15 +471,28 @@ def main(args: argparse.Namespace) -> int:
     say(f"{len(compose['services'])} services ({args.localization} localization, {drive} drive) in {world.name}")
     if args.lockstep:
         summary = run_lockstep(compose, world, goals, args, recording, say)
-    else:
-        run_processes(compose, compose_file, args, recording, log, goals, say)
-        summary = summarize_mission(load_mission(recording, args.robot), world, goals_total=len(goals),
+        print_summary(summary, args.json)
+        return 0 if summary.success else 1
+    problem = run_processes(compose, compose_file, args, recording, log, goals, say)
+    names = tuple(s["name"] for s in compose["services"])
+    try:
+        summary = summarize_mission(load_mission(recording, args.robot, names), world, goals_total=len(goals),
                                     recording=str(recording))
-    if args.json:
-        print(json.dumps(summary.to_json()))
+    except MissionError as exc:
+        if not problem:
+            raise
+        say(f"no summary: {exc}")
     else:
-        print("\n".join(summary_lines(summary)))
+        if problem:
+            say("the mission was given up; the summary of what the recording holds:")
+        print_summary(summary, args.json)
+    if problem:
+        raise NavigateError(f"{problem}; the recording is kept: {recording}")
     return 0 if summary.success else 1
+
+
+def print_summary(summary, as_json: bool) -> None:
+    print(json.dumps(summary.to_json()) if as_json else "\n".join(summary_lines(summary)), flush=True)
 
 
 def run_lockstep(compose: dict, world: World, goals: np.ndarray, args: argparse.Namespace, recording: Path, say):
@@ -450,8 +508,9 @@ def run_lockstep(compose: dict, world: World, goals: np.ndarray, args: argparse.
 
 
 def run_processes(compose: dict, compose_file: Path, args: argparse.Namespace, recording: Path, log: Path,
-                  goals: np.ndarray, say) -> None:
-    """Every service its own process under `omninav up`; the goals sent over the bus."""
+                  goals: np.ndarray, say) -> str:
+    """Every service its own process under `omninav up`; the goals sent over the bus. Returns why the
+    mission was given up, or ''."""
     names = [s["name"] for s in compose["services"]]
 
     # $OMNINAV_ROUTER names the mission's router, so `omninav view` can join it; else any free port
@@ -463,7 +522,7 @@ def run_processes(compose: dict, compose_file: Path, args: argparse.Namespace, r
         if not wait_until_ready(router, names, up, args.robot, say):
             problem = f"the services did not all start; see {log}"
         else:
-            with Mission(router, names, up, args.robot, log) as mission:
+            with Mission(router, names, up, args.robot, log, say) as mission:
                 if not mission.node.clock_seen.wait(CLOCK_WAIT_S):
                     raise ServiceDied(f"no sim clock within {CLOCK_WAIT_S:g} s; see {log}")
                 for k, goal in enumerate(goals):
@@ -475,5 +534,4 @@ def run_processes(compose: dict, compose_file: Path, args: argparse.Namespace, r
     finally:
         stopped = stop_stack(up)
     say(f"stopped every service (up exit {stopped})")
-    if problem:
-        raise NavigateError(f"{problem}; the recording is kept: {recording}")
+    return problem

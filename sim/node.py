@@ -3,10 +3,14 @@
 A source (pace_s/tick): each tick advances one step and publishes, all stamped with the new sim
 time, the robot's wheel states, the ground truth, the movers and, last, the Clock — so whoever
 sees the clock at t has been sent everything stamped t. Wheel commands are a sporadic input:
-the sim applies whichever command has arrived by the time it steps.
+the sim applies whichever command has arrived by the time it steps — until none has arrived for
+wheel_cmd_timeout_s of sim time (its own steps): then the wheels are commanded to stop, as a motor
+driver's watchdog does, so a robot whose chassis process died does not roll on. Counted by arrival,
+not by the command's stamp: a chassis lagging behind on a loaded machine still drives.
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -25,11 +29,14 @@ class SimNodeParams(SimParams):
     rate: float = 1.0             # sim seconds per wall second
     footprint: tuple[tuple[float, float], ...] = ()   # m, robot frame (a robot profile's); () = the world's
     chassis: dict = field(default_factory=dict)       # ChassisParams by name: the wheels the chassis drives
+    wheel_cmd_timeout_s: float = 0.5   # sim s of steps without a wheel command that stop the wheels; 0: never
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if not self.rate > 0:
             raise ValueError(f"rate must be positive, got {self.rate}")
+        if not (math.isfinite(self.wheel_cmd_timeout_s) and self.wheel_cmd_timeout_s >= 0):
+            raise ValueError(f"wheel_cmd_timeout_s must be zero (no watchdog) or positive, got {self.wheel_cmd_timeout_s}")
         if self.footprint and (len(self.footprint) < 3 or abs(polygon_area(np.array(self.footprint))) < 1e-6):
             raise ValueError(f"footprint must be a polygon of at least 3 points enclosing an area, got {self.footprint}")
         self.chassis_params()
@@ -76,6 +83,7 @@ class SimNode(Node):
         self.queryable("sim/truth", lambda _params: self.last_truth)
         self.last_truth = self._truth(self.sim.pose, np.zeros(3))
         self._logged_problems: set[str] = set()
+        self.quiet_steps: int | None = None    # steps since the last wheel command; None: none in effect
 
     def pace_s(self) -> float:
         return self.params.dt / self.params.rate
@@ -91,8 +99,22 @@ class SimNode(Node):
                 self.log.warning("%s (further ones only counted)", problem)
             return
         self.sim.set_wheel_command(msg.velocities)
+        self.quiet_steps = 0
+
+    def _watchdog(self) -> None:
+        """Stop the wheels when no command has come for wheel_cmd_timeout_s (the chassis is silent)."""
+        p = self.params
+        if not p.wheel_cmd_timeout_s or self.quiet_steps is None:
+            return
+        self.quiet_steps += 1
+        if self.quiet_steps * p.dt > p.wheel_cmd_timeout_s:
+            self.sim.set_wheel_command(np.zeros(self.sim.command.size))
+            self.quiet_steps = None
+            self.counters["wheel_cmd_timeouts"] += 1
+            self.log.warning("no wheel command for %.2f sim s: stopping the wheels", p.wheel_cmd_timeout_s)
 
     def tick(self) -> None:
+        self._watchdog()
         r = self.sim.step()
         self.now_ns = self.sim.steps * self.step_ns
         self.wheel_state.publish(self._wheel_state(r))

@@ -244,3 +244,29 @@ def test_commands_arriving_late_within_the_delay_replay_byte_for_byte():
     assert [(r.key, r.payload) for r in replayed] != live
     assert node.counters[f"late/{CMD_VEL}"] == len(commands)
     assert node.diagnostic().level == 1
+
+
+def test_a_restarted_chassis_carries_its_odometry_on_from_odom_file(tmp_path):
+    """Killed after 1.5 s of driving, the chassis left its odometry in odom_file; the robot rolls on
+    for 0.5 s with nobody counting; the restarted chassis's odometry continues where the robot is,
+    not at the odometry's origin."""
+    odom_file = tmp_path / "odom.yaml"
+    params = ChassisNodeParams(drive="mecanum", odom_file=str(odom_file), save_odom_rate=10.0)
+    states, poses = drive(params, [((0.4, 0.1, 0.3), 2.0), ((0.0, 0.0, 0.0), 0.5)])
+    first = ChassisNode(params)
+    out = capture(first)
+    in_stamp_order(first, states[:151])                   # to 1.5 s
+    saved = of(out, "omninav/r1/odom")
+    assert odom_file.exists() and len(saved) == 151
+    restarted = ChassisNode(params)
+    out = capture(restarted)
+    assert restarted.counters["resumed_from_odom_file"] == 1
+    in_stamp_order(restarted, states[201:])               # back at 2.0 s
+    odom = of(out, "omninav/r1/odom")
+    assert odom[0].header.stamp_ns == states[201].header.stamp_ns
+    np.testing.assert_allclose([odom[-1].pose.x, odom[-1].pose.y, odom[-1].pose.theta], poses[-1], atol=0.01)
+    assert np.hypot(odom[-1].pose.x, odom[-1].pose.y) > 0.5          # not back at the origin
+    fresh = ChassisNode(dataclasses.replace(params, odom_file=""))   # without the file: the origin again
+    out = capture(fresh)
+    in_stamp_order(fresh, states[201:])
+    assert np.hypot(of(out, "omninav/r1/odom")[-1].pose.x, of(out, "omninav/r1/odom")[-1].pose.y) < 0.01

@@ -263,9 +263,56 @@ def test_the_saved_pose_lets_a_restarted_localizer_resume(room, room_map, tmp_pa
                 (saved.initial_pose_x, saved.initial_pose_y, saved.initial_pose_a)]
     assert t - NS_PER_S // 2 <= match.header.stamp_ns <= t and saved.initial_cov_xx == match.covariance[0, 0]
     assert math.hypot(saved.initial_pose_x - true[0], saved.initial_pose_y - true[1]) < 0.6
+    assert (saved.odom_x, saved.odom_y, saved.odom_a) == pytest.approx(tuple(odo - (t - match.header.stamp_ns) /
+                                                                           NS_PER_S * np.array([1.0, 0, 0])))
     restarted, _ = make_node(room_map, pose_file=str(pose_file), initial_pose_x=7.0, initial_pose_y=5.0)
     assert restarted.amcl.poses[:, :2].mean(axis=0) == pytest.approx([saved.initial_pose_x, saved.initial_pose_y],
                                                                     abs=0.05)
+    assert restarted.counters["resumed_from_pose_file"] == 1
+
+
+def test_a_localizer_restarted_while_the_robot_drove_on_resumes_where_the_robot_is_now(room, room_map, tmp_path):
+    """The robot drives 1.5 m while no localizer runs: the restarted one starts from the saved pose
+    carried by the odometry since it was saved, neither there nor at the start pose."""
+    world, _ = room
+    pose_file = tmp_path / "pose.yaml"
+    node, _ = make_node(room_map, pose_file=str(pose_file), save_pose_rate=2.0)
+    drive(node, world, 25)                                       # to x = 3.6 at 1 m/s; odometry from 0
+    saved = read_saved_pose(pose_file)
+    restarted, out = make_node(room_map, pose_file=str(pose_file))      # initial_pose_*: the start pose
+    rng = np.random.default_rng(2)
+    for k in range(40, 43):                                      # down for 1.5 s: x = 5.2 now
+        t, true, odo = k * NS_PER_S // 10, START + [0.1 * k, 0, 0], np.array([0.1 * k, 0, 0])
+        feed(restarted, "odom", odom(t, odo, k))
+        feed(restarted, "scan", laser(world, true, t, rng))
+    first = of(out, "pose")[0].pose
+    assert math.hypot(first.x - (START[0] + 4.0), first.y - START[1]) < 0.15
+    assert first.x - saved.initial_pose_x > 1.0
+
+
+def test_a_localizer_resumed_with_navigates_parameters_stays_converged(room, room_map, tmp_path):
+    """With navigate's amcl parameters (recovery on), a filter begun on a converged cloud (~3 cm)
+    lost its weights and injected random poses until it was lost metres away: a resumed localizer
+    starts no tighter than its initial covariance, and stays where the robot stands."""
+    from omninav.cli.navigate import LOCALIZER_BEYOND_ROS, PARAMS
+    from omninav.services.runtime.params import read_params_mapping
+    world, _ = room
+    pose_file = tmp_path / "pose.yaml"
+    params = {**read_params_mapping(PARAMS / "amcl_paper.yaml"), **LOCALIZER_BEYOND_ROS, "initial_cov_xx": 0.0025,
+              "initial_cov_yy": 0.0025, "initial_cov_aa": 0.0025, "pose_file": str(pose_file), "save_pose_rate": 2.0}
+    rng = np.random.default_rng(0)
+    node, _ = make_node(room_map, **params)
+    for k in range(30):
+        feed(node, "odom", odom(k * NS_PER_S // 10, (0, 0, 0), k + 1))
+        feed(node, "scan", laser(world, START, k * NS_PER_S // 10, rng))
+    assert read_saved_pose(pose_file).initial_cov_xx < 0.0025          # converged tighter than it began
+    restarted, out = make_node(room_map, **params)
+    for k in range(30, 130):
+        feed(restarted, "odom", odom(k * NS_PER_S // 10, (0, 0, 0), k + 1))
+        feed(restarted, "scan", laser(world, START, k * NS_PER_S // 10, rng))
+    last = of(out, "pose")[-1]
+    assert restarted.counters["random_poses_injected"] == 0
+    assert math.hypot(last.pose.x - START[0], last.pose.y - START[1]) < 0.1
 
 
 # ---------------------------------------------------------------- the whole pipeline in process

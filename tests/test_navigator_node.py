@@ -12,6 +12,7 @@ from conftest import wait_until
 from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import CancelGoal, Goal, Header, LocalCommand, Odometry, Path, Pose2D
+from omninav.services.navigator.core import State
 from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.merge import StampMerger
@@ -160,6 +161,50 @@ def test_a_goal_is_planned_followed_on_the_local_planners_commands_and_reached()
     assert after[-1].header.stamp_ns == done.header.stamp_ns + ns(0.5)
     assert out["cmd_vel_nav"][-1].header.stamp_ns < ns(200 * DT)
     assert navigator.answer(KEYS.robot("nav_status"), {}).status == "succeeded"
+
+
+def test_a_restarted_navigator_resumes_the_active_goal_from_its_goal_file(tmp_path):
+    """Killed mid-goal, the navigator left its goal in goal_file: the next one takes it at its first
+    tick under the same goal_id, plans afresh and reaches it; the file goes when the goal ends."""
+    goal_file = tmp_path / "goal.yaml"
+    params = NavigatorNodeParams(goal_file=str(goal_file))
+    navigator, robot, out = navigate({2: [("goal", goal(2.0, 1.0, 0.5))]}, 40, params)
+    assert statuses(out)[-1][:2] == ("g1", "active") and goal_file.exists()
+    assert robot.pose[0] > 0.1                                     # under way when it died
+    navigator, robot, out = navigate({}, 300, params)             # no goal sent to this one
+    assert navigator.counters["goals_resumed"] == 1 and out["plan_request"][0].goal_id == "g1#1"
+    assert statuses(out)[-1] == ("g1", "succeeded", "") and not goal_file.exists()
+    assert math.hypot(robot.pose[0] - 2.0, robot.pose[1] - 1.0) <= 0.10
+    navigator, _, out = navigate({}, 20, params)                  # nothing left to resume
+    assert navigator.counters["goals_resumed"] == 0 and out["nav_status"] == []
+
+
+class ForgetfulRobot(ToyRobot):
+    """A toy robot whose local planner loses its path at step `forget_at` (it was restarted)."""
+
+    def __init__(self, events, forget_at: int):
+        self.forget_at = forget_at
+        super().__init__(events)
+
+    def tick(self) -> None:
+        if self.step + 1 == self.forget_at:
+            self.path = None
+        super().tick()
+
+
+def test_a_local_planner_that_lost_its_path_is_sent_it_again():
+    robot = ForgetfulRobot({2: [("goal", goal(2.0, 1.0))]}, forget_at=30)
+    navigator = NavigatorNode(NavigatorNodeParams(resend_path_after_s=1.0))
+    runner = InProcessRunner([robot, ToyPlanner(), navigator])
+    follows = []
+    runner.tap(lambda key, payload, stamp: follows.append(decode(payload)) if key == KEYS.robot("follow_path") else None)
+    runner.run_until(lambda: navigator.core.state is State.SUCCEEDED, 300)
+    runner.close()
+    assert navigator.counters["follow_path_resent"] == 1
+    first, again = follows[0], follows[1]
+    assert again.goal_id == "g1" and np.array_equal(again.poses, first.poses)
+    assert again.header.stamp_ns >= ns(30 * DT)                   # only once it answered idle
+    assert math.hypot(robot.pose[0] - 2.0, robot.pose[1] - 1.0) <= 0.10
 
 
 def test_before_any_goal_the_status_query_says_so_and_nothing_is_commanded():

@@ -14,6 +14,7 @@ from omninav.sim.world import WorldError
 from conftest import wait_until
 
 STEP_NS = 10_000_000
+NS_PER_S = 1_000_000_000
 
 
 def capture(node):
@@ -52,7 +53,7 @@ def test_tick_publishes_four_outputs_stamped_with_the_new_sim_time():
 
 
 def test_wheel_commands_drive_the_robot_and_truth_answers_get():
-    node = SimNode(SimNodeParams(world="room").without_noise())
+    node = SimNode(SimNodeParams(world="room", wheel_cmd_timeout_s=0.0).without_noise())     # one command held
     out = capture(node)
     truth_key = "omninav/sim/r1/truth"
     assert node.answer(truth_key, {}).pose.x == pytest.approx(1.2)     # before the first step: the start
@@ -68,6 +69,25 @@ def test_wheel_commands_drive_the_robot_and_truth_answers_get():
     answer = node.answer(truth_key, {})
     assert answer.header.stamp_ns == 200 * STEP_NS and answer.pose.x == truth.pose.x
     assert node.counters["received/omninav/r1/wheel_cmd"] == 1
+
+
+def test_the_wheels_stop_when_their_command_goes_stale():
+    """A chassis that dies leaves its last wheel command behind: the sim's watchdog stops the robot
+    after wheel_cmd_timeout_s of its own steps without a new one, as a motor driver would."""
+    node = SimNode(SimNodeParams(world="room", wheel_cmd_timeout_s=0.5).without_noise())
+    out = capture(node)
+    command(node, node.sim.kinematics.ik((0.5, 0.0, 0.0)))
+    for _ in range(300):
+        node.tick()
+    truths = [msg for key, _, msg in out if key == "omninav/sim/r1/truth"]
+    moving = [t.header.stamp_ns for t in truths if t.twist.linear_x > 0.01]
+    assert 0.5 * NS_PER_S <= moving[-1] <= 0.7 * NS_PER_S          # stopped (decelerating) after 0.5 s
+    assert truths[-1].twist.linear_x == pytest.approx(0.0, abs=1e-9) and truths[-1].pose.x < 1.2 + 0.5
+    assert node.counters["wheel_cmd_timeouts"] == 1
+    command(node, node.sim.kinematics.ik((0.5, 0.0, 0.0)), stamp_ns=node.now_ns)   # a fresh command drives again
+    node.tick()
+    node.tick()
+    assert node.sim.command.any()
 
 
 def test_a_command_for_another_robot_is_rejected_logged_once_and_counted(caplog):
@@ -97,7 +117,7 @@ def test_a_command_for_another_robot_is_rejected_logged_once_and_counted(caplog)
 def test_collisions_show_in_the_diagnostic(tmp_path):
     world = tmp_path / "box.yaml"
     world.write_text("bounds: [3.0, 3.0]\nrobot: {start: [1.5, 1.5, 0.0], drive: diff}\n")
-    node = SimNode(SimNodeParams(world=str(world)))
+    node = SimNode(SimNodeParams(world=str(world), wheel_cmd_timeout_s=0.0))     # one command held
     capture(node)
     assert node.sim.drive == "diff"
     command(node, [10.0, 10.0], drive="diff")
@@ -126,7 +146,7 @@ def test_sim_process_steps_takes_commands_and_exits_2_on_a_bad_world(processes, 
     log = processes.log_of(bad)
     assert "no such file" in log and "Traceback" not in log
 
-    sim = processes.omninav("run", "sim", "--set", "rate=2.0")
+    sim = processes.omninav("run", "sim", "--set", "rate=2.0", "--set", "wheel_cmd_timeout_s=0")   # one command held
     truths = []
     with open_client(router_endpoint) as session:
         sub = session.declare_subscriber("omninav/sim/r1/truth",

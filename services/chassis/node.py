@@ -6,10 +6,16 @@ with the reading's time. cmd_vel is sporadic: a command stamped t takes effect f
 wheel_state stamped after t + cmd_vel_delay_s, not from whichever reading happened to come next.
 That fixed delay is what makes a live run replayable: whether the command reached the node before
 or after the readings stamped in (t, t + delay] cannot change the outputs (see docs/teleop_and_report.md).
+
+With odom_file set, the odometry's state (stamp, poses, encoder positions) is written there at most
+save_odom_rate times per sim second, and a chassis started with that file carries on from it: the
+encoders' change over the time it was down is one odometry step, so a restarted chassis does not
+put the robot back at the odometry's origin under the localizer, the costmap and the planners.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -17,7 +23,8 @@ from ...schemas import MessageError
 from ...schemas.messages import Header, Odometry, Pose2D, Transform, Twist, WheelCommand, WheelState
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
-from ..runtime.params import require_nonnegative
+from ..runtime.params import ParamError, require_nonnegative
+from ..runtime.state_file import read_state, write_state
 from .follower import follower_odometry
 from .kinematics import ChassisParams, Kinematics
 from .odometry import OdomEstimate, wheel_odometry
@@ -33,10 +40,12 @@ class ChassisNodeParams(ChassisParams):
     odom_frame_id: str = "odom"
     base_frame_id: str = "base_link"
     follower_odometry: bool = True     # also publish odom_follower (needs two follower encoders)
+    odom_file: str = ""                # where save_odom_rate keeps the odometry's state; "": nowhere
+    save_odom_rate: float = 10.0       # Hz of sim time
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        require_nonnegative(self, "cmd_vel_timeout_s", "cmd_vel_delay_s")
+        require_nonnegative(self, "cmd_vel_timeout_s", "cmd_vel_delay_s", "save_odom_rate")
         if self.cmd_vel_delay_s >= self.cmd_vel_timeout_s:
             raise ValueError(f"cmd_vel_delay_s ({self.cmd_vel_delay_s}) must be shorter than "
                              f"cmd_vel_timeout_s ({self.cmd_vel_timeout_s}), or no command is ever fresh")
@@ -45,9 +54,20 @@ class ChassisNodeParams(ChassisParams):
                 raise ValueError(f"{name} must not be empty")
 
 
+@dataclass(frozen=True)
+class SavedOdometry:
+    """What odom_file holds: each odometry's last update (EncoderOdometry.state)."""
+    stamp_ns: int
+    pose: tuple[float, float, float]
+    positions: tuple[float, ...]
+    follower_pose: tuple[float, ...] = ()       # () without follower odometry
+    follower_positions: tuple[float, ...] = ()
+
+
 class ChassisNode(Node):
     service = "chassis"
     Params = ChassisNodeParams
+    state_files = ("odom_file",)
 
     def setup(self) -> None:
         p = self.params
@@ -68,6 +88,40 @@ class ChassisNode(Node):
         self.command: tuple[int, np.ndarray] | None = None     # (stamp, twist) in effect
         self.previous = np.zeros(3)                            # the twist last commanded
         self.last_stamp: int | None = None                     # of the last accepted wheel_state
+        self.last_save_ns: int | None = None
+        self._resume()
+
+    def _resume(self) -> None:
+        path = self.params.odom_file
+        if not path or not Path(path).exists():
+            return
+        try:
+            saved = read_state(SavedOdometry, path)
+            self.wheel_odom.resume(saved.stamp_ns, saved.pose, saved.positions)
+            if self.follower_odom is not None and saved.follower_positions:
+                self.follower_odom.resume(saved.stamp_ns, saved.follower_pose, saved.follower_positions)
+        except (ParamError, ValueError) as exc:
+            self.log.warning("not resuming from the saved odometry: %s", exc)
+            return
+        self.counters["resumed_from_odom_file"] += 1
+        self.log.info("resuming the odometry saved in %s", path)
+
+    def _save(self, t: int) -> None:
+        p = self.params
+        if not p.odom_file or p.save_odom_rate <= 0 or (
+                self.last_save_ns is not None and t - self.last_save_ns < NS_PER_S / p.save_odom_rate):
+            return
+        self.last_save_ns = t
+        stamp, pose, positions = self.wheel_odom.state()
+        follower = self.follower_odom.state() if self.follower_odom is not None else None
+        state = SavedOdometry(stamp, tuple(pose), tuple(positions),
+                              *((tuple(follower[1]), tuple(follower[2])) if follower is not None else ()))
+        try:
+            write_state(p.odom_file, state, "the chassis's odometry at its last save")
+        except OSError as exc:
+            self.counters["odom_file_errors"] += 1
+            if self.counters["odom_file_errors"] == 1:
+                self.log.warning("cannot save the odometry to %s: %s", p.odom_file, exc)
 
     # ------------------------------------------------------------ inputs
 
@@ -87,6 +141,7 @@ class ChassisNode(Node):
                                       transform=self.last_odom.pose))
         if self.follower_odom is not None:
             self.follower_pub.publish(self._odometry(self.follower_odom.update(t, msg.follower_positions, msg.gyro_z)))
+        self._save(t)
         self._command(t, dt)
 
     def _check(self, msg: WheelState) -> str:

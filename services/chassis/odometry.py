@@ -71,6 +71,23 @@ class EncoderOdometry:
         return OdomEstimate(stamp_ns, self.pose.copy(), self.twist.copy(), self.pose_covariance.copy(),
                             self.twist_covariance.copy(), self.distance, self.rotation)
 
+    def state(self) -> tuple[int, np.ndarray, np.ndarray] | None:
+        """(stamp_ns, pose, encoder positions) of the last update, or None before the first: what
+        resume() needs to carry on from there."""
+        if self._last is None:
+            return None
+        return self._last[0], self.pose.copy(), self._last[1].copy()
+
+    def resume(self, stamp_ns: int, pose, positions) -> None:
+        """Carry on from a saved state(): the next update integrates the encoders' whole change since
+        then as one step (the gyro's part is its rate then times the gap, so a heading taken from the
+        gyro misses a turn made meanwhile). The covariance starts again from zero."""
+        positions = np.asarray(positions, dtype=float)
+        if positions.shape != (self.n_encoders,):
+            raise ValueError(f"expected {self.n_encoders} encoder positions, got shape {positions.shape}")
+        self.pose = compose(np.asarray(pose, dtype=float), np.zeros(3))
+        self._last = (int(stamp_ns), positions.copy())
+
     def _advance(self, motion: np.ndarray, dt: float) -> None:
         p = self.params
         step = se2_exp(motion)

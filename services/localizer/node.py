@@ -15,8 +15,10 @@ filter update, `particlecloud` after updates at most gui_publish_rate times per 
 every scan `pose_fit` (PoseFit: the share of the scan's returns on mapped obstacles at the pose)
 and `tf/map_odom` (post-dated by transform_tolerance, as amcl's tf). `get` on the pose
 key answers the last pose. With pose_file set, the pose is written there at most save_pose_rate
-times per sim second as amcl parameters (initial_pose_*, initial_cov_*), and a localizer started
-with that file resumes from it.
+times per sim second, as amcl's parameters (initial_pose_*, initial_cov_*) plus the odometry pose
+at the same stamp (odom_*), and a localizer started with that file resumes from it: the saved pose
+carried by the odometry from then to its first scan, so the robot may keep driving while the
+localizer is down (the costmap and the planners carry the last map→odom meanwhile).
 
 The map comes from map_file (a map_server YAML, read at start: amcl's static_map service) or from
 the map key (the map server's latched map). With map_file, the map key is read only when
@@ -27,12 +29,10 @@ from __future__ import annotations
 
 import bisect
 import math
-import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from ...schemas import MessageError
 from ...schemas.messages import (Diagnostic, Header, LaserScan, OccupancyGrid, Odometry, ParticleCloud, Pose2D,
@@ -40,7 +40,8 @@ from ...schemas.messages import (Diagnostic, Header, LaserScan, OccupancyGrid, O
 from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
-from ..runtime.params import ParamError, load_params, read_params_mapping
+from ..runtime.params import ParamError
+from ..runtime.state_file import read_state, write_state
 from ..se2 import compose, relative, wrap_angle
 from .filter import Amcl, warm_up
 from .params import AmclParams
@@ -74,27 +75,26 @@ class LocalizerParams(AmclParams):
 
 @dataclass(frozen=True)
 class SavedPose:
-    """What save_pose_rate writes: amcl's own parameter names, so the file also loads as amcl params."""
+    """What save_pose_rate writes: the pose under amcl's own parameter names, and where the
+    odometry put the robot at the same stamp (to carry the pose over the time the localizer was down)."""
     initial_pose_x: float
     initial_pose_y: float
     initial_pose_a: float
     initial_cov_xx: float
     initial_cov_yy: float
     initial_cov_aa: float
+    odom_x: float
+    odom_y: float
+    odom_a: float
 
 
 def read_saved_pose(path: str | Path) -> SavedPose:
     """The pose a localizer saved (ParamError naming the file if it is damaged)."""
-    return load_params(SavedPose, read_params_mapping(path), str(path))
+    return read_state(SavedPose, path)
 
 
 def write_saved_pose(path: str | Path, pose: SavedPose) -> None:
-    """Replace the file atomically: a crash mid-write never leaves half a pose to resume from."""
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.part")
-    tmp.write_text("# the localizer's last pose, as amcl parameters\n"
-                   + yaml.safe_dump({k: float(v) for k, v in vars(pose).items()}, sort_keys=False))
-    os.replace(tmp, path)
+    write_state(path, pose, "the localizer's last pose (amcl parameters) and the odometry at its stamp")
 
 
 class OdomHistory:
@@ -133,6 +133,7 @@ class OdomHistory:
 class LocalizerNode(Node):
     service = "localizer"
     Params = LocalizerParams
+    state_files = ("pose_file",)
 
     def setup(self) -> None:
         p = self.params
@@ -143,6 +144,7 @@ class LocalizerNode(Node):
         self.odom = OdomHistory(round((p.odom_history_s + p.request_delay_s) * NS_PER_S))
         self.scans: list[tuple[int, ScanBeams]] = []          # waiting for odometry past their stamp
         self.requests = Deferred(p.request_delay_s)   # map, initial pose and global localization requests not yet due
+        self.resumed: tuple | None = None                      # (pose, covariance, odometry) read from pose_file
         self.start: tuple | None = self._resume()              # how the next filter starts, if not as params say
         self.last_pose: PoseWithCovariance | None = None
         self.last_cloud_ns: int | None = None
@@ -177,8 +179,15 @@ class LocalizerNode(Node):
             self.log.warning("not resuming from the saved pose: %s", exc)
             return None
         self.log.info("resuming from the pose saved in %s", path)
-        return ("pose", np.array([saved.initial_pose_x, saved.initial_pose_y, saved.initial_pose_a]),
-                np.diag([saved.initial_cov_xx, saved.initial_cov_yy, saved.initial_cov_aa]))
+        self.counters["resumed_from_pose_file"] += 1
+        p = self.params
+        # no more certain than a fresh start: a filter begun on a cloud much tighter than its initial
+        # covariance (a converged one's, ~3 cm) loses its weights and injects random poses until lost
+        variances = np.maximum([saved.initial_cov_xx, saved.initial_cov_yy, saved.initial_cov_aa],
+                               [p.initial_cov_xx, p.initial_cov_yy, p.initial_cov_aa])
+        self.resumed = (np.array([saved.initial_pose_x, saved.initial_pose_y, saved.initial_pose_a]),
+                        np.diag(variances), np.array([saved.odom_x, saved.odom_y, saved.odom_a]))
+        return ("pose", *self.resumed[:2])
 
     # ------------------------------------------------------------ inputs
 
@@ -226,6 +235,12 @@ class LocalizerNode(Node):
         return ""
 
     # ------------------------------------------------------------ the filter
+
+    def _carry_resumed_pose(self, odom: np.ndarray) -> None:
+        """At the first scan after resuming: the saved pose moved on by the odometry since it was saved
+        (the robot drove on while no localizer ran), as an initial pose is carried to its scan."""
+        (pose, cov, then), self.resumed = self.resumed, None
+        self._start_filter(("pose", compose(pose, relative(then, odom)), cov))
 
     def _apply_requests(self, stamp_ns: int, odom: np.ndarray) -> None:
         for kind, msg in self.requests.due(stamp_ns):
@@ -285,6 +300,8 @@ class LocalizerNode(Node):
             self.amcl.set_initial_pose(how[1], how[2])
 
     def _localize(self, stamp_ns: int, beams: ScanBeams, odom: np.ndarray) -> None:
+        if self.resumed is not None:
+            self._carry_resumed_pose(odom)
         self._apply_requests(stamp_ns, odom)
         if self.amcl is None:
             self.counters["scans_without_map"] += 1
@@ -294,7 +311,7 @@ class LocalizerNode(Node):
             self.counters["filter_updates"] += 1
             if amcl.resampled and amcl.injected:
                 self.counters["random_poses_injected"] += amcl.injected
-            self._publish_pose(stamp_ns)
+            self._publish_pose(stamp_ns, odom)
             if p.gui_publish_rate > 0 and (self.last_cloud_ns is None
                                            or stamp_ns - self.last_cloud_ns >= NS_PER_S / p.gui_publish_rate):
                 self.last_cloud_ns = stamp_ns
@@ -317,7 +334,7 @@ class LocalizerNode(Node):
         self.fit_pub.publish(PoseFit(header=Header(stamp_ns=stamp_ns, frame_id=self.params.global_frame_id),
                                      beam_fit=fit, beams=count))
 
-    def _publish_pose(self, stamp_ns: int) -> None:
+    def _publish_pose(self, stamp_ns: int, odom: np.ndarray) -> None:
         p, estimate = self.params, self.amcl.estimate()
         x, y, theta = (float(v) for v in estimate.pose)
         self.last_pose = PoseWithCovariance(header=Header(stamp_ns=stamp_ns, frame_id=p.global_frame_id),
@@ -336,7 +353,7 @@ class LocalizerNode(Node):
                 self.last_save_ns is None or stamp_ns - self.last_save_ns >= NS_PER_S / p.save_pose_rate):
             self.last_save_ns = stamp_ns
             try:
-                write_saved_pose(p.pose_file, SavedPose(x, y, theta, *np.maximum(np.diag(cov), 0.0)))
+                write_saved_pose(p.pose_file, SavedPose(x, y, theta, *np.maximum(np.diag(cov), 0.0), *odom))
             except OSError as exc:
                 self.counters["pose_file_errors"] += 1
                 if self.counters["pose_file_errors"] == 1:

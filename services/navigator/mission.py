@@ -23,6 +23,10 @@ declare a goal reached metres away from it; that is a false arrival, not a reach
 
 success: every requested goal reached and no collision that was the robot's fault; a recording
 whose sim does not split its collisions counts every one as the robot's.
+
+restarts: per service named to load_mission, how many times it was restarted during the mission:
+the distinct runs (run_started_ns) its Diagnostics came from, minus one. A run that died before
+its first Diagnostic (published a second after it starts) is not seen.
 """
 from __future__ import annotations
 
@@ -34,10 +38,11 @@ import numpy as np
 
 from ...schemas import MessageError, decode
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
-from ...schemas.messages import Goal, NavStatus, Path as PathMsg
+from ...schemas.messages import Diagnostic, Goal, NavStatus, Path as PathMsg
 from ...sim.world import World, point_segment_distance, points_in_polygons, transform_points
 from ..recorder.mcap_io import RecordingError, read_records
 from ..runtime.errors import UserError
+from ..runtime.live import RUN_STARTED
 from ..runtime.node import NS_PER_S
 from ..se2 import wrap_angle
 
@@ -64,6 +69,7 @@ class MissionRecord:
     statuses: list[NavStatus] = field(default_factory=list)
     plans: list[PathMsg] = field(default_factory=list)
     sim_values: dict = field(default_factory=dict)      # the sim's last Diagnostic values
+    restarts: dict[str, int] = field(default_factory=dict)   # service -> times restarted
 
 
 @dataclass(frozen=True)
@@ -101,6 +107,7 @@ class MissionSummary:
     min_mover_clearance_m: float | None     # the closest the footprint came to a mover; None: no movers
     recording: str
     goals: list[GoalOutcome]
+    restarts: dict[str, int] = field(default_factory=dict)   # service -> times restarted (only those that were)
 
     def to_json(self) -> dict:
         mapping = asdict(self)
@@ -122,12 +129,27 @@ class MissionCollector:
     """Gathers what a mission summary needs from (key, payload) pairs, in any order: the messages
     of a recording, or of an in-process run as they are published."""
 
-    def __init__(self, robot: str = DEFAULT_ROBOT):
+    def __init__(self, robot: str = DEFAULT_ROBOT, services: tuple[str, ...] = ()):
         self.robot = robot
         self.wanted = mission_keys(robot)
         self.found: dict[str, list] = {name: [] for name in self.wanted.values()}
+        self.diagnostics = {KeyLayout(robot).diagnostics(name): name for name in services}
+        self.runs: dict[str, set[int]] = {name: set() for name in services}
+
+    @property
+    def keys(self) -> list[str]:
+        """Every key this collector reads."""
+        return [*self.wanted, *self.diagnostics]
 
     def add(self, key: str, payload: bytes) -> None:
+        service = self.diagnostics.get(key)
+        if service is not None:
+            try:
+                run = decode(payload, Diagnostic, key=key).values.get(RUN_STARTED)
+            except MessageError:
+                run = None
+            if isinstance(run, int):
+                self.runs[service].add(run)
         part = self.wanted.get(key)
         if part is None:
             return
@@ -147,7 +169,8 @@ class MissionCollector:
         record = MissionRecord(np.array([m.header.stamp_ns for m in truth], np.int64),
                                np.array([(m.pose.x, m.pose.y, m.pose.theta) for m in truth], np.float64),
                                goals=found["goals"], statuses=found["statuses"], plans=found["plans"],
-                               sim_values=dict(found["sim"][-1].values) if found["sim"] else {})
+                               sim_values=dict(found["sim"][-1].values) if found["sim"] else {},
+                               restarts={name: len(runs) - 1 for name, runs in self.runs.items() if len(runs) > 1})
         movers = found["movers"]
         if movers and len(movers[0].circles):
             count = len(movers[0].circles)
@@ -157,11 +180,12 @@ class MissionCollector:
         return record
 
 
-def load_mission(path: str | Path, robot: str = DEFAULT_ROBOT) -> MissionRecord:
-    """The mission's messages from a recording (MissionError if unreadable or without truth)."""
-    path, collector = Path(path), MissionCollector(robot)
+def load_mission(path: str | Path, robot: str = DEFAULT_ROBOT, services: tuple[str, ...] = ()) -> MissionRecord:
+    """The mission's messages from a recording (MissionError if unreadable or without truth); the
+    restarts of `services` (names) from their Diagnostics."""
+    path, collector = Path(path), MissionCollector(robot, services)
     try:
-        for rec in read_records(path, collector.wanted):
+        for rec in read_records(path, collector.keys):
             collector.add(rec.key, rec.payload)
     except RecordingError as exc:
         raise MissionError(str(exc)) from None
@@ -279,7 +303,7 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
         final_yaw_error_deg=outcomes[-1].yaw_error_deg if outcomes else None,
         collisions=collisions, robot_fault_collisions=robot_fault, mover_fault_collisions=mover_fault,
         min_clearance_m=clearance, min_mover_clearance_m=mover_clearance if math.isfinite(mover_clearance) else None,
-        recording=recording, goals=outcomes)
+        recording=recording, goals=outcomes, restarts=dict(record.restarts))
 
 
 def summary_lines(summary: MissionSummary) -> list[str]:
@@ -293,7 +317,8 @@ def summary_lines(summary: MissionSummary) -> list[str]:
              f"time {summary.time_s:.1f} sim s, driven {summary.path_length_m:.2f} m "
              f"(first global plans {num(summary.plan_length_m, '.2f')} m), min clearance {summary.min_clearance_m:.3f} m"
              + (f" ({summary.min_mover_clearance_m:.3f} m to a mover)" if summary.min_mover_clearance_m is not None else ""),
-             f"final error {num(summary.final_xy_error_m, '.3f')} m, {num(summary.final_yaw_error_deg, '.2f')} deg"]
+             f"final error {num(summary.final_xy_error_m, '.3f')} m, {num(summary.final_yaw_error_deg, '.2f')} deg",
+             "restarts: " + (", ".join(f"{name} {n}" for name, n in sorted(summary.restarts.items())) or "none")]
     for o in summary.goals:
         why = f" ({o.reason})" if o.reason else ""
         if o.status == "succeeded" and not o.reached:

@@ -33,19 +33,28 @@ step of their own, in stamp order, before the tick's step.
 
 The robot's pose: the latest `pose` in effect (map frame) when newer than the odometry, else the
 odometry carried into the map by tf/map_odom (or initial_pose_* until one comes), as the planner.
+
+Restarts. With goal_file set, the active goal (goal_id, the targets not yet reached) is written
+there whenever it or its next waypoint changes, and the file is removed when the goal ends; a
+navigator started with that file takes the goal at its first tick, as if it had just been sent
+(same goal_id: whoever waits for its status sees it go on), and plans afresh from where the robot
+is. A local planner that was restarted answers idle (goal_id "") although it was given a path:
+once an idle answer is stamped resend_path_after_s after the last follow_path, the plan is sent again.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from pathlib import Path as FilePath
 
 import numpy as np
 
-from ...schemas.messages import (CancelGoal, ClearCostmaps, Goal, LocalCommand, NavStatus, Odometry, Path, Pose2D,
-                                 Twist)
+from ...schemas.messages import (CancelGoal, ClearCostmaps, Goal, Header, LocalCommand, NavStatus, Odometry, Path,
+                                 Pose2D, Twist)
 from ..costmap.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, QueryError
-from ..runtime.params import require_nonnegative, require_positive
+from ..runtime.params import ParamError, require_nonnegative, require_positive
+from ..runtime.state_file import read_state, remove_state, write_state
 from .core import ACTIVE, ControlResult, Navigator, NavActions, NavInputs, PlanResult, State
 from .params import NavigatorParams
 from .recovery import ZERO
@@ -62,11 +71,28 @@ class NavigatorNodeParams(FrameParams, NavigatorParams):
     request_delay_s: float = 0.3  # sim s from a tf / pose / plan / goal / cancel stamp to its effect
     stop_duration_s: float = 0.5  # sim s of zero commands after a goal ends
     status_period_s: float = 1.0  # sim s between repeated statuses while a goal is pending or active
+    goal_file: str = ""           # where the active goal is kept for a restarted navigator; "": nowhere
+    resend_path_after_s: float = 1.0  # sim s after a follow_path before an idle local planner is sent it again
 
     def __post_init__(self) -> None:
         super().__post_init__()
         require_nonnegative(self, "request_delay_s", "stop_duration_s")
-        require_positive(self, "status_period_s")
+        require_positive(self, "status_period_s", "resend_path_after_s")
+
+
+@dataclass(frozen=True)
+class SavedGoal:
+    """What goal_file holds: the active goal with the targets it has still to reach."""
+    goal_id: str
+    frame_id: str
+    x: float
+    y: float
+    theta: float
+    waypoints: tuple[float, ...] = ()     # the waypoints not yet reached, flattened (x, y, theta, ...)
+
+    def goal(self) -> Goal:
+        return Goal(header=Header(frame_id=self.frame_id), goal_id=self.goal_id, pose=Pose2D(self.x, self.y, self.theta),
+                    waypoints=np.array(self.waypoints, np.float64).reshape(-1, 3))
 
 
 def plan_result(plan: Path, request_id: int) -> PlanResult:
@@ -78,6 +104,7 @@ def plan_result(plan: Path, request_id: int) -> PlanResult:
 class NavigatorNode(Node):
     service = "navigator"
     Params = NavigatorNodeParams
+    state_files = ("goal_file",)
 
     def setup(self) -> None:
         p = self.params
@@ -92,6 +119,10 @@ class NavigatorNode(Node):
         self.status_ns = 0                    # when it was published
         self.last_cmd_ns: int | None = None   # the last tick a goal was running
         self.followed = ""                    # goal_id of the plan the local planner follows ("" none)
+        self.followed_plan: Path | None = None   # the last non-empty follow_path
+        self.followed_ns = 0                  # when it was sent
+        self.saved: tuple | None = None       # (goal_id, target_index) in goal_file
+        self.resumed: Goal | None = self._resume()   # the goal to take at the first tick
         self.plan_request_pub = self.publisher("plan_request")
         self.follow_pub = self.publisher("follow_path")
         self.cmd_pub = self.publisher("cmd_vel_nav")
@@ -105,6 +136,38 @@ class NavigatorNode(Node):
                                    (POSE_FIT, "pose_fit", self._check_map_frame)):
             self.subscribe_deferred(topic, self.pending, kind, check)
         self.queryable("nav_status", self.answer_status)
+
+    def _resume(self) -> Goal | None:
+        path = self.params.goal_file
+        if not path or not FilePath(path).exists():
+            return None
+        try:
+            goal = read_state(SavedGoal, path).goal()
+        except ParamError as exc:
+            self.log.warning("not resuming the goal saved in %s: %s", path, exc)
+            return None
+        self.log.info("resuming goal %r saved in %s", goal.goal_id, path)
+        return goal
+
+    def _save_goal(self) -> None:
+        """Keep goal_file up to date with the active goal, if there is one (removed when none is)."""
+        core, path = self.core, self.params.goal_file
+        active = (core.goal_id, core.target_index) if core.state in ACTIVE else None
+        if not path or active == self.saved:
+            return
+        try:
+            if active is None:
+                remove_state(path)
+            else:
+                (x, y, theta), rest = core.targets[-1], core.targets[core.target_index:-1]
+                write_state(path, SavedGoal(core.goal_id, self.frames.map_frame, x, y, theta,
+                                            tuple(float(v) for v in rest.ravel())),
+                            "the navigator's active goal and the targets it has still to reach")
+        except OSError as exc:
+            self.counters["goal_file_errors"] += 1
+            if self.counters["goal_file_errors"] == 1:
+                self.log.warning("cannot keep the goal in %s: %s", path, exc)
+        self.saved = active
 
     # ------------------------------------------------------------ inputs
 
@@ -139,6 +202,11 @@ class NavigatorNode(Node):
     def on_local_cmd(self, msg: LocalCommand) -> None:
         now_s = self.now_ns / NS_PER_S
         events, plan, beam_fit = self._due(self.now_ns)
+        if self.resumed is not None:
+            events.insert(0, self.resumed)
+            self.resumed = None
+            self.counters["goals_resumed"] += 1
+        self._resend_path(msg)
         robot = self.frames.robot_with_pose(self.frames.map_frame, self.pose)
         for event in events:
             is_goal = isinstance(event, Goal)
@@ -148,6 +216,14 @@ class NavigatorNode(Node):
         inputs = NavInputs(pose=robot, velocity=self.velocity, plan=self._plan_result(plan), control=self._control(msg),
                            beam_fit=beam_fit)
         self._carry_out(self.core.step(now_s, inputs), final=True)
+        self._save_goal()
+
+    def _resend_path(self, msg: LocalCommand) -> None:
+        """A local planner that answers idle long after it was sent a path has lost it (restarted)."""
+        if (self.followed and self.followed_plan is not None and not msg.goal_id
+                and msg.header.stamp_ns >= self.followed_ns + round(self.params.resend_path_after_s * NS_PER_S)):
+            self.counters["follow_path_resent"] += 1
+            self._follow(self.followed, self.followed_plan.poses)
 
     def _plan_result(self, plan: Path | None) -> PlanResult | None:
         if plan is None:
@@ -189,8 +265,10 @@ class NavigatorNode(Node):
                 self._publish_status(actions.statuses[-1], periodic=core.state in ACTIVE)
 
     def _follow(self, goal_id: str, poses: np.ndarray) -> None:
-        self.follow_pub.publish(Path(header=self.header(self.frames.map_frame), poses=poses, goal_id=goal_id))
+        path = Path(header=self.header(self.frames.map_frame), poses=poses, goal_id=goal_id)
+        self.follow_pub.publish(path)
         self.followed = goal_id if len(poses) else ""
+        self.followed_plan, self.followed_ns = (path if len(poses) else None), self.now_ns
 
     def _publish_command(self, actions: NavActions) -> None:
         if actions.cmd is not None:

@@ -302,7 +302,8 @@ def main_into(args: argparse.Namespace) -> int:
     # first where the live service started and with which parameters, then the node built like it
     alignment = find_alignment(_load(args.file, {diag_key}), diag_key)
     known = {f.name for f in dataclasses.fields(cls.Params) if f.init}
-    recorded = {k: v for k, v in (alignment.params or {}).items() if k in known}
+    # the live run's state files are its own: a replay neither resumes from them nor writes them
+    recorded = {k: v for k, v in (alignment.params or {}).items() if k in known} | dict.fromkeys(cls.state_files, "")
     unknown = sorted(set(alignment.params or {}) - known)     # recorded by an older version of the service
     try:
         node = build_node(args.into, args.params, overrides, args.robot, args.name,

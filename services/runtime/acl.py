@@ -130,9 +130,13 @@ def publishers_of(folder: Path, keys: set[str]) -> dict[str, Path]:
 
 
 def _write_private(path: Path, text: str) -> None:
-    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    """Written beside it, then renamed: whoever waits for the file to exist (navigate, bench kills)
+    never reads it half written."""
+    part = path.with_name(f".{path.name}.part")
+    fd = os.open(part, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
     with os.fdopen(fd, "w") as file:
         file.write(text)
+    os.replace(part, path)
 
 
 def read_credentials(path: str | Path) -> tuple[str, str]:

@@ -105,6 +105,9 @@ class QueryError(Exception):
 class Node:
     service: ClassVar[str] = ""
     Params: ClassVar[type] = NoParams
+    # parameters naming files the service keeps its state in to resume after a restart
+    # (services/runtime/state_file.py); a replay runs without them
+    state_files: ClassVar[tuple[str, ...]] = ()
 
     def __init__(self, params: Any = None, robot: str = DEFAULT_ROBOT, name: str | None = None):
         self.params = params if params is not None else self.Params()
