@@ -18,8 +18,9 @@ from __future__ import annotations
 import json
 import os
 import secrets
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Iterable
 
 from ...schemas.keys import ALL, KeyLayout
 from .node import Node
@@ -45,6 +46,15 @@ def node_grants(node: Node) -> Grants:
     """What a service may do: exactly what its Node declared."""
     return Grants(put=(*node.outputs, node.diagnostics.key), subscribe=tuple(node.subscriptions()),
                   queryable=tuple(node.queryables), token=(node.keys.alive(node.name),))
+
+
+def union(grants: Iterable[Grants]) -> Grants:
+    """What a process running several services may do: what any of them may (a container)."""
+    merged: dict[str, list[str]] = {f.name: [] for f in fields(Grants)}
+    for one in grants:
+        for name, keys in merged.items():
+            keys += [k for k in getattr(one, name) if k not in keys]
+    return Grants(**{name: tuple(keys) for name, keys in merged.items()})
 
 
 def client_grants(robot: str) -> dict[str, Grants]:
