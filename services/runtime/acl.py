@@ -111,17 +111,29 @@ def access_control(identities: dict[str, Grants]) -> dict:
 def write_credentials(folder: Path, identities: dict[str, Grants]) -> Path:
     """A fresh password per identity: one file per identity (for its process), the router's
     dictionary and what each may put, all readable by this user only; returns the dictionary's path."""
+    dictionary = write_passwords(folder, list(identities))
+    write_puts(folder, identities)
+    return dictionary
+
+
+def write_passwords(folder: Path, users: list[str]) -> Path:
+    """A fresh password per user, one file each and the router's dictionary, readable by this user
+    only (`up` writes them before it knows the rights, so processes can start meanwhile)."""
     folder.mkdir(mode=0o700, parents=True, exist_ok=True)
     os.chmod(folder, 0o700)
-    _write_private(folder / PUTS, json.dumps({user: list(g.put) for user, g in identities.items()}, indent=1))
     lines = []
-    for user in identities:
+    for user in users:
         line = f"{user}:{secrets.token_urlsafe(24)}\n"
         _write_private(folder / user, line)
         lines.append(line)
     dictionary = folder / DICTIONARY
     _write_private(dictionary, "".join(lines))
     return dictionary
+
+
+def write_puts(folder: Path, identities: dict[str, Grants]) -> None:
+    """What each identity may put, for replay (publishers_of)."""
+    _write_private(folder / PUTS, json.dumps({user: list(g.put) for user, g in identities.items()}, indent=1))
 
 
 def publishers_of(folder: Path, keys: set[str]) -> dict[str, Path]:

@@ -27,10 +27,11 @@ import yaml
 import zenoh
 
 from ...schemas.keys import KeyLayout
-from .acl import CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, union, write_credentials
+from .acl import (CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, union, write_passwords,
+                  write_puts)
 from .compose import Compose, ComposeError, ProcessSpec, load_compose
 from .params import ParamError
-from .registry import UnknownService
+from .registry import UnknownService, node_class
 from .node import Node
 from .live import tokens_present
 from .run import build_node
@@ -44,6 +45,7 @@ START_WINDOW_S = 10.0    # a first run that exits with an error sooner than this
 STOP_TIMEOUT_S = 10.0    # after SIGINT, then SIGKILL
 TAIL_LINES = 20          # output lines kept per service, shown when it cannot start
 _POLL_S = 0.1
+SOURCES_WAVE = 2
 _READY_TIMEOUT_S = 60.0     # numba warm-up and imports on a loaded 2-core machine take a while
 
 
@@ -250,13 +252,22 @@ def identities(compose: Compose, nodes: dict[str, Node] | None = None) -> dict[s
     """Every identity of a run and what it may do: each process's from the declarations of its
     services' Nodes (`nodes`, else built here; a container may do what any of its services may),
     and the hand-started clients'."""
+    identity_names(compose)
     nodes = build_nodes(compose) if nodes is None else nodes
     grants = client_grants(compose.robot)
     for process in compose.processes:
-        if process.name in grants:
-            raise ComposeError(f"{compose.path}: the name {process.name!r} is reserved for an identity of `up`")
         grants[process.name] = union(node_grants(nodes[spec.name]) for spec in process.services)
     return grants
+
+
+def identity_names(compose: Compose) -> list[str]:
+    """The users of a run: the hand-started clients' and one per process (ComposeError if a
+    process takes a client's name)."""
+    clients = list(client_grants(compose.robot))
+    for process in compose.processes:
+        if process.name in clients:
+            raise ComposeError(f"{compose.path}: the name {process.name!r} is reserved for an identity of `up`")
+    return [*clients, *(process.name for process in compose.processes)]
 
 
 def main(args: argparse.Namespace) -> int:
@@ -264,8 +275,7 @@ def main(args: argparse.Namespace) -> int:
     try:
         compose = load_compose(args.compose)
         endpoint = router_endpoint(args.router or compose.router)
-        nodes = build_nodes(compose)
-        grants = identities(compose, nodes)
+        users = identity_names(compose)
     except (ComposeError, ValueError) as exc:
         out.say(f"error: {exc}", sys.stderr)
         return 2
@@ -275,20 +285,45 @@ def main(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="omninav-up-") as params_dir:
         credentials = Path(args.credentials or Path(params_dir) / "credentials")
         try:
-            dictionary = write_credentials(credentials, grants)
-            router = open_router(endpoint, dictionary, access_control(grants))
+            dictionary = write_passwords(credentials, users)
         except OSError as exc:
             out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
             return 1
-        except zenoh.ZError as exc:
-            out.say(f"error: cannot start the router on {endpoint}: {exc}", sys.stderr)
-            return 1
+        services = [Supervised(spec, endpoint, Path(params_dir), credentials, out,
+                               start_wave([node_class(s.service or s.name, s.module) for s in spec.services]))
+                    for spec in compose.processes]
+        # the processes that set no pace start now: they import and build their nodes while this
+        # process builds them too (for the rights), and connect once the router is open
+        early = [s for s in services if s.wave < SOURCES_WAVE]
+        for service in early:
+            service.start()
+        try:
+            nodes = build_nodes(compose)
+            grants = identities(compose, nodes)
+            write_puts(credentials, grants)
+            router = open_router(endpoint, dictionary, access_control(grants))
+        except (ComposeError, OSError, zenoh.ZError) as exc:
+            for service in reversed(early):
+                service.stop()
+            return _not_started(exc, credentials, endpoint, out)
+        for service in services:
+            if service.runs == 0:
+                service.wave = start_wave([nodes[s.name] for s in service.spec.services])
         with router:
             out.say(f"router listening on {endpoint}")
             out.say(f"identities in {credentials} (tools: {CREDENTIALS_ENV}={credentials / TOOL})")
-            services = [Supervised(spec, endpoint, Path(params_dir), credentials, out,
-                                   start_wave([nodes[s.name] for s in spec.services])) for spec in compose.processes]
             return _run(services, stop, args.duration, out, router)
+
+
+def _not_started(exc: Exception, credentials: Path, endpoint: str, out: Output) -> int:
+    if isinstance(exc, ComposeError):       # a service's setup failed
+        out.say(f"error: {exc}", sys.stderr)
+        return 2
+    if isinstance(exc, OSError):
+        out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
+    else:
+        out.say(f"error: cannot start the router on {endpoint}: {exc}", sys.stderr)
+    return 1
 
 
 def _run(services: list[Supervised], stop: threading.Event, duration: float | None, out: Output,
@@ -301,14 +336,16 @@ def _run(services: list[Supervised], stop: threading.Event, duration: float | No
         out.say("stopped")
 
 
-def start_wave(nodes: list[Node]) -> int:
+def start_wave(members: list[type] | list[Node]) -> int:
     """When a process starts: 0 with an observer (a service with its own session that listens to
-    the others: the recorder, the view), so it sees everything; 2 with a source (the sim, the
-    talker: they set the pace), once everyone listening is ready; 1 the rest. The processes of one
-    wave start at once and the next wave starts when all of them are ready."""
-    if any(node.pace_s() is not None for node in nodes):
-        return 2
-    return 0 if any(hasattr(node, "run_live") for node in nodes) else 1
+    the others: the recorder, the view), so it sees everything; SOURCES_WAVE with a source (a Node
+    with its own pace: the sim, the talker, a map server publishing once), once everyone listening
+    is ready; 1 the rest. The processes of one wave start at once and the next wave starts when all
+    of them are ready. Before the Nodes are built (their classes given) any class with a pace of its
+    own counts as a source; the built Nodes say whether they have one with their parameters."""
+    if any(m.pace_s is not Node.pace_s if isinstance(m, type) else m.pace_s() is not None for m in members):
+        return SOURCES_WAVE
+    return 0 if any(hasattr(m, "run_live") for m in members) else 1
 
 
 def _wait_ready(wave: list[Supervised], session: zenoh.Session, stop: threading.Event, out: Output) -> None:
@@ -336,7 +373,8 @@ def _supervise(services: list[Supervised], stop: threading.Event, duration: floa
         for wave in sorted({s.wave for s in services}):
             starting = [s for s in services if s.wave == wave]
             for service in starting:
-                service.start()
+                if service.runs == 0:       # not started early (main)
+                    service.start()
             _wait_ready(starting, session, stop, out)
     except CannotStart as exc:
         return _cannot_start(exc, out)
