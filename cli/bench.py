@@ -19,6 +19,7 @@ BENCHES: dict[str, str] = {
     "scenarios": "omninav.experiments.scenarios.bench",
     "barn": "omninav.experiments.barn",
     "explore": "omninav.experiments.explore_bench",
+    "footprint": "omninav.experiments.footprint_bench",
 }
 
 
