@@ -1,7 +1,9 @@
 """Composition: several services in one OS process (`process:` in a compose file), messages between
 them handed over in-process and still on the bus, the same recording and replay as separate
 processes, one identity per container that may do only what its services may."""
+import os
 import shutil
+import signal
 import subprocess
 import sys
 import textwrap
@@ -149,3 +151,21 @@ def test_zenoh_keeps_a_remote_only_put_from_its_own_sessions_subscribers():
         pub = own.declare_publisher(CHATTER, allowed_destination=zenoh.Locality.REMOTE)
         wait_until(lambda: pub.put(b"x") or theirs, 20, interval=0.2, what="the other session")
     assert not mine
+
+
+def test_a_killed_container_is_restarted_as_a_whole_by_its_services_policy(up, endpoint):
+    launcher = up(TALKER_LISTENER_IN_ONE.replace("process: demo\n", "process: demo\n        max_restarts: 1\n"))
+    wait_alive(endpoint, ["talker", "listener"])
+    [first] = children(launcher.pid)
+    echoes = []
+    with open_client(endpoint) as session:
+        sub = echo_subscriber(session, echoes)
+        wait_until(lambda: count_echoes(echoes) >= 3, 60, what="echoes from the container")
+        os.kill(first, signal.SIGKILL)
+        wait_until(lambda: children(launcher.pid) not in ([], [first]), 60, what="the container restarted")
+        before = count_echoes(echoes)
+        wait_until(lambda: count_echoes(echoes) >= before + 3, 60, what="echoes after the restart")
+        sub.undeclare()
+    assert up.procs.stop(launcher) == 0
+    log = up.procs.log_of(launcher)
+    assert "[up] demo ended with signal SIGKILL" in log and "restarting in 0.5s (restart 1)" in log
