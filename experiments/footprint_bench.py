@@ -43,7 +43,10 @@ BARN_ARGS = ["--profile", "jackal", "--localization", "odom", "--goal", str(GOAL
 AIMS = {"composed": {"cores": 0.25, "pss_mb": 400, "startup_s": 3.0},
         "separate": {"cores": 0.5, "pss_mb": 800, "startup_s": 5.0}}
 FIRST_GOAL = re.compile(r"g1: goal .* sent at sim")
+GOAL_ENDED = re.compile(r"g\d+: (succeeded|aborted|canceled|no result)")
 LAUNCH_TIMEOUT_S = 600
+STOP_TIMEOUT_S = 600    # navigate stops its services one by one, each up to 10 s on a loaded machine
+SAMPLE_S = 0.5
 
 
 class FootprintError(UserError):
@@ -139,25 +142,45 @@ def measure_run(mission: list[str], mode: str, settle_s: float, window_s: float,
     reader = threading.Thread(target=read, daemon=True)
     reader.start()
     try:
-        if not sent.wait(LAUNCH_TIMEOUT_S) or proc.poll() is not None and not sent.is_set():
+        give_up = time.monotonic() + LAUNCH_TIMEOUT_S
+        while not sent.wait(SAMPLE_S) and proc.poll() is None and time.monotonic() < give_up:
+            pass
+        if not sent.is_set():
             raise FootprintError(f"{mode}: no first goal; navigate said: " + " | ".join(t for _, t in lines[-5:]))
         startup_s = next(t for t, text in lines if FIRST_GOAL.search(text)) - launched
         time.sleep(settle_s)
-        pids = tree_pids(proc.pid)
-        cpu0, wall0 = cpu_seconds(pids), time.time_ns()
-        time.sleep(window_s)
-        pids = tree_pids(proc.pid)
-        cpu1, wall1 = cpu_seconds(pids), time.time_ns()
-        memory = pss_mb(pids)
+        first = sample(proc.pid)
+        last = first
+        deadline = time.monotonic() + window_s
+        # a short mission (a BARN world) may end within the window: its last full sample counts
+        while time.monotonic() < deadline and not any(GOAL_ENDED.search(text) for _, text in lines):
+            time.sleep(SAMPLE_S)
+            now = sample(proc.pid)
+            if now.processes < first.processes:
+                break
+            last = now
     finally:
         if proc.poll() is None:
             os.kill(proc.pid, signal.SIGINT)     # navigate stops its stack, the recorder last
-        proc.wait(120)
+        proc.wait(STOP_TIMEOUT_S)
         reader.join(10)
-    sim0, sim1 = sim_time_at(folder / "run.mcap", [wall0, wall1])
+    sim0, sim1 = sim_time_at(folder / "run.mcap", [first.wall_ns, last.wall_ns])
     if sim1 <= sim0:
-        raise FootprintError(f"{mode}: the sim clock did not advance in the window")
-    return RunFigures(startup_s, (cpu1 - cpu0) / (sim1 - sim0), memory, len(pids))
+        raise FootprintError(f"{mode}: the sim clock did not advance in the window (the mission ended too soon?)")
+    return RunFigures(startup_s, (last.cpu_s - first.cpu_s) / (sim1 - sim0), last.pss_mb, last.processes)
+
+
+@dataclass
+class Sample:
+    wall_ns: int
+    cpu_s: float
+    pss_mb: float
+    processes: int
+
+
+def sample(root: int) -> Sample:
+    pids = tree_pids(root)
+    return Sample(time.time_ns(), cpu_seconds(pids), pss_mb(pids), len(pids))
 
 
 # ---------------------------------------------------------------- the bench
