@@ -20,6 +20,7 @@ BENCHES: dict[str, str] = {
     "barn": "omninav.experiments.barn",
     "explore": "omninav.experiments.explore_bench",
     "kills": "omninav.experiments.kills_bench",
+    "footprint": "omninav.experiments.footprint_bench",
 }
 
 

@@ -30,6 +30,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     # real time by default: the chassis takes a command 50 ms of sim time after its stamp, and at twice real
     # time a loaded 2-core machine sometimes delivers one later than that (then the replay is not exact)
     parser.add_argument("--rate", type=float, default=1.0, help="sim speed, sim seconds per wall second (default 1)")
+    parser.add_argument("--composed", nargs="?", const="two", choices=("one", "two"),
+                        help="run the services in one or two containers (navigate --composed), not a process each")
 
 
 def _omninav(*args: str) -> list[str]:
@@ -65,9 +67,11 @@ def main(args: argparse.Namespace) -> int:
     recording = out / "run.mcap"
     goals = [str(v) for goal in (args.goal or [(x, y, math.radians(yaw)) for x, y, yaw in GOALS])
              for v in ("--goal", *goal[:2], f"{goal[2]!r}rad")]
-    navigated = _step("navigate --world room --localization amcl (every service its own process)",
+    composed = ["--composed", args.composed] if args.composed else []
+    navigated = _step("navigate --world room --localization amcl " +
+                      (f"(--composed {args.composed})" if composed else "(every service its own process)"),
                       _omninav("navigate", "--world", "room", *goals, "--localization", "amcl", "--rate", str(args.rate),
-                               "-o", str(out), "--record", str(recording)), log, show_output=True)
+                               "-o", str(out), "--record", str(recording), *composed), log, show_output=True)
     if not recording.is_file():
         print(f"demo failed: no recording; the log is {log}", file=sys.stderr)
         return 1

@@ -9,6 +9,7 @@ import sys
 # name -> (module with add_arguments(parser) and main(args) -> int, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("omninav.services.runtime.run", "run one service as a process on the bus"),
+    "container": ("omninav.services.runtime.container", "run several services of a compose file in one process"),
     "router": ("omninav.cli.router", "run a Zenoh router on loopback"),
     "services": ("omninav.cli.services", "list the services that can be run"),
     "up": ("omninav.services.runtime.launcher", "start a compose file: router + services as processes"),

@@ -48,9 +48,8 @@ from ..services.chassis.kinematics import DRIVES
 from ..services.map_server.mapio import MapError, load_map, save_map
 from ..services.navigator.mission import TERMINAL, MissionError, load_mission, summarize_mission, summary_lines
 from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
-from ..services.runtime.compose import ComposeError, load_compose
 from ..services.runtime.errors import UserError, exits_2_on_user_error
-from ..services.runtime.live import LiveRunner
+from ..services.runtime.live import LiveRunner, tokens_present
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.zenoh_config import ROUTER_ENV, free_loopback_endpoint, open_client, router_endpoint
 from ..sim.node import open_world
@@ -81,6 +80,9 @@ CANCEL_WAIT_S = 2.0     # sim s to wait for the navigator to confirm a cancel
 POLL_S = 0.1
 STOP_TIMEOUT_S = 120
 READY_TIMEOUT_S = 300   # wall s for every service to come up (numba warm-ups on a loaded machine)
+# --composed: the containers (compose `process`) of a mission; unnamed services go to the last one.
+# two: the simulated hardware beside the robot's stack, as on a robot whose drivers run apart
+CONTAINERS = {"two": {"simulator": ("sim", "chassis", "lidar"), "robot": ()}, "one": {"stack": ()}}
 CLOCK_WAIT_S = 30.0     # wall s for the first clock once every service is alive
 # a restarted sim would start its clock again from 0, a restarted recorder its file afresh: without
 # either the mission cannot go on; every other service is restarted and resumes
@@ -239,6 +241,13 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
     return {"robot": robot, "services": services}
 
 
+def in_containers(services: list[dict], how: str) -> list[dict]:
+    """The services with their container (compose `process`) set, as CONTAINERS[how] groups them."""
+    groups = CONTAINERS[how]
+    last = list(groups)[-1]
+    return [{**s, "process": next((c for c, names in groups.items() if s["name"] in names), last)} for s in services]
+
+
 # ---------------------------------------------------------------- arguments
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -263,6 +272,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run every service in this one process, in lockstep with the simulator: as fast "
                              "as the CPU computes, the same recording every time at any machine load (--rate "
                              "does not apply)")
+    parser.add_argument("--composed", nargs="?", const="two", choices=sorted(CONTAINERS),
+                        help="run the services in containers rather than a process each: two (the default: "
+                             "sim, chassis and lidar in one, the rest in the other) or one")
     parser.add_argument("--json", action="store_true", help="print the summary as one JSON object")
     parser.add_argument("--quiet", action="store_true",
                         help="no progress lines (services starting and up, goals sent and ended); the summary only")
@@ -397,17 +409,17 @@ def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot:
         if up.poll() is not None or time.monotonic() > deadline:
             return False
         time.sleep(POLL_S)
-    ready: list[str] = []
+    ready: set[str] = set()
     with open_client(router) as session:
         while time.monotonic() < deadline and up.poll() is None:
-            alive = [n for n in names if any(r.ok is not None for r in session.liveliness().get(keys.alive(n), timeout=0.2))]
+            alive = {key.rpartition("/")[2] for key in tokens_present(session, [keys.alive(n) for n in names])}
             if len(alive) > len(ready):
                 waiting = [n for n in names if n not in alive]
                 say(f"{len(alive)}/{len(names)} services up" + (f"; waiting for {', '.join(waiting)}" if waiting else ""))
                 ready = alive
             if len(alive) == len(names):
                 return True
-            time.sleep(0.2)
+            time.sleep(POLL_S)
     return False
 
 
@@ -462,12 +474,10 @@ def main(args: argparse.Namespace) -> int:
         state_dir.mkdir()
     compose = compose_for(world, world_file, map_file, drive, args.localization, recording, args.seed,
                           args.rate, args.robot, profile, state_dir=state_dir)
+    if args.composed:
+        compose["services"] = in_containers(compose["services"], args.composed)
     compose_file = out / "compose.yaml"
     compose_file.write_text(yaml.safe_dump(compose, sort_keys=False))
-    try:
-        load_compose(compose_file)
-    except ComposeError as exc:
-        raise NavigateError(f"the mission's compose file is not usable: {exc}") from None
     say(f"{len(compose['services'])} services ({args.localization} localization, {drive} drive) in {world.name}")
     if args.lockstep:
         summary = run_lockstep(compose, world, goals, args, recording, say)
@@ -519,8 +529,9 @@ def run_processes(compose: dict, compose_file: Path, args: argparse.Namespace, r
     up = start_stack(compose_file, router, log)
     problem = ""
     try:
+        # `up` validates the compose file (exit 2 naming the key) while the services start
         if not wait_until_ready(router, names, up, args.robot, say):
-            problem = f"the services did not all start; see {log}"
+            problem = f"the services did not all start (up exit {up.poll()}); see {log}"
         else:
             with Mission(router, names, up, args.robot, log, say) as mission:
                 if not mission.node.clock_seen.wait(CLOCK_WAIT_S):

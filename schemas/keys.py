@@ -100,6 +100,10 @@ class KeyLayout:
         """The liveliness token a running service declares once its inputs and outputs are in place."""
         return f"{ROOT}/{self.robot_name}/alive/{_check_segment('service name', service)}"
 
+    def alive_of_all(self) -> str:
+        """The key expression of every service's liveliness token (one query sees who is ready)."""
+        return f"{ROOT}/{self.robot_name}/alive/*"
+
     def resolve(self, name: str) -> str:
         """A topic as services name it: 'scan', 'sim/clock', 'sim/truth' or a full key."""
         if name.startswith(f"{ROOT}/"):

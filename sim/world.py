@@ -17,7 +17,6 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage
 
 from ..schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
 from ..services.runtime.params import unknown_names
@@ -257,6 +256,10 @@ class World:
         occupied = self.grid_occupied
         if occupied is None or not occupied.any():
             return None
+        # imported here: only worlds drawn on a map need it, and scipy.ndimage takes most of a second to
+        # import in every service that reads a world (sim, lidar, costmap, tracker)
+        from scipy import ndimage
+
         _, (rows, cols) = ndimage.distance_transform_edt(~occupied, return_indices=True)
         return rows.astype(np.int32), cols.astype(np.int32)
 

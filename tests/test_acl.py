@@ -8,7 +8,7 @@ import pytest
 import yaml
 import zenoh
 
-from omninav.cli.navigate import compose_for, map_for
+from omninav.cli.navigate import compose_for, in_containers, map_for
 from omninav.schemas import decode
 from omninav.schemas.codec import encode
 from omninav.schemas.keys import KeyLayout
@@ -47,25 +47,29 @@ def shipped_and_mission_composes(tmp_path: Path) -> list[Path]:
     mission = compose_for(world, Path(world.source), map_for(world, "room", tmp_path), "diff", "amcl",
                           tmp_path / "run.mcap", seed=1, rate=1.0, robot="r1")
     (tmp_path / "mission.yaml").write_text(yaml.safe_dump(mission, sort_keys=False))
-    return [*sorted((REPO / "compose").glob("*.yaml")), tmp_path / "mission.yaml"]
+    composed = {**mission, "services": in_containers(mission["services"], "two")}     # navigate --composed
+    (tmp_path / "composed.yaml").write_text(yaml.safe_dump(composed, sort_keys=False))
+    return [*sorted((REPO / "compose").glob("*.yaml")), tmp_path / "mission.yaml", tmp_path / "composed.yaml"]
 
 
 def test_every_shipped_compose_file_and_a_mission_build_an_acl_the_router_accepts(tmp_path):
     for path in shipped_and_mission_composes(tmp_path):
-        grants = identities(load_compose(path))
+        compose = load_compose(path)
+        grants = identities(compose)
+        process_of = {spec.name: spec.process for spec in compose.services}
         dictionary = write_credentials(tmp_path / path.stem, grants)
         with open_router(free_loopback_endpoint(), dictionary, access_control(grants)):
             pass
         assert not grants[TOOL].put, "tools are read-only"
-        if "sim" not in grants and "ros2_bridge" not in grants:     # the demo's talker is its clock
+        if "sim" not in process_of and "ros2_bridge" not in process_of:     # the demo's talker is its clock
             continue
         putters = {key: sorted(user for user, g in grants.items() if key in g.put)
                    for key in (KEYS.robot("cmd_vel"), KEYS.robot("wheel_cmd"), KEYS.sim("clock"), KEYS.sim_robot("truth"))}
         # on a ROS 2 robot (ros2_robot.yaml) the bridge publishes the robot's time in the sim's place
-        clock = "sim" if "sim" in grants else "ros2_bridge"
+        clock = "sim" if "sim" in process_of else "ros2_bridge"
         owners = {"cmd_vel": "collision_monitor", "wheel_cmd": "chassis", "clock": clock, "truth": "sim"}
         for key, users in putters.items():      # the motion chain is closed: one writer per key, or none
-            assert users in ([], [owners[key.rsplit("/", 1)[1]]]), (path.name, key, users)
+            assert users in ([], [process_of[owners[key.rsplit("/", 1)[1]]]]), (path.name, key, users)
 
 
 def test_identity_files_are_private_and_unreadable_ones_give_one_line(tmp_path):

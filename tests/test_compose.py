@@ -42,17 +42,18 @@ def test_a_valid_file_parses_into_services_in_order(tmp_path):
     compose = load_compose(path)
     assert compose.path == path and compose.router == "tcp/127.0.0.1:7500" and compose.robot == "r2"
     assert compose.services == (
-        ServiceSpec("talker", "talker", None, {"rate": 4}, "r2", "no", None),
+        ServiceSpec("talker", "talker", None, {"rate": 4}, "r2", "no", None, "talker"),
         # the file's values, overridden by the inline ones; the file's path is relative to the compose file
-        ServiceSpec("listener", "listener", None, {"gain": 3, "summary_period_s": 0.5}, "r3", "always", 4),
-        ServiceSpec("mine", None, "omninav.services.demo.talker:Talker", {}, "r2", "on-failure", None),
+        ServiceSpec("listener", "listener", None, {"gain": 3, "summary_period_s": 0.5}, "r3", "always", 4,
+                        "listener"),
+        ServiceSpec("mine", None, "omninav.services.demo.talker:Talker", {}, "r2", "on-failure", None, "mine"),
     )
 
 
 def test_defaults(tmp_path):
     compose = load_compose(write(tmp_path, "services: [{service: listener}]\n"))
     assert compose.router is None and compose.robot == "r1"
-    assert compose.services == (ServiceSpec("listener", "listener", None, {}, "r1", "on-failure", None),)
+    assert compose.services == (ServiceSpec("listener", "listener", None, {}, "r1", "on-failure", None, "listener"),)
 
 
 @pytest.mark.parametrize("services,needles", [

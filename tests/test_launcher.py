@@ -56,7 +56,7 @@ def test_a_bad_parameter_fails_with_exit_2_and_starts_nothing(up, endpoint):
     assert "router listening" not in log and "started" not in log
 
 
-def test_a_service_whose_setup_raises_makes_up_fail_with_its_error_before_starting(up, endpoint, tmp_path):
+def test_a_service_whose_setup_raises_makes_up_fail_with_its_error_before_the_router_opens(up, endpoint, tmp_path):
     (tmp_path / "omninav_test_crasher.py").write_text(textwrap.dedent("""\
         from omninav.services.runtime.node import Node
 
@@ -71,7 +71,8 @@ def test_a_service_whose_setup_raises_makes_up_fail_with_its_error_before_starti
     assert launcher.wait(60) == 2   # up builds every node to make the ACL from its declarations
     log = up.procs.log_of(launcher)
     assert "crasher cannot be built to read what it declares: RuntimeError: no wheels attached" in log
-    assert "router listening" not in log and "started" not in log
+    # the services that set no pace start while up builds the nodes (start-up time); they are stopped
+    assert "router listening" not in log and "[up] crasher stopped" in log
     assert processes_using(endpoint) == []
 
 

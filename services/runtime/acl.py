@@ -18,8 +18,9 @@ from __future__ import annotations
 import json
 import os
 import secrets
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from pathlib import Path
+from typing import Iterable
 
 from ...schemas.keys import ALL, KeyLayout
 from .node import Node
@@ -45,6 +46,15 @@ def node_grants(node: Node) -> Grants:
     """What a service may do: exactly what its Node declared."""
     return Grants(put=(*node.outputs, node.diagnostics.key), subscribe=tuple(node.subscriptions()),
                   queryable=tuple(node.queryables), token=(node.keys.alive(node.name),))
+
+
+def union(grants: Iterable[Grants]) -> Grants:
+    """What a process running several services may do: what any of them may (a container)."""
+    merged: dict[str, list[str]] = {f.name: [] for f in fields(Grants)}
+    for one in grants:
+        for name, keys in merged.items():
+            keys += [k for k in getattr(one, name) if k not in keys]
+    return Grants(**{name: tuple(keys) for name, keys in merged.items()})
 
 
 def client_grants(robot: str) -> dict[str, Grants]:
@@ -101,17 +111,29 @@ def access_control(identities: dict[str, Grants]) -> dict:
 def write_credentials(folder: Path, identities: dict[str, Grants]) -> Path:
     """A fresh password per identity: one file per identity (for its process), the router's
     dictionary and what each may put, all readable by this user only; returns the dictionary's path."""
+    dictionary = write_passwords(folder, list(identities))
+    write_puts(folder, identities)
+    return dictionary
+
+
+def write_passwords(folder: Path, users: list[str]) -> Path:
+    """A fresh password per user, one file each and the router's dictionary, readable by this user
+    only (`up` writes them before it knows the rights, so processes can start meanwhile)."""
     folder.mkdir(mode=0o700, parents=True, exist_ok=True)
     os.chmod(folder, 0o700)
-    _write_private(folder / PUTS, json.dumps({user: list(g.put) for user, g in identities.items()}, indent=1))
     lines = []
-    for user in identities:
+    for user in users:
         line = f"{user}:{secrets.token_urlsafe(24)}\n"
         _write_private(folder / user, line)
         lines.append(line)
     dictionary = folder / DICTIONARY
     _write_private(dictionary, "".join(lines))
     return dictionary
+
+
+def write_puts(folder: Path, identities: dict[str, Grants]) -> None:
+    """What each identity may put, for replay (publishers_of)."""
+    _write_private(folder / PUTS, json.dumps({user: list(g.put) for user, g in identities.items()}, indent=1))
 
 
 def publishers_of(folder: Path, keys: set[str]) -> dict[str, Path]:

@@ -19,7 +19,7 @@ from .zenoh_config import check_loopback
 
 RESTART_POLICIES = ("no", "on-failure", "always")
 TOP_KEYS = ("router", "robot", "services")
-SERVICE_KEYS = ("name", "service", "module", "params", "params_file", "robot", "restart", "max_restarts")
+SERVICE_KEYS = ("name", "service", "module", "params", "params_file", "robot", "restart", "max_restarts", "process")
 
 
 class ComposeError(ValueError):
@@ -35,6 +35,21 @@ class ServiceSpec:
     robot: str
     restart: str              # one of RESTART_POLICIES
     max_restarts: int | None  # None: no limit
+    process: str              # the OS process (container) it runs in: its own name unless `process` says
+
+
+@dataclass(frozen=True)
+class ProcessSpec:
+    """One OS process of a run: a single service, or a container of several sharing one Zenoh
+    session and one identity (container.py). Its restart policy is its services' (they agree)."""
+    name: str
+    services: tuple[ServiceSpec, ...]
+    restart: str
+    max_restarts: int | None
+
+    @property
+    def container(self) -> bool:
+        return len(self.services) > 1 or self.services[0].name != self.name
 
 
 @dataclass(frozen=True)
@@ -43,6 +58,7 @@ class Compose:
     router: str | None        # None: $OMNINAV_ROUTER or the default
     robot: str
     services: tuple[ServiceSpec, ...]
+    processes: tuple[ProcessSpec, ...]     # in the order of their first service
 
 
 def load_compose(path: str | Path) -> Compose:
@@ -74,7 +90,30 @@ def load_compose(path: str | Path) -> Compose:
         if any(s.name == spec.name for s in services):
             raise ComposeError(f"{path}: services[{index}]: duplicate name {spec.name!r}")
         services.append(spec)
-    return Compose(path, router, robot, tuple(services))
+    return Compose(path, router, robot, tuple(services), _processes(services, path))
+
+
+def _processes(services: list[ServiceSpec], path: Path) -> tuple[ProcessSpec, ...]:
+    """Services grouped by their process; a process name is an identity, so it may not be the name
+    of a service running elsewhere, and the services of one process share one restart policy."""
+    groups: dict[str, list[ServiceSpec]] = {}
+    for spec in services:
+        groups.setdefault(spec.process, []).append(spec)
+    processes = []
+    for name, members in groups.items():
+        clash = next((s for s in services if s.name == name and s.process != name), None)
+        if clash is not None:
+            raise ComposeError(f"{path}: process {name!r} has the name of service {clash.name!r}, which runs "
+                               f"in process {clash.process!r}")
+        first = members[0]
+        for other in members[1:]:
+            if (other.restart, other.max_restarts) != (first.restart, first.max_restarts):
+                raise ComposeError(f"{path}: {other.name} (restart {other.restart}, max_restarts "
+                                   f"{other.max_restarts}) runs in process {name!r} with {first.name} (restart "
+                                   f"{first.restart}, max_restarts {first.max_restarts}): a process restarts as "
+                                   f"a whole, give its services the same policy")
+        processes.append(ProcessSpec(name, tuple(members), first.restart, first.max_restarts))
+    return tuple(processes)
 
 
 def _service(entry: Any, where: str, base: Path, default_robot: str) -> ServiceSpec:
@@ -84,7 +123,7 @@ def _service(entry: Any, where: str, base: Path, default_robot: str) -> ServiceS
     service, module = entry.get("service"), entry.get("module")
     if (service is None) == (module is None):
         raise ComposeError(f"{where}: give exactly one of 'service' (a registered name) or 'module' (package.module:Class)")
-    for key in ("service", "module", "name", "params_file"):
+    for key in ("service", "module", "name", "params_file", "process"):
         if key in entry and not isinstance(entry[key], str):
             raise ComposeError(f"{where}.{key}: must be a string, got {entry[key]!r}")
     if module is not None and (module.count(":") != 1 or not all(module.split(":"))):
@@ -121,7 +160,12 @@ def _service(entry: Any, where: str, base: Path, default_robot: str) -> ServiceS
                                      or max_restarts < 0):
         raise ComposeError(f"{where}.max_restarts: must be a whole number >= 0, got {max_restarts!r}")
 
-    return ServiceSpec(name, service, module, params, robot, restart, max_restarts)
+    process = entry.get("process", name)
+    try:
+        KeyLayout(default_robot).diagnostics(process)   # a process name is a Zenoh user name and a file name
+    except ValueError as exc:
+        raise ComposeError(f"{where}.process: {exc}") from None
+    return ServiceSpec(name, service, module, params, robot, restart, max_restarts, process)
 
 
 def _params(entry: dict, where: str, base: Path, name: str, params_type: type) -> dict:

@@ -27,10 +27,13 @@ import yaml
 import zenoh
 
 from ...schemas.keys import KeyLayout
-from .acl import CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, write_credentials
-from .compose import Compose, ComposeError, ServiceSpec, load_compose
+from .acl import (CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, union, write_passwords,
+                  write_puts)
+from .compose import Compose, ComposeError, ProcessSpec, load_compose
 from .params import ParamError
-from .registry import UnknownService
+from .registry import UnknownService, node_class
+from .node import Node
+from .live import tokens_present
 from .run import build_node
 from .zenoh_config import ROUTER_ENV, open_router, router_endpoint
 
@@ -42,6 +45,7 @@ START_WINDOW_S = 10.0    # a first run that exits with an error sooner than this
 STOP_TIMEOUT_S = 10.0    # after SIGINT, then SIGKILL
 TAIL_LINES = 20          # output lines kept per service, shown when it cannot start
 _POLL_S = 0.1
+SOURCES_WAVE = 2
 _READY_TIMEOUT_S = 60.0     # numba warm-up and imports on a loaded 2-core machine take a while
 
 
@@ -77,15 +81,18 @@ class CannotStart(RuntimeError):
     """A service whose first run failed on its own within START_WINDOW_S."""
 
     def __init__(self, service: Supervised, returncode: int):
-        super().__init__(f"{service.spec.name} could not start ({describe_exit(returncode)})")
+        super().__init__(f"{service.name} could not start ({describe_exit(returncode)})")
         self.service = service
 
 
 class Supervised:
-    """One service of the compose file: its current process, restart bookkeeping and output."""
+    """One process of the compose file (a service, or a container of several): its current OS
+    process, restart bookkeeping and output."""
 
-    def __init__(self, spec: ServiceSpec, endpoint: str, params_dir: Path, credentials: Path, out: Output):
-        self.spec, self.endpoint, self.out = spec, endpoint, out
+    def __init__(self, spec: ProcessSpec, endpoint: str, params_dir: Path, credentials: Path, out: Output,
+                 wave: int = 1):
+        self.spec, self.name, self.endpoint, self.out = spec, spec.name, endpoint, out
+        self.wave = wave        # start order (start_wave): the processes of a wave start together
         self.credentials = credentials / spec.name
         self.params_file = self._write_params(params_dir)
         self.proc: subprocess.Popen | None = None
@@ -99,15 +106,25 @@ class Supervised:
         self.returncode: int | None = None
 
     def _write_params(self, params_dir: Path) -> Path | None:
-        if not self.spec.params:
+        if self.spec.container:     # a compose file of its services alone, for `omninav container`
+            path = params_dir / f"{self.name}.compose.yaml"
+            entries = [{"name": s.name, **({"module": s.module} if s.module else {"service": s.service}),
+                        "robot": s.robot, "params": s.params} for s in self.spec.services]
+            path.write_text(yaml.safe_dump({"services": entries}, sort_keys=False))
+            return path
+        spec = self.spec.services[0]
+        if not spec.params:
             return None
-        path = params_dir / f"{self.spec.name}.yaml"
+        path = params_dir / f"{spec.name}.yaml"
         # the ROS 2 layout, so no parameter can be mistaken for a node-name wrapper when read back
-        path.write_text(yaml.safe_dump({self.spec.name: {"ros__parameters": self.spec.params}}))
+        path.write_text(yaml.safe_dump({spec.name: {"ros__parameters": spec.params}}))
         return path
 
     def command(self) -> list[str]:
-        spec = self.spec
+        if self.spec.container:
+            return [sys.executable, "-m", "omninav.cli.main", "container", str(self.params_file),
+                    "--router", self.endpoint]
+        spec = self.spec.services[0]
         cmd = [sys.executable, "-m", "omninav.cli.main", "run", spec.service or spec.name,
                "--robot", spec.robot, "--name", spec.name, "--router", self.endpoint]
         if spec.module:
@@ -125,16 +142,16 @@ class Supervised:
         self.restart_at = None
         self.tail.clear()
         self.reader = threading.Thread(target=self._pump, args=(self.proc,), daemon=True,
-                                       name=f"output-{self.spec.name}")
+                                       name=f"output-{self.name}")
         self.reader.start()
-        self.out.say(f"started {self.spec.name} (pid {self.proc.pid})")
+        self.out.say(f"started {self.name} (pid {self.proc.pid})")
 
     def _pump(self, proc: subprocess.Popen) -> None:
         with proc.stdout:
             for raw in proc.stdout:
                 text = raw.decode(errors="replace").rstrip("\r\n")
                 self.tail.append(text)
-                self.out.line(self.spec.name, text)
+                self.out.line(self.name, text)
 
     def _reaped(self) -> int:
         """Wait for the output of the process that just ended; forget the process."""
@@ -157,7 +174,7 @@ class Supervised:
             self.start()
 
     def _after_exit(self, returncode: int, ran_s: float, now: float) -> None:
-        spec, what = self.spec, f"{self.spec.name} ended with {describe_exit(returncode)} after {ran_s:.1f}s"
+        spec, what = self.spec, f"{self.name} ended with {describe_exit(returncode)} after {ran_s:.1f}s"
         wanted = spec.restart == "always" or (spec.restart == "on-failure" and returncode != 0)
         if not wanted:
             self.finished = True
@@ -179,15 +196,15 @@ class Supervised:
         self.finished = True
         if self.proc is None:
             return
-        self.out.say(f"stopping {self.spec.name}")
+        self.out.say(f"stopping {self.name}")
         self._signal(signal.SIGINT)
         try:
             self.proc.wait(STOP_TIMEOUT_S)
         except subprocess.TimeoutExpired:
-            self.out.say(f"{self.spec.name} did not stop within {STOP_TIMEOUT_S:.0f}s; killing it")
+            self.out.say(f"{self.name} did not stop within {STOP_TIMEOUT_S:.0f}s; killing it")
             self._signal(signal.SIGKILL)
             self.proc.wait()
-        self.out.say(f"{self.spec.name} stopped ({describe_exit(self._reaped())})")
+        self.out.say(f"{self.name} stopped ({describe_exit(self._reaped())})")
 
     def _signal(self, sig: int) -> None:
         try:
@@ -199,7 +216,7 @@ class Supervised:
 def _cannot_start(exc: CannotStart, out: Output) -> int:
     out.say(f"error: {exc}; its last output:", sys.stderr)
     for text in exc.service.tail:
-        out.line(exc.service.spec.name, text, sys.stderr)
+        out.line(exc.service.name, text, sys.stderr)
     return 1
 
 
@@ -215,23 +232,42 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              f"{CREDENTIALS_ENV}=FOLDER/{TOOL} (default: a temporary folder, printed)")
 
 
-def identities(compose: Compose) -> dict[str, Grants]:
-    """Every identity of a run and what it may do: each service's from its own Node's declarations
-    (built with its parameters, as its process will build it), and the hand-started clients'."""
-    grants = client_grants(compose.robot)
+def build_nodes(compose: Compose) -> dict[str, Node]:
+    """Every service's Node, built with its parameters as its process will build it (ComposeError
+    naming the service whose setup fails: its process would fail the same way)."""
+    nodes = {}
     for spec in compose.services:
-        if spec.name in grants:
-            raise ComposeError(f"{compose.path}: service name {spec.name!r} is reserved for an identity of `up`")
         try:
-            node = build_node(spec.service or spec.name, overrides=spec.params, robot=spec.robot, name=spec.name,
-                              spec=spec.module)
+            nodes[spec.name] = build_node(spec.service or spec.name, overrides=spec.params, robot=spec.robot,
+                                          name=spec.name, spec=spec.module)
         except (UnknownService, ParamError) as exc:
             raise ComposeError(f"{compose.path}: {spec.name}: {exc}") from None
-        except Exception as exc:    # its setup() failed: its process would fail the same way
+        except Exception as exc:    # its setup() failed
             raise ComposeError(f"{compose.path}: {spec.name} cannot be built to read what it declares: "
                                f"{type(exc).__name__}: {exc}") from None
-        grants[spec.name] = node_grants(node)
+    return nodes
+
+
+def identities(compose: Compose, nodes: dict[str, Node] | None = None) -> dict[str, Grants]:
+    """Every identity of a run and what it may do: each process's from the declarations of its
+    services' Nodes (`nodes`, else built here; a container may do what any of its services may),
+    and the hand-started clients'."""
+    identity_names(compose)
+    nodes = build_nodes(compose) if nodes is None else nodes
+    grants = client_grants(compose.robot)
+    for process in compose.processes:
+        grants[process.name] = union(node_grants(nodes[spec.name]) for spec in process.services)
     return grants
+
+
+def identity_names(compose: Compose) -> list[str]:
+    """The users of a run: the hand-started clients' and one per process (ComposeError if a
+    process takes a client's name)."""
+    clients = list(client_grants(compose.robot))
+    for process in compose.processes:
+        if process.name in clients:
+            raise ComposeError(f"{compose.path}: the name {process.name!r} is reserved for an identity of `up`")
+    return [*clients, *(process.name for process in compose.processes)]
 
 
 def main(args: argparse.Namespace) -> int:
@@ -239,7 +275,7 @@ def main(args: argparse.Namespace) -> int:
     try:
         compose = load_compose(args.compose)
         endpoint = router_endpoint(args.router or compose.router)
-        grants = identities(compose)
+        users = identity_names(compose)
     except (ComposeError, ValueError) as exc:
         out.say(f"error: {exc}", sys.stderr)
         return 2
@@ -249,19 +285,45 @@ def main(args: argparse.Namespace) -> int:
     with tempfile.TemporaryDirectory(prefix="omninav-up-") as params_dir:
         credentials = Path(args.credentials or Path(params_dir) / "credentials")
         try:
-            dictionary = write_credentials(credentials, grants)
-            router = open_router(endpoint, dictionary, access_control(grants))
+            dictionary = write_passwords(credentials, users)
         except OSError as exc:
             out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
             return 1
-        except zenoh.ZError as exc:
-            out.say(f"error: cannot start the router on {endpoint}: {exc}", sys.stderr)
-            return 1
+        services = [Supervised(spec, endpoint, Path(params_dir), credentials, out,
+                               start_wave([node_class(s.service or s.name, s.module) for s in spec.services]))
+                    for spec in compose.processes]
+        # the processes that set no pace start now: they import and build their nodes while this
+        # process builds them too (for the rights), and connect once the router is open
+        early = [s for s in services if s.wave < SOURCES_WAVE]
+        for service in early:
+            service.start()
+        try:
+            nodes = build_nodes(compose)
+            grants = identities(compose, nodes)
+            write_puts(credentials, grants)
+            router = open_router(endpoint, dictionary, access_control(grants))
+        except (ComposeError, OSError, zenoh.ZError) as exc:
+            for service in reversed(early):
+                service.stop()
+            return _not_started(exc, credentials, endpoint, out)
+        for service in services:
+            if service.runs == 0:
+                service.wave = start_wave([nodes[s.name] for s in service.spec.services])
         with router:
             out.say(f"router listening on {endpoint}")
             out.say(f"identities in {credentials} (tools: {CREDENTIALS_ENV}={credentials / TOOL})")
-            services = [Supervised(spec, endpoint, Path(params_dir), credentials, out) for spec in compose.services]
             return _run(services, stop, args.duration, out, router)
+
+
+def _not_started(exc: Exception, credentials: Path, endpoint: str, out: Output) -> int:
+    if isinstance(exc, ComposeError):       # a service's setup failed
+        out.say(f"error: {exc}", sys.stderr)
+        return 2
+    if isinstance(exc, OSError):
+        out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
+    else:
+        out.say(f"error: cannot start the router on {endpoint}: {exc}", sys.stderr)
+    return 1
 
 
 def _run(services: list[Supervised], stop: threading.Event, duration: float | None, out: Output,
@@ -274,28 +336,46 @@ def _run(services: list[Supervised], stop: threading.Event, duration: float | No
         out.say("stopped")
 
 
-def _wait_ready(service: Supervised, session: zenoh.Session, stop: threading.Event, out: Output) -> None:
-    """Until the service's liveliness token appears, so what it records or answers is in place
-    before the next one starts publishing (raises CannotStart if it dies meanwhile)."""
-    key = KeyLayout(service.spec.robot).alive(service.spec.name)
+def start_wave(members: list[type] | list[Node]) -> int:
+    """When a process starts: 0 with an observer (a service with its own session that listens to
+    the others: the recorder, the view), so it sees everything; SOURCES_WAVE with a source (a Node
+    with its own pace: the sim, the talker, a map server publishing once), once everyone listening
+    is ready; 1 the rest. The processes of one wave start at once and the next wave starts when all
+    of them are ready. Before the Nodes are built (their classes given) any class with a pace of its
+    own counts as a source; the built Nodes say whether they have one with their parameters."""
+    if any(m.pace_s is not Node.pace_s if isinstance(m, type) else m.pace_s() is not None for m in members):
+        return SOURCES_WAVE
+    return 0 if any(hasattr(m, "run_live") for m in members) else 1
+
+
+def _wait_ready(wave: list[Supervised], session: zenoh.Session, stop: threading.Event, out: Output) -> None:
+    """Until the liveliness token of each service of these processes appears, so what they record or
+    answer is in place before the next wave starts publishing (raises CannotStart if one dies meanwhile)."""
+    waiting = {KeyLayout(spec.robot).alive(spec.name): service for service in wave for spec in service.spec.services}
     deadline = time.monotonic() + _READY_TIMEOUT_S
     while not stop.is_set() and time.monotonic() < deadline:
-        if any(reply.ok is not None for reply in session.liveliness().get(key, timeout=_POLL_S)):
+        for key in tokens_present(session, waiting, _POLL_S):
+            del waiting[key]
+        for service in {id(s): s for s in waiting.values()}.values():
+            service.step(time.monotonic())
+        waiting = {key: service for key, service in waiting.items() if not service.finished}
+        if not waiting:
             return
-        service.step(time.monotonic())
-        if service.finished:
-            return
-        stop.wait(_POLL_S)
+        stop.wait(_POLL_S / 2)
     if not stop.is_set():
-        out.say(f"{service.spec.name} did not report ready within {_READY_TIMEOUT_S:.0f}s; starting the rest anyway")
+        late = sorted({service.name for service in waiting.values()})
+        out.say(f"{', '.join(late)} did not report ready within {_READY_TIMEOUT_S:.0f}s; starting the rest anyway")
 
 
 def _supervise(services: list[Supervised], stop: threading.Event, duration: float | None, out: Output,
                session: zenoh.Session) -> int:
     try:
-        for service in services:
-            service.start()
-            _wait_ready(service, session, stop, out)
+        for wave in sorted({s.wave for s in services}):
+            starting = [s for s in services if s.wave == wave]
+            for service in starting:
+                if service.runs == 0:       # not started early (main)
+                    service.start()
+            _wait_ready(starting, session, stop, out)
     except CannotStart as exc:
         return _cannot_start(exc, out)
     deadline = None if duration is None else time.monotonic() + duration

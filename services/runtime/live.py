@@ -10,6 +10,7 @@ import json
 import queue
 import threading
 import time
+from typing import Iterable
 
 import zenoh
 
@@ -23,6 +24,17 @@ from .zenoh_config import MAX_MESSAGE_SIZE, client_config, open_client
 
 _POLL_S = 0.05
 RUN_STARTED = "run_started_ns"
+
+
+def tokens_present(session: zenoh.Session, keys: Iterable[str], timeout_s: float = 0.5) -> set[str]:
+    """Which of these liveliness tokens (KeyLayout.alive: a service is ready) are declared now; one
+    query per robot namespace rather than one per service."""
+    wanted = set(keys)
+    found: set[str] = set()
+    for expr in {key.rpartition("/")[0] + "/*" for key in wanted}:
+        found.update(str(reply.ok.key_expr) for reply in session.liveliness().get(expr, timeout=timeout_s)
+                     if reply.ok is not None)
+    return found & wanted
 
 
 class PayloadTooLarge(ValueError):
@@ -46,6 +58,9 @@ class LiveRunner:
         # identifies this run of the service in its diagnostics, so replay can tell a restarted
         # service's runs apart in one recording (wall time: diagnostics are never compared)
         self.started_ns = time.time_ns()
+        # in a container (container.py): key -> the (runner, input index) of this process that take it;
+        # those get a published message straight into their inbox, the bus carries it to the others
+        self.local: dict[str, list[tuple[LiveRunner, int]]] | None = None
 
     def stop(self) -> None:
         """Ask the loop to finish; safe from a signal handler. The wake-up item matters: on
@@ -62,15 +77,22 @@ class LiveRunner:
                                   f"{self.max_payload:,d} bytes a Zenoh message may carry here "
                                   f"({MAX_MESSAGE_SIZE}); not sent")
         self._zpubs[pub.key].put(payload, attachment=pack_attachment(pub.seq, stamp_ns, pub.type_name))
+        if self.local is not None:
+            for runner, index in self.local.get(pub.key, ()):
+                runner._inbox.put(("msg", index, payload, pub.key))
 
     def _declare(self, session: zenoh.Session) -> list:
         handles = []
+        # in a container the session's own subscribers are this process's nodes, which _sink serves
+        destination = None if self.local is None else zenoh.Locality.REMOTE
         for key, pub in self.node.outputs.items():
             self._zpubs[key] = session.declare_publisher(
-                key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE)
+                key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE,
+                allowed_destination=destination)
             pub.sink = self._sink
         diag = self.node.diagnostics
-        self._zpubs[diag.key] = session.declare_publisher(diag.key, congestion_control=zenoh.CongestionControl.BLOCK)
+        self._zpubs[diag.key] = session.declare_publisher(diag.key, congestion_control=zenoh.CongestionControl.BLOCK,
+                                                          allowed_destination=destination)
         diag.sink = self._sink
         for index, inp in enumerate(self.node.inputs):
             handles.append(session.declare_subscriber(
@@ -83,16 +105,20 @@ class LiveRunner:
 
     # ------------------------------------------------------------ the processing thread
 
-    def run(self) -> None:
-        """Process until stop_event is set; then drain what is buffered and close the session."""
-        with open_client(self.router) as session:
-            handles = self._declare(session)
-            self._loop()
-            self._finish()
-            for handle in handles:
-                handle.undeclare()
-            for zpub in self._zpubs.values():
-                zpub.undeclare()
+    def run(self, session: zenoh.Session | None = None) -> None:
+        """Process until stop_event is set; then drain what is buffered and undeclare. On its own
+        session (closed at the end), or on a container's shared one."""
+        if session is None:
+            with open_client(self.router) as own:
+                self.run(own)
+            return
+        handles = self._declare(session)
+        self._loop()
+        self._finish()
+        for handle in handles:
+            handle.undeclare()
+        for zpub in self._zpubs.values():
+            zpub.undeclare()
 
     def _loop(self) -> None:
         pacer = self.node.pace_s()
