@@ -82,7 +82,8 @@ STOP_TIMEOUT_S = 120
 READY_TIMEOUT_S = 300   # wall s for every service to come up (numba warm-ups on a loaded machine)
 # --composed: the containers (compose `process`) of a mission; unnamed services go to the last one.
 # two: the simulated hardware beside the robot's stack, as on a robot whose drivers run apart
-CONTAINERS = {"two": {"simulator": ("sim", "chassis", "lidar"), "robot": ()}, "one": {"stack": ()}}
+# the recorder sits with the simulator: neither restarts, so the robot's container can
+CONTAINERS = {"two": {"simulator": ("sim", "chassis", "lidar", "recorder"), "robot": ()}, "one": {"stack": ()}}
 CLOCK_WAIT_S = 30.0     # wall s for the first clock once every service is alive
 # a restarted sim would start its clock again from 0, a restarted recorder its file afresh: without
 # either the mission cannot go on; every other service is restarted and resumes
@@ -242,10 +243,13 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
 
 
 def in_containers(services: list[dict], how: str) -> list[dict]:
-    """The services with their container (compose `process`) set, as CONTAINERS[how] groups them."""
+    """The services with their container (compose `process`) set, as CONTAINERS[how] groups them. A
+    container restarts as a whole: not at all when it holds a service that is not restarted."""
     groups = CONTAINERS[how]
     last = list(groups)[-1]
-    return [{**s, "process": next((c for c, names in groups.items() if s["name"] in names), last)} for s in services]
+    placed = [{**s, "process": next((c for c, names in groups.items() if s["name"] in names), last)} for s in services]
+    frozen = {s["process"] for s in placed if s["name"] in NOT_RESTARTED}
+    return [{**s, "restart": "no", "max_restarts": None} if s["process"] in frozen else s for s in placed]
 
 
 # ---------------------------------------------------------------- arguments

@@ -18,7 +18,7 @@ import pytest
 import yaml
 
 from omninav.cli.main import main as cli_main
-from omninav.cli.navigate import REPO, compose_for, map_for
+from omninav.cli.navigate import REPO, compose_for, in_containers, map_for
 from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Clock, Goal, Header, NavStatus, Odometry, Pose2D, Twist
@@ -337,6 +337,11 @@ def test_mission_compose_restarts_every_service_but_the_sim_and_the_recorder(loc
     path = tmp_path / "compose.yaml"
     path.write_text(yaml.safe_dump(compose))
     assert [s.name for s in load_compose(path).services] == names     # every parameter is valid
+    # composed, a container restarts as a whole: the simulator's (sim, recorder) not, the robot's does
+    composed = {**compose, "services": in_containers(compose["services"], "two")}
+    path.write_text(yaml.safe_dump(composed))
+    policies = {(s.process, s.restart) for s in load_compose(path).services}
+    assert policies == {("simulator", "no"), ("robot", "on-failure")}
 
 
 def test_the_room_uses_its_shipped_map(tmp_path):
