@@ -7,7 +7,7 @@ import sys
 
 # name -> module with add_arguments(parser) and main(args) -> int
 BENCHES: dict[str, str] = {
-    "transport": "omninav.services.runtime.bench_transport",
+    "transport": "omninav.bench.transport",
     "recorder": "omninav.services.recorder.bench",
     "sim": "omninav.sim.bench",
     "amcl": "omninav.services.localizer.bench",

@@ -26,13 +26,13 @@ from typing import Any, Callable
 import numpy as np
 import zenoh
 
-from ...schemas.attachment import pack_attachment
-from ...schemas.codec import decode, encode
-from ...schemas.keys import KeyLayout
-from ...schemas.messages import Chatter, Header, LaserScan, MapMetaData, OccupancyGrid
-from ...schemas.registry import type_info
-from .acl import CREDENTIALS_ENV, Grants, access_control, write_credentials
-from .zenoh_config import client_config, free_loopback_endpoint, open_client, open_router
+from ..schemas.attachment import pack_attachment
+from ..schemas.codec import decode, encode
+from ..schemas.keys import KeyLayout
+from ..schemas.messages import Chatter, Header, LaserScan, MapMetaData, OccupancyGrid
+from ..schemas.registry import type_info
+from ..services.runtime.acl import CREDENTIALS_ENV, Grants, access_control, write_credentials
+from ..services.runtime.zenoh_config import client_config, free_loopback_endpoint, open_client, open_router
 
 BEAMS = 360
 GRID_CELLS = 2000
