@@ -8,7 +8,7 @@ import sys
 # name -> module with add_arguments(parser) and main(args) -> int
 BENCHES: dict[str, str] = {
     "transport": "omninav.bench.transport",
-    "recorder": "omninav.services.recorder.bench",
+    "recorder": "omninav.bench.recorder",
     "sim": "omninav.sim.bench",
     "amcl": "omninav.services.localizer.bench",
     "planner": "omninav.services.global_planner.bench",

@@ -20,13 +20,13 @@ from pathlib import Path
 
 import zenoh
 
-from ...schemas.attachment import pack_attachment
-from ...schemas.codec import encode
-from ...schemas.keys import KeyLayout
-from ...schemas.messages import Chatter, Header
-from ...schemas.registry import type_info
-from ..runtime.zenoh_config import free_loopback_endpoint, open_client, open_router
-from .node import RecorderNode, RecorderParams
+from ..schemas.attachment import pack_attachment
+from ..schemas.codec import encode
+from ..schemas.keys import KeyLayout
+from ..schemas.messages import Chatter, Header
+from ..schemas.registry import type_info
+from ..services.runtime.zenoh_config import free_loopback_endpoint, open_client, open_router
+from ..services.recorder.node import RecorderNode, RecorderParams
 
 KEY = KeyLayout().robot("chatter")
 _SETTLE_S = 3.0     # no progress for this long = the rest is lost
