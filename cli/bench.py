@@ -9,7 +9,7 @@ import sys
 BENCHES: dict[str, str] = {
     "transport": "omninav.bench.transport",
     "recorder": "omninav.bench.recorder",
-    "sim": "omninav.sim.bench",
+    "sim": "omninav.bench.sim",
     "amcl": "omninav.services.localizer.bench",
     "planner": "omninav.services.global_planner.bench",
     "local": "omninav.services.local_planner.bench",

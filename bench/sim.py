@@ -34,8 +34,8 @@ from ..services.chassis.follower import follower_odometry
 from ..services.chassis.kinematics import ChassisParams, Kinematics
 from ..services.chassis.odometry import wheel_odometry
 from ..services.se2 import wrap_angle
-from .physics import SimParams, Simulation
-from .world import World, WorldError, load_world, world_path
+from ..sim.physics import SimParams, Simulation
+from ..sim.world import World, WorldError, load_world, world_path
 
 WORLDS = ("room", "warehouse", "willow")
 SPIN = (0.0, 0.0, 0.5)                          # m/s, m/s, rad/s while measuring speed
