@@ -18,7 +18,7 @@ BENCHES: dict[str, str] = {
     "paper": "omninav.experiments.paper_bench",
     "scenarios": "omninav.experiments.scenarios.bench",
     "barn": "omninav.experiments.barn",
-    "explore": "omninav.experiments.explore_bench",
+    "explore": "omninav.bench.explore",
 }
 
 

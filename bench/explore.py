@@ -29,7 +29,7 @@ import yaml
 
 from ..services.slam.mapping import build_map, compare_with_truth, explored_share, slam_params_for
 from ..sim.world import load_world
-from .scenarios import KINDS
+from ..experiments.scenarios import KINDS
 
 MAPPED_ENOUGH = 0.95        # a world counts as explored when this share of its reachable free space is mapped
 AIM = 0.95                  # … and the aim is this share of the worlds
