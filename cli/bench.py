@@ -14,7 +14,7 @@ BENCHES: dict[str, str] = {
     "planner": "omninav.services.global_planner.bench",
     "local": "omninav.services.local_planner.bench",
     "fuzz": "omninav.experiments.fuzz",
-    "missions": "omninav.experiments.missions_bench",
+    "missions": "omninav.bench.missions",
     "paper": "omninav.experiments.paper_bench",
     "scenarios": "omninav.experiments.scenarios.bench",
     "barn": "omninav.experiments.barn",

@@ -24,8 +24,8 @@ import numpy as np
 from ..cli.navigate import LOCALIZATIONS, compose_for, map_for
 from ..services.chassis.kinematics import DRIVES
 from ..sim.node import open_world
-from .lockstep_mission import run_mission
-from .workers import run_in_workers
+from ..experiments.lockstep_mission import run_mission
+from ..experiments.workers import run_in_workers
 
 REPO = Path(__file__).resolve().parents[1]
 # world -> goals (x m, y m, yaw degrees), visited in order from the world's start
