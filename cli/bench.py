@@ -15,7 +15,7 @@ BENCHES: dict[str, str] = {
     "local": "omninav.services.local_planner.bench",
     "fuzz": "omninav.experiments.fuzz",
     "missions": "omninav.bench.missions",
-    "paper": "omninav.experiments.paper_bench",
+    "paper": "omninav.bench.paper",
     "scenarios": "omninav.experiments.scenarios.bench",
     "barn": "omninav.experiments.barn",
     "explore": "omninav.bench.explore",
