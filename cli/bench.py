@@ -16,7 +16,7 @@ BENCHES: dict[str, str] = {
     "fuzz": "omninav.experiments.fuzz",
     "missions": "omninav.bench.missions",
     "paper": "omninav.bench.paper",
-    "scenarios": "omninav.experiments.scenarios.bench",
+    "scenarios": "omninav.bench.scenarios",
     "barn": "omninav.experiments.barn",
     "explore": "omninav.bench.explore",
 }

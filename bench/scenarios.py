@@ -16,15 +16,15 @@ import statistics
 import time
 from pathlib import Path
 
-from ...cli.navigate import LOCALIZATIONS, compose_for, map_for
-from ...services.chassis.kinematics import DRIVES
-from ...services.runtime.errors import exits_2_on_user_error
-from ...sim.world import load_world
-from ..lockstep_mission import run_mission
-from ..workers import run_in_workers
-from . import ScenarioError, check_kind, generate_world, world_text
+from ..cli.navigate import LOCALIZATIONS, compose_for, map_for
+from ..services.chassis.kinematics import DRIVES
+from ..services.runtime.errors import exits_2_on_user_error
+from ..sim.world import load_world
+from ..experiments.lockstep_mission import run_mission
+from ..experiments.workers import run_in_workers
+from ..experiments.scenarios import ScenarioError, check_kind, generate_world, world_text
 
-REPO = Path(__file__).resolve().parents[2]
+REPO = Path(__file__).resolve().parents[1]
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
