@@ -11,7 +11,7 @@ BENCHES: dict[str, str] = {
     "recorder": "omninav.bench.recorder",
     "sim": "omninav.bench.sim",
     "amcl": "omninav.services.localizer.bench",
-    "planner": "omninav.services.global_planner.bench",
+    "planner": "omninav.bench.planner",
     "local": "omninav.services.local_planner.bench",
     "fuzz": "omninav.experiments.fuzz",
     "missions": "omninav.bench.missions",

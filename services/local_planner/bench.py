@@ -33,7 +33,7 @@ from ...schemas.messages import MapMetaData, Pose2D
 from ..costmap import layers as costmap_layers
 from ..costmap.footprint import transform
 from ..global_planner import astar
-from ..global_planner.bench import MAP, inflated_costmap, load_bench_map, pick_pairs, timed
+from ...bench.planner import MAP, inflated_costmap, load_bench_map, pick_pairs, timed
 from ..global_planner.params import GlobalPlannerParams
 from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
 from ..runtime.errors import UserError, exits_2_on_user_error

@@ -24,15 +24,15 @@ import numpy as np
 from scipy import ndimage, sparse
 from scipy.sparse import csgraph
 
-from ...schemas.messages import OccupancyGrid
-from ...sim.world import DEFAULT_FOOTPRINT, shared_data_dir
-from ..costmap import layers as costmap_layers
-from ..costmap.costmap import Costmap
-from ..costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
-from ..map_server.mapio import MapError, cell_to_world, load_map
-from ..runtime.errors import UserError, exits_2_on_user_error
-from .astar import SQRT2, GlobalPlanner, passable, warm_up
-from .params import GlobalPlannerParams
+from ..schemas.messages import OccupancyGrid
+from ..sim.world import DEFAULT_FOOTPRINT, shared_data_dir
+from ..services.costmap import layers as costmap_layers
+from ..services.costmap.costmap import Costmap
+from ..services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
+from ..services.map_server.mapio import MapError, cell_to_world, load_map
+from ..services.runtime.errors import UserError, exits_2_on_user_error
+from ..services.global_planner.astar import SQRT2, GlobalPlanner, passable, warm_up
+from ..services.global_planner.params import GlobalPlannerParams
 
 MAP = "maps/willow-full-0.05.yaml"
 PAIRS, SEED, MIN_APART_M, RUNS = 20, 6, 25.0, 3
