@@ -12,7 +12,7 @@ BENCHES: dict[str, str] = {
     "sim": "omninav.bench.sim",
     "amcl": "omninav.services.localizer.bench",
     "planner": "omninav.bench.planner",
-    "local": "omninav.services.local_planner.bench",
+    "local": "omninav.bench.local_planner",
     "fuzz": "omninav.experiments.fuzz",
     "missions": "omninav.bench.missions",
     "paper": "omninav.bench.paper",

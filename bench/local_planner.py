@@ -29,18 +29,18 @@ import time
 
 import numpy as np
 
-from ...schemas.messages import MapMetaData, Pose2D
-from ..costmap import layers as costmap_layers
-from ..costmap.footprint import transform
-from ..global_planner import astar
-from ...bench.planner import MAP, inflated_costmap, load_bench_map, pick_pairs, timed
-from ..global_planner.params import GlobalPlannerParams
-from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
-from ..runtime.errors import UserError, exits_2_on_user_error
-from ..se2 import integrate
-from . import eband
-from .dwa import DwaPlanner, PoseCheck, footprint_check_cost, warm_up
-from .params import DwaParams, ElasticBandParams
+from ..schemas.messages import MapMetaData, Pose2D
+from ..services.costmap import layers as costmap_layers
+from ..services.costmap.footprint import transform
+from ..services.global_planner import astar
+from .planner import MAP, inflated_costmap, load_bench_map, pick_pairs, timed
+from ..services.global_planner.params import GlobalPlannerParams
+from ..services.map_server.mapio import cell_to_world, in_grid, world_to_cell
+from ..services.runtime.errors import UserError, exits_2_on_user_error
+from ..services.se2 import integrate
+from ..services.local_planner import eband
+from ..services.local_planner.dwa import DwaPlanner, PoseCheck, footprint_check_cost, warm_up
+from ..services.local_planner.params import DwaParams, ElasticBandParams
 
 CYCLES, REPEATS, SPACING_M, WINDOW_M = 60, 5, 0.5, 6.0
 SPEED = 0.4                 # m/s along the path
