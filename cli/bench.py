@@ -10,7 +10,7 @@ BENCHES: dict[str, str] = {
     "transport": "omninav.bench.transport",
     "recorder": "omninav.bench.recorder",
     "sim": "omninav.bench.sim",
-    "amcl": "omninav.services.localizer.bench",
+    "amcl": "omninav.bench.amcl",
     "planner": "omninav.bench.planner",
     "local": "omninav.bench.local_planner",
     "fuzz": "omninav.experiments.fuzz",

@@ -21,11 +21,11 @@ import time
 
 import numpy as np
 
-from ...sim.raycast import LidarParams, scan
-from ...sim.world import WorldError, load_world, world_path
-from .filter import Amcl, warm_up
-from .params import AmclParams
-from .sensor import LaserModel, ScanBeams, prepare_scan
+from ..sim.raycast import LidarParams, scan
+from ..sim.world import WorldError, load_world, world_path
+from ..services.localizer.filter import Amcl, warm_up
+from ..services.localizer.params import AmclParams
+from ..services.localizer.sensor import LaserModel, ScanBeams, prepare_scan
 
 COUNTS = (500, 2000, 10000)
 BEAMS = 60
