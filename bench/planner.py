@@ -21,7 +21,7 @@ import time
 from pathlib import Path
 
 import numpy as np
-from scipy import ndimage, sparse
+from scipy import ndimage
 from scipy.sparse import csgraph
 
 from ..schemas.messages import OccupancyGrid
@@ -31,13 +31,13 @@ from ..services.costmap.costmap import Costmap
 from ..services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
 from ..services.map_server.mapio import MapError, cell_to_world, load_map
 from ..services.runtime.errors import UserError, exits_2_on_user_error
-from ..services.global_planner.astar import SQRT2, GlobalPlanner, passable, warm_up
+from ..services.global_planner.astar import GlobalPlanner, passable, warm_up
+from ..services.global_planner.reference import graph
 from ..services.global_planner.params import GlobalPlannerParams
 
 MAP = "maps/willow-full-0.05.yaml"
 PAIRS, SEED, MIN_APART_M, RUNS = 20, 6, 25.0, 3
 BAR_PLAN_MS, BAR_INFLATE_MS = 50.0, 200.0
-STEPS = ((-1, 0), (1, 0), (0, -1), (0, 1), (-1, -1), (-1, 1), (1, -1), (1, 1))
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -60,28 +60,6 @@ def pick_pairs(costs: np.ndarray, resolution: float, params: GlobalPlannerParams
         if np.hypot(*(a - b)) * resolution >= MIN_APART_M:
             pairs.append((tuple(int(v) for v in a), tuple(int(v) for v in b)))
     return pairs
-
-
-def graph(costs: np.ndarray, params: GlobalPlannerParams) -> sparse.csr_matrix:
-    """The planner's graph as a sparse matrix: edge u → v weighs v's step cost, as in astar.py."""
-    height, width = costs.shape
-    ok = passable(costs, *np.indices(costs.shape), params)
-    weight = params.neutral_cost + params.cost_factor * np.where(costs == 255, params.lethal_cost - 1, costs)
-    rows, cols, data = [], [], []
-    index = np.arange(costs.size).reshape(costs.shape)
-    for dr, dc in STEPS:
-        r = slice(max(-dr, 0), height - max(dr, 0))
-        c = slice(max(-dc, 0), width - max(dc, 0))
-        rn = slice(max(dr, 0), height + min(dr, 0))
-        cn = slice(max(dc, 0), width + min(dc, 0))
-        edge = ok[rn, cn].copy()
-        if dr and dc:   # diagonal: both cells beside the step must be passable
-            edge &= ok[r, cn] & ok[rn, c]
-        rows.append(index[r, c][edge])
-        cols.append(index[rn, cn][edge])
-        data.append(weight[rn, cn][edge] * (SQRT2 if dr and dc else 1.0))
-    return sparse.csr_matrix((np.concatenate(data), (np.concatenate(rows), np.concatenate(cols))),
-                             shape=(costs.size, costs.size))
 
 
 def load_bench_map(map_arg: str | None) -> tuple[Path, OccupancyGrid]:

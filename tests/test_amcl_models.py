@@ -7,7 +7,7 @@ import pytest
 
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.localizer import motion
-from omninav.bench.amcl import likelihood_field_numpy
+from omninav.services.localizer.reference import likelihood_field_numpy
 from omninav.services.localizer.params import AmclParams
 from omninav.services.localizer.sensor import LaserModel, prepare_scan
 from omninav.services.map_server.mapio import cell_to_world

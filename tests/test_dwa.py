@@ -8,7 +8,7 @@ from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.costmap.costmap import Costmap
 from omninav.services.costmap.footprint import make_footprint
 from omninav.services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
-from omninav.bench.local_planner import reference_pose_cost, reference_rollout
+from omninav.services.local_planner.reference import reference_pose_cost, reference_rollout
 from omninav.services.local_planner.dwa import (DwaPlanner, dynamic_window, footprint_check_cost, path_maps,
                                                 sample_velocities)
 from omninav.services.local_planner.params import DwaParams

@@ -11,7 +11,7 @@ from omninav.services.costmap.params import (CostmapParams, InflationLayerParams
                                              StaticLayerParams)
 from omninav.services.global_planner.astar import (GOAL_IN_OBSTACLE, NO_PATH, OFF_MAP, OK, GlobalPlanner,
                                                    orientations, search)
-from omninav.bench.planner import graph
+from omninav.services.global_planner.reference import graph
 from omninav.services.global_planner.params import GlobalPlannerParams
 from omninav.services.global_planner.smoother import segment_max_cost, smooth
 from omninav.services.map_server.mapio import cell_to_world, grid_coords, load_map
