@@ -25,7 +25,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "map": ("omninav.cli.map", "save the map served on the bus, or draw a map file"),
     "export": ("omninav.cli.export", "write a recording in Foxglove's well-known schemas (--foxglove)"),
     "import": ("omninav.cli.importers", "convert CARMEN logs or ROS bags into MCAP recordings"),
-    "localize-eval": ("omninav.services.localizer.evaluate", "score AMCL in the simulator against the ground truth"),
+    "localize-eval": ("omninav.experiments.localize_eval", "score AMCL in the simulator against the ground truth"),
     "slam-eval": ("omninav.services.slam.evaluate", "run SLAM on a CARMEN log and score it with the relations metric"),
     "navigate": ("omninav.cli.navigate", "drive a navigation mission in the simulator and score it"),
     "scenario": ("omninav.experiments.scenarios.cli", "generate worlds of a kind from a seed (crossing, crowd, ...)"),

@@ -10,7 +10,7 @@ import pytest
 
 from omninav.cli.main import main as omninav
 from omninav.schemas.codec import encode
-from omninav.services.localizer.evaluate import (PARAMS_FILE, ROUTES, Route, Series, kidnap_result, route_command,
+from omninav.experiments.localize_eval import (PARAMS_FILE, ROUTES, Route, Series, kidnap_result, route_command,
                                                  route_problems)
 from omninav.services.localizer.params import AmclParams
 from omninav.services.localizer.node import OdomHistory

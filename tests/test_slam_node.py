@@ -13,7 +13,7 @@ from omninav.schemas import decode
 from omninav.schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, Pose2D, PoseWithCovariance, Transform
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
-from omninav.services.localizer.evaluate import HarnessParams, Route
+from omninav.experiments.localize_eval import HarnessParams, Route
 from omninav.services.map_server.mapio import load_map, world_to_cell
 from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.inprocess import InProcessRunner

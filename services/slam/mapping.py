@@ -34,7 +34,7 @@ from ..lidar.node import LidarNode, LidarNodeParams
 from ..cmd_vel_mux.node import CmdVelMuxNode
 from ..local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
 from ..local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
-from ..localizer.evaluate import ROUTES, Harness, HarnessParams, Route, route_problems
+from ...experiments.localize_eval import ROUTES, Harness, HarnessParams, Route, route_problems
 from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
 from ..navigator.node import NavigatorNode, NavigatorNodeParams
 from ..runtime.inprocess import InProcessRunner

@@ -31,23 +31,23 @@ from pathlib import Path
 
 import numpy as np
 
-from ...schemas import decode
-from ...schemas.messages import Header, Odometry, Pose2D, PoseFit, PoseWithCovariance, Transform, Twist
-from ...sim.node import SimNode, SimNodeParams
-from ...sim.world import World, WorldError
-from ..chassis.kinematics import DRIVES
-from ..chassis.node import ChassisNode, ChassisNodeParams
-from ..lidar.node import LidarNode, LidarNodeParams
-from ..runtime.inprocess import InProcessRunner
-from ..runtime.node import NS_PER_S, Node
-from ..runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
-from ..runtime.run import configure_logging
-from ..se2 import compose, wrap_angle
-from . import realdata
-from .node import LocalizerNode, LocalizerParams
+from ..schemas import decode
+from ..schemas.messages import Header, Odometry, Pose2D, PoseFit, PoseWithCovariance, Transform, Twist
+from ..sim.node import SimNode, SimNodeParams
+from ..sim.world import World, WorldError
+from ..services.chassis.kinematics import DRIVES
+from ..services.chassis.node import ChassisNode, ChassisNodeParams
+from ..services.lidar.node import LidarNode, LidarNodeParams
+from ..services.runtime.inprocess import InProcessRunner
+from ..services.runtime.node import NS_PER_S, Node
+from ..services.runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
+from ..services.runtime.run import configure_logging
+from ..services.se2 import compose, wrap_angle
+from ..services.localizer import realdata
+from ..services.localizer.node import LocalizerNode, LocalizerParams
 
 MODES = ("track", "global", "kidnap")
-PARAMS_FILE = Path(__file__).resolve().parents[2] / "compose" / "params" / "amcl_paper.yaml"
+PARAMS_FILE = Path(__file__).resolve().parents[1] / "compose" / "params" / "amcl_paper.yaml"
 MAP_RESOLUTION = 0.05
 CONVERGED_M = 0.10
 CONVERGED_HOLD_S = 1.0
