@@ -43,7 +43,7 @@ from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
 from ..services.runtime.run import configure_logging
 from ..services.se2 import compose, wrap_angle
-from ..services.localizer import realdata
+from . import localize_realdata as realdata
 from ..services.localizer.node import LocalizerNode, LocalizerParams
 
 MODES = ("track", "global", "kidnap")

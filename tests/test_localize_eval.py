@@ -14,7 +14,7 @@ from omninav.experiments.localize_eval import (PARAMS_FILE, ROUTES, Route, Serie
                                                  route_problems)
 from omninav.services.localizer.params import AmclParams
 from omninav.services.localizer.node import OdomHistory
-from omninav.services.localizer.realdata import Agreement, judge_start, load_run, search_start
+from omninav.experiments.localize_realdata import Agreement, judge_start, load_run, search_start
 from omninav.services.runtime.params import load_params_file
 from omninav.sim.raycast import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path

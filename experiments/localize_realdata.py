@@ -44,20 +44,20 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from ...schemas import MessageError, decode
-from ...schemas.codec import encode
-from ...schemas.keys import KeyLayout
-from ...schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, PoseWithCovariance, Transform
-from ...schemas.registry import type_info
-from ..map_server.mapio import MapError, cell_to_world, load_map
-from ..recorder.mcap_io import Record, RecordingError, read_records
-from ..replay.into import replay_into
-from ..runtime.node import NS_PER_S
-from ..runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
-from ..se2 import compose, relative, wrap_angle
-from .node import LocalizerNode, LocalizerParams, OdomHistory
-from .params import AmclParams
-from .sensor import FREE, OCCUPIED, GridFrame, LaserModel, prepare_scan, share_near_obstacles
+from ..schemas import MessageError, decode
+from ..schemas.codec import encode
+from ..schemas.keys import KeyLayout
+from ..schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, PoseWithCovariance, Transform
+from ..schemas.registry import type_info
+from ..services.map_server.mapio import MapError, cell_to_world, load_map
+from ..services.recorder.mcap_io import Record, RecordingError, read_records
+from ..services.replay.into import replay_into
+from ..services.runtime.node import NS_PER_S
+from ..services.runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
+from ..services.se2 import compose, relative, wrap_angle
+from ..services.localizer.node import LocalizerNode, LocalizerParams, OdomHistory
+from ..services.localizer.params import AmclParams
+from ..services.localizer.sensor import FREE, OCCUPIED, GridFrame, LaserModel, prepare_scan, share_near_obstacles
 
 NEAR_M = 0.1                 # an end point this close to an occupied cell agrees with the map
 RACECAR_LASER_X = 0.285      # m, base_link → laser on the MIT racecar (see the module docstring)
@@ -107,7 +107,7 @@ def load_run(path: str | Path, scan_topic: str, odom_topic: str, robot: str = "r
         except MessageError as exc:
             raise RealDataError(f"{path}: {exc}") from None
     else:
-        from ..importers.rosbag import RosbagError, read_bag
+        from ..services.importers.rosbag import RosbagError, read_bag
         try:
             contents = read_bag(path, scan_topic, odom_topic)
         except RosbagError as exc:
