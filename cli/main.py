@@ -26,7 +26,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "export": ("omninav.cli.export", "write a recording in Foxglove's well-known schemas (--foxglove)"),
     "import": ("omninav.cli.importers", "convert CARMEN logs or ROS bags into MCAP recordings"),
     "localize-eval": ("omninav.experiments.localize_eval", "score AMCL in the simulator against the ground truth"),
-    "slam-eval": ("omninav.services.slam.evaluate", "run SLAM on a CARMEN log and score it with the relations metric"),
+    "slam-eval": ("omninav.experiments.slam_eval", "run SLAM on a CARMEN log and score it with the relations metric"),
     "navigate": ("omninav.cli.navigate", "drive a navigation mission in the simulator and score it"),
     "scenario": ("omninav.experiments.scenarios.cli", "generate worlds of a kind from a seed (crossing, crowd, ...)"),
     "bench": ("omninav.cli.bench", "benchmarks (transport, recorder, sim, amcl, planner, ...)"),

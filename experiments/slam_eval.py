@@ -21,12 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..importers.carmen import CarmenError, read_log
-from ..runtime.params import ParamError, load_params, parse_overrides, read_yaml, unwrap_ros
-from ..se2 import compose, relative
-from .params import MODES, SlamParams
-from .rbpf import Rbpf
-from .relations import RelationsError, interpolate, load_relations, score
+from ..services.importers.carmen import CarmenError, read_log
+from ..services.runtime.params import ParamError, load_params, parse_overrides, read_yaml, unwrap_ros
+from ..services.se2 import compose, relative
+from ..services.slam.params import MODES, SlamParams
+from ..services.slam.rbpf import Rbpf
+from ..services.slam.relations import RelationsError, interpolate, load_relations, score
 
 # Settings for the 2-D laser benchmark logs (SICK LMS, 0.5 degree beams, ~5 Hz, building-scale
 # loops), over the gmapping defaults: every scan that moved a little is processed, and a
@@ -196,7 +196,7 @@ def main(args: argparse.Namespace) -> int:
     if args.save_map or args.picture:
         grid = slam.grids.occupancy_grid(slam.best, params.occ_thresh)
         if args.save_map:
-            from ..map_server.mapio import save_map
+            from ..services.map_server.mapio import save_map
             save_map(grid, args.save_map)
         if args.picture:
             _draw(args.picture, grid, trajectory, data.odom)
