@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from ..services.slam.mapping import build_map, compare_with_truth, explored_share, slam_params_for
+from ..experiments.mapping import build_map, compare_with_truth, explored_share, slam_params_for
 from ..sim.world import load_world
 from ..experiments.scenarios import KINDS
 

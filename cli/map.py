@@ -29,7 +29,7 @@ from ..services.map_server.mapio import (MODES, UNKNOWN_GREY, MapError, load_map
 from ..services.chassis.kinematics import DRIVES
 from ..experiments.localize_eval import parse_waypoints
 from ..services.runtime.params import ParamError, parse_overrides
-from ..services.slam.mapping import (MAPPING_ROUTES, build_map, compare_with_truth, explored_share,
+from ..experiments.mapping import (MAPPING_ROUTES, build_map, compare_with_truth, explored_share,
                                      slam_params_for)
 from ..sim.node import open_world
 from ..sim.world import GRID_OBSTACLE, WorldError

@@ -16,7 +16,7 @@ from omninav.services.slam.explore import (INSCRIBED, Explorer, ExploreParams, F
                                            frontier_cells, known_area, still_frontier)
 from omninav.services.runtime.node import NS_PER_S
 from omninav.services.slam.explore_node import ExploreNode, ExploreNodeParams
-from omninav.services.slam.mapping import build_map, compare_with_truth, explored_share, slam_params_for
+from omninav.experiments.mapping import build_map, compare_with_truth, explored_share, slam_params_for
 from omninav.sim.node import open_world
 
 RES = 0.1

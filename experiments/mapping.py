@@ -23,27 +23,27 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from ...schemas.messages import OccupancyGrid
-from ...sim.node import SimNode, SimNodeParams
-from ...sim.world import GRID_OBSTACLE, World
-from ..chassis.node import ChassisNode, ChassisNodeParams
-from ..costmap.footprint import radii
-from ..costmap.node import CostmapNode, CostmapNodeParams
-from ..global_planner.node import PlannerNode, PlannerNodeParams
-from ..lidar.node import LidarNode, LidarNodeParams
-from ..cmd_vel_mux.node import CmdVelMuxNode
-from ..local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
-from ..local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
-from ...experiments.localize_eval import ROUTES, Harness, HarnessParams, Route, route_problems
-from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
-from ..navigator.node import NavigatorNode, NavigatorNodeParams
-from ..runtime.inprocess import InProcessRunner
-from ..runtime.node import Node
-from ..runtime.params import load_params
-from ..tracker.node import TrackerNode, TrackerNodeParams
-from .explore import Failure
-from .explore_node import ExploreNode, ExploreNodeParams
-from .node import SlamNode, SlamNodeParams
+from ..schemas.messages import OccupancyGrid
+from ..sim.node import SimNode, SimNodeParams
+from ..sim.world import GRID_OBSTACLE, World
+from ..services.chassis.node import ChassisNode, ChassisNodeParams
+from ..services.costmap.footprint import radii
+from ..services.costmap.node import CostmapNode, CostmapNodeParams
+from ..services.global_planner.node import PlannerNode, PlannerNodeParams
+from ..services.lidar.node import LidarNode, LidarNodeParams
+from ..services.cmd_vel_mux.node import CmdVelMuxNode
+from ..services.local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
+from ..services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
+from .localize_eval import ROUTES, Harness, HarnessParams, Route, route_problems
+from ..services.map_server.mapio import cell_to_world, in_grid, world_to_cell
+from ..services.navigator.node import NavigatorNode, NavigatorNodeParams
+from ..services.runtime.inprocess import InProcessRunner
+from ..services.runtime.node import Node
+from ..services.runtime.params import load_params
+from ..services.tracker.node import TrackerNode, TrackerNodeParams
+from ..services.slam.explore import Failure
+from ..services.slam.explore_node import ExploreNode, ExploreNodeParams
+from ..services.slam.node import SlamNode, SlamNodeParams
 
 # gmapping's defaults process a scan per metre driven; indoors, with a 12 m lidar, updating every
 # 25 cm / 0.25 rad gives the matcher overlapping scans and the map denser evidence. The explorer
@@ -53,7 +53,7 @@ from .node import SlamNode, SlamNodeParams
 MAPPING_DEFAULTS = dict(linearUpdate=0.25, angularUpdate=0.25, particles=30, map_update_interval=1.0,
                         translation_weight=10.0, rotation_weight=40.0)
 MARGIN_M = 2.0      # the map's extent beyond the world's bounds
-COSTMAP_PARAMS = Path(__file__).resolve().parents[2] / "compose" / "params"
+COSTMAP_PARAMS = Path(__file__).resolve().parents[1] / "compose" / "params"
 # localize-eval's routes, except where mapping must see more than localizing needs: every aisle of
 # the warehouse (a mover may cross; slam keeps it out of the map as it moves on)
 MAPPING_ROUTES: dict[str, Route] = {
