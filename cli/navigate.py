@@ -37,7 +37,7 @@ from ..schemas.keys import DEFAULT_ROBOT, KeyLayout
 from ..schemas.messages import CancelGoal, Clock, Goal, Header, NavStatus, Pose2D
 from ..services.chassis.kinematics import DRIVES
 from ..services.map_server.mapio import MapError, load_map, save_map
-from ..services.navigator.mission import TERMINAL, load_mission, summarize_mission, summary_lines
+from ..experiments.mission_score import TERMINAL, load_mission, summarize_mission, summary_lines
 from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
 from ..services.runtime.compose import ComposeError, load_compose
 from ..services.runtime.errors import UserError, exits_2_on_user_error

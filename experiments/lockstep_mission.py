@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from ..schemas.messages import CancelGoal, Clock, Goal, NavStatus, Pose2D
-from ..services.navigator.mission import TERMINAL, MissionCollector, MissionSummary, summarize_mission
+from .mission_score import TERMINAL, MissionCollector, MissionSummary, summarize_mission
 from ..services.recorder.mcap_io import RecordingWriter
 from ..services.runtime.inprocess import InProcessRunner
 from ..services.runtime.node import NS_PER_S, Node

@@ -24,7 +24,7 @@ from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Clock, Goal, Header, NavStatus, Odometry, Pose2D, Twist
 from omninav.schemas.messages import Path as PathMsg
 from omninav.services.chassis.node import ChassisNode
-from omninav.services.navigator.mission import (MissionError, MissionRecord, load_mission, summarize_mission,
+from omninav.experiments.mission_score import (MissionError, MissionRecord, load_mission, summarize_mission,
                                                 summary_lines)
 from omninav.services.navigator.truth_pose import TruthPoseNode, TruthPoseParams
 from omninav.services.map_server.mapio import load_map

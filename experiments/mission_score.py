@@ -32,14 +32,14 @@ from pathlib import Path
 
 import numpy as np
 
-from ...schemas import MessageError, decode
-from ...schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
-from ...schemas.messages import Goal, NavStatus, Path as PathMsg
-from ...sim.world import World, point_segment_distance, points_in_polygons, transform_points
-from ..recorder.mcap_io import RecordingError, read_records
-from ..runtime.errors import UserError
-from ..runtime.node import NS_PER_S
-from ..se2 import wrap_angle
+from ..schemas import MessageError, decode
+from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
+from ..schemas.messages import Goal, NavStatus, Path as PathMsg
+from ..sim.world import World, point_segment_distance, points_in_polygons, transform_points
+from ..services.recorder.mcap_io import RecordingError, read_records
+from ..services.runtime.errors import UserError
+from ..services.runtime.node import NS_PER_S
+from ..services.se2 import wrap_angle
 
 TERMINAL = ("succeeded", "aborted", "canceled")
 CLEARANCE_CHUNK = 2048      # poses per vectorised clearance computation (bounds the temporaries)
