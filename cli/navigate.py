@@ -45,7 +45,7 @@ from ..services.runtime.live import LiveRunner
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.zenoh_config import ROUTER_ENV, free_loopback_endpoint, open_client, router_endpoint
 from ..sim.node import open_world
-from ..sim.reachability import mission_problems
+from ..experiments.reachability import mission_problems
 from ..sim.world import World, WorldError, world_path
 from .profile import Profile, load_profile
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...sim.reachability import ReachabilityParams, mission_problems
+from ..reachability import ReachabilityParams, mission_problems
 from ...sim.world import World, point_segment_distance
 from .layout import polyline_length
 
