@@ -33,7 +33,7 @@ import numpy as np
 from ..services.chassis.follower import follower_odometry
 from ..services.chassis.kinematics import ChassisParams, Kinematics
 from ..services.chassis.odometry import wheel_odometry
-from ..services.se2 import wrap_angle
+from ..geometry.se2 import wrap_angle
 from ..sim.physics import SimParams, Simulation
 from ..sim.world import World, WorldError, load_world, world_path
 

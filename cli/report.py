@@ -32,7 +32,7 @@ from ..schemas import MessageError, decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ..schemas.messages import Costmap, Diagnostic, Goal, LaserScan, Obstacles, OccupancyGrid, Odometry, Path as PathMsg
 from ..services.recorder.mcap_io import Record, RecordingError, read_records
-from ..services.se2 import compose, inverse, wrap_angle
+from ..geometry.se2 import compose, inverse, wrap_angle
 from ..sim.raycast import LidarParams, laser_pose
 from ..sim.world import DEFAULT_FOOTPRINT, GRID_OBSTACLE, World, WorldError, load_world, world_path
 

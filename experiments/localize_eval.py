@@ -42,7 +42,7 @@ from ..services.runtime.inprocess import InProcessRunner
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
 from ..services.runtime.run import configure_logging
-from ..services.se2 import compose, wrap_angle
+from ..geometry.se2 import compose, wrap_angle
 from . import localize_realdata as realdata
 from ..services.localizer.node import LocalizerNode, LocalizerParams
 

@@ -39,7 +39,7 @@ from ..sim.world import World, point_segment_distance, points_in_polygons, trans
 from ..services.recorder.mcap_io import RecordingError, read_records
 from ..services.runtime.errors import UserError
 from ..services.runtime.node import NS_PER_S
-from ..services.se2 import wrap_angle
+from ..geometry.se2 import wrap_angle
 
 TERMINAL = ("succeeded", "aborted", "canceled")
 CLEARANCE_CHUNK = 2048      # poses per vectorised clearance computation (bounds the temporaries)

@@ -23,7 +23,7 @@ import numpy as np
 
 from ..services.importers.carmen import CarmenError, read_log
 from ..services.runtime.params import ParamError, load_params, parse_overrides, read_yaml, unwrap_ros
-from ..services.se2 import compose, relative
+from ..geometry.se2 import compose, relative
 from ..services.slam.params import MODES, SlamParams
 from ..services.slam.rbpf import Rbpf
 from ..services.slam.relations import RelationsError, interpolate, load_relations, score

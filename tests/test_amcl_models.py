@@ -12,7 +12,7 @@ from omninav.services.localizer.params import AmclParams
 from omninav.services.localizer.sensor import LaserModel, prepare_scan
 from omninav.services.map_server.mapio import cell_to_world
 from omninav.services.runtime.params import ParamError, load_params, load_params_file
-from omninav.services.se2 import compose, wrap_angle
+from omninav.geometry.se2 import compose, wrap_angle
 from omninav.sim.raycast import LidarParams, scan
 from omninav.sim.world import load_world, world_path
 

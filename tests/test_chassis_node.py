@@ -15,7 +15,7 @@ from omninav.services.replay.into import replay_into
 from omninav.services.runtime.live import LiveRunner
 from omninav.services.runtime.node import NS_PER_S
 from omninav.services.runtime.params import ParamError, load_params
-from omninav.services.se2 import integrate, wrap_angle
+from omninav.geometry.se2 import integrate, wrap_angle
 
 DT = 0.01
 STEP_NS = round(DT * NS_PER_S)

@@ -34,7 +34,7 @@ from omninav.services.runtime.compose import load_compose
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
 from omninav.services.runtime.zenoh_config import open_client
-from omninav.services.se2 import compose
+from omninav.geometry.se2 import compose
 from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.world import load_world, world_path
 

@@ -28,7 +28,7 @@ from omninav.services.navigator.truth_pose import TruthPoseNode
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
 from omninav.services.runtime.params import read_params_mapping
-from omninav.services.se2 import wrap_angle
+from omninav.geometry.se2 import wrap_angle
 from omninav.services.tracker.node import TrackerNode, TrackerNodeParams
 from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.world import load_world, world_path

@@ -4,7 +4,7 @@ import json
 import numpy as np
 import pytest
 
-from omninav.services.se2 import compose, relative
+from omninav.geometry.se2 import compose, relative
 from omninav.services.slam.grid import TILE
 from omninav.services.slam.params import SlamParams
 from omninav.services.slam.rbpf import Rbpf, _Nodes

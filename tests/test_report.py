@@ -9,7 +9,7 @@ from omninav.schemas import encode
 from omninav.schemas.messages import (Costmap, Diagnostic, Goal, Header, MapMetaData, Obstacles, OccupancyGrid,
                                       Odometry, Path, Pose2D)
 from omninav.services.recorder.mcap_io import RecordingWriter
-from omninav.services.se2 import integrate
+from omninav.geometry.se2 import integrate
 from omninav.sim.raycast import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path
 

@@ -11,7 +11,7 @@ from omninav.services.local_planner.dwa import DwaPlanner
 from omninav.services.local_planner.params import DwaParams
 from omninav.services.local_planner.shim import (RotationShim, RotationShimParams, heading_error, sampled_point,
                                                    turn_rate)
-from omninav.services.se2 import integrate
+from omninav.geometry.se2 import integrate
 from omninav.sim.world import DEFAULT_FOOTPRINT
 
 DT = 0.05

@@ -17,7 +17,7 @@ from omninav.experiments.localize_eval import HarnessParams, Route
 from omninav.services.map_server.mapio import load_map, world_to_cell
 from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.inprocess import InProcessRunner
-from omninav.services.se2 import compose
+from omninav.geometry.se2 import compose
 from omninav.experiments.mapping import RouteDriver, compare_with_truth, slam_params_for
 from omninav.services.slam.node import SlamNode
 from omninav.sim.node import SimNode, SimNodeParams, open_world

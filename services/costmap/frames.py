@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...schemas.messages import Odometry, Pose2D, PoseWithCovariance, Transform
-from ..se2 import compose
+from ...geometry.se2 import compose
 
 
 class RobotFrames:

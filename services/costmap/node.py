@@ -49,7 +49,7 @@ from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node, QueryError
 from ..runtime.params import require_nonnegative
-from ..se2 import compose
+from ...geometry.se2 import compose
 from .costmap import Costmap
 from .frames import FrameParams
 from .layers import same_geometry, warm_up

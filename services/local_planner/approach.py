@@ -27,7 +27,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..se2 import wrap_angle
+from ...geometry.se2 import wrap_angle
 from .follower import Line, PathFollower
 from .params import FollowerParams
 

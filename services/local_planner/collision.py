@@ -33,7 +33,7 @@ from ...schemas.messages import LaserScan
 from ...sim.world import points_in_polygons
 from ..costmap.footprint import pad
 from ..costmap.layers import scan_points
-from ..se2 import integrate
+from ...geometry.se2 import integrate
 from .dynamic import Movers
 from .params import CollisionMonitorParams
 

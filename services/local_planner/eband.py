@@ -54,7 +54,7 @@ from scipy import ndimage
 from ...schemas.messages import MapMetaData
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE
 from ..map_server.mapio import in_grid, world_to_cell
-from ..se2 import wrap_angle
+from ...geometry.se2 import wrap_angle
 from .dwa import _densify, footprint_outline, local_path
 from .params import ElasticBandParams
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..se2 import wrap_angle
+from ...geometry.se2 import wrap_angle
 from .params import FollowerParams
 
 

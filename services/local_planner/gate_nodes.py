@@ -38,7 +38,7 @@ from ...sim.raycast import LidarParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, Ticks
 from ..runtime.params import require_nonnegative
-from ..se2 import integrate, inverse
+from ...geometry.se2 import integrate, inverse
 from .collision import CollisionMonitor, robot_frame_points
 from .dynamic import Movers, movers_at, tracks_problem
 from .params import CollisionMonitorParams, VelocitySmootherParams

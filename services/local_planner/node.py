@@ -52,7 +52,7 @@ from ..costmap.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, Ticks
 from ..runtime.params import ParamError, load_params, require_nonnegative
-from ..se2 import compose, inverse
+from ...geometry.se2 import compose, inverse
 from .approach import FinalApproach
 from .dwa import DwaPlanner, footprint_check_cost, reachable, warm_up
 from .dynamic import Movers, movers_at, tracks_problem

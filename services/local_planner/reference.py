@@ -9,7 +9,7 @@ from ...schemas.messages import MapMetaData
 from ..costmap import layers as costmap_layers
 from ..costmap.footprint import transform
 from ..map_server.mapio import in_grid, world_to_cell
-from ..se2 import integrate
+from ...geometry.se2 import integrate
 from .dwa import DwaPlanner, PoseCheck
 
 def reference_pose_cost(planner: DwaPlanner, check: PoseCheck, pose, costs: np.ndarray, info: MapMetaData) -> int:

@@ -41,7 +41,7 @@ from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import ParamError, load_params, read_params_mapping
-from ..se2 import compose, relative, wrap_angle
+from ...geometry.se2 import compose, relative, wrap_angle
 from .filter import Amcl, warm_up
 from .params import AmclParams
 from .sensor import ScanBeams, scan_beams

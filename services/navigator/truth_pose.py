@@ -20,7 +20,7 @@ import numpy as np
 from ...schemas.messages import Header, Odometry, Pose2D, PoseWithCovariance, Transform
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import require_nonnegative
-from ..se2 import compose, inverse
+from ...geometry.se2 import compose, inverse
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..se2 import compose, inverse, relative, wrap_angle
+from ...geometry.se2 import compose, inverse, relative, wrap_angle
 from .grid import GridGeometry, TiledGrids, cut_beams
 from .params import SlamParams
 from .scanmatch import gaussian_kernel, match_all

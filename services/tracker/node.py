@@ -26,7 +26,7 @@ from ..costmap.layers import scan_points
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import require_nonnegative
-from ..se2 import compose
+from ...geometry.se2 import compose
 from .tracker import MoverTracker, TrackerParams, warm_up
 
 _MAP, _MAP_ODOM = range(2)      # sporadic inputs, in input order (the order of equal stamps)
