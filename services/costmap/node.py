@@ -51,7 +51,7 @@ from ..runtime.node import Node, QueryError
 from ..runtime.params import require_nonnegative
 from ...geometry.se2 import compose
 from .costmap import Costmap
-from .frames import FrameParams
+from ...geometry.frames import FrameParams
 from .layers import same_geometry, warm_up
 from .params import CostmapParams, ObstacleLayerParams, StaticLayerParams, load_costmap_params
 

@@ -48,7 +48,7 @@ import numpy as np
 from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Path, Tracks
 from ...sim.world import DEFAULT_FOOTPRINT
 from ..costmap.footprint import make_footprint
-from ..costmap.frames import FrameParams
+from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, Ticks
 from ..runtime.params import ParamError, load_params, require_nonnegative

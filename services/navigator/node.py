@@ -42,7 +42,7 @@ import numpy as np
 
 from ...schemas.messages import (CancelGoal, ClearCostmaps, Goal, LocalCommand, NavStatus, Odometry, Path, Pose2D,
                                  Twist)
-from ..costmap.frames import FrameParams
+from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, QueryError
 from ..runtime.params import require_nonnegative, require_positive

@@ -21,7 +21,7 @@ import numpy as np
 from ...schemas import MessageError
 from ...schemas.messages import LaserScan, OccupancyGrid, Tracks
 from ...sim.raycast import LidarParams
-from ..costmap.frames import FrameParams
+from ...geometry.frames import FrameParams
 from ..costmap.layers import scan_points
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node

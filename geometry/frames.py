@@ -11,8 +11,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...schemas.messages import Odometry, Pose2D, PoseWithCovariance, Transform
-from ...geometry.se2 import compose
+from ..schemas.messages import Odometry, Pose2D, PoseWithCovariance, Transform
+from .se2 import compose
 
 
 class RobotFrames:
