@@ -34,7 +34,7 @@ from ..services.costmap import layers as costmap_layers
 from ..services.global_planner import astar
 from .planner import MAP, inflated_costmap, load_bench_map, pick_pairs, timed
 from ..services.global_planner.params import GlobalPlannerParams
-from ..services.map_server.mapio import cell_to_world, world_to_cell
+from ..geometry.grid import cell_to_world, world_to_cell
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..services.local_planner import eband
 from ..services.local_planner.dwa import DwaPlanner, footprint_check_cost, warm_up

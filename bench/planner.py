@@ -29,7 +29,8 @@ from ..sim.world import DEFAULT_FOOTPRINT, shared_data_dir
 from ..services.costmap import layers as costmap_layers
 from ..services.costmap.costmap import Costmap
 from ..services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
-from ..services.map_server.mapio import MapError, cell_to_world, load_map
+from ..services.map_server.mapio import MapError, load_map
+from ..geometry.grid import cell_to_world
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..services.global_planner.astar import GlobalPlanner, passable, warm_up
 from ..services.global_planner.reference import graph

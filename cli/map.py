@@ -32,7 +32,8 @@ from ..services.runtime.params import ParamError, parse_overrides
 from ..experiments.mapping import (MAPPING_ROUTES, build_map, compare_with_truth, explored_share,
                                      slam_params_for)
 from ..sim.node import open_world
-from ..sim.world import GRID_OBSTACLE, WorldError
+from ..sim.world import WorldError
+from ..geometry.grid import GRID_OBSTACLE
 from .introspect import ROUTER_HELP, CommandError, connect, key_expression, reports_errors
 from .report import new_figure
 

@@ -49,7 +49,8 @@ from ..schemas.codec import encode
 from ..schemas.keys import KeyLayout
 from ..schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, PoseWithCovariance, Transform
 from ..schemas.registry import type_info
-from ..services.map_server.mapio import MapError, cell_to_world, load_map
+from ..services.map_server.mapio import MapError, load_map
+from ..geometry.grid import cell_to_world
 from ..services.recorder.mcap_io import Record, RecordingError, read_records
 from ..services.replay.into import replay_into
 from ..services.runtime.node import NS_PER_S

@@ -25,7 +25,8 @@ from scipy import ndimage
 
 from ..schemas.messages import OccupancyGrid
 from ..sim.node import SimNode, SimNodeParams
-from ..sim.world import GRID_OBSTACLE, World
+from ..sim.world import World
+from ..geometry.grid import GRID_OBSTACLE
 from ..services.chassis.node import ChassisNode, ChassisNodeParams
 from ..services.costmap.footprint import radii
 from ..services.costmap.node import CostmapNode, CostmapNodeParams
@@ -35,7 +36,7 @@ from ..services.cmd_vel_mux.node import CmdVelMuxNode
 from ..services.local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
 from ..services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from .localize_eval import ROUTES, Harness, HarnessParams, Route, route_problems
-from ..services.map_server.mapio import cell_to_world, in_grid, world_to_cell
+from ..geometry.grid import cell_to_world, in_grid, world_to_cell
 from ..services.navigator.node import NavigatorNode, NavigatorNodeParams
 from ..services.runtime.inprocess import InProcessRunner
 from ..services.runtime.node import Node

@@ -22,7 +22,7 @@ from ..schemas.messages import OccupancyGrid
 from ..services.costmap.footprint import cells_inside, pad, radii, transform
 from ..services.global_planner.astar import GlobalPlanner
 from ..services.global_planner.params import GlobalPlannerParams
-from ..services.map_server.mapio import in_grid, world_to_cell
+from ..geometry.grid import in_grid, world_to_cell
 
 LETHAL = 254
 PATH_SEARCH = GlobalPlannerParams(use_dijkstra=False, use_grid_path=True, allow_unknown=False,

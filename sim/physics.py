@@ -46,7 +46,7 @@ from pymunk.autogeometry import convex_decomposition
 
 from ..services.chassis.follower import follower_readings
 from ..services.chassis.kinematics import DRIVES, ChassisParams, Kinematics
-from ..services.map_server.mapio import cell_to_world
+from ..geometry.grid import cell_to_world
 from ..geometry.se2 import relative, se2_exp, wrap_angle
 from .world import World, polygon_area, transform_points
 

@@ -16,7 +16,7 @@ import numpy as np
 from numba import njit
 
 from ..schemas.messages import Header, LaserScan
-from ..services.map_server.mapio import grid_coords
+from ..geometry.grid import grid_coords
 from .world import World
 
 FULL_CIRCLE = 2.0 * math.pi

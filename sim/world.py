@@ -21,7 +21,8 @@ from scipy import ndimage
 
 from ..schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
 from ..services.runtime.params import unknown_names
-from ..services.map_server.mapio import MapError, cell_to_world, grid_coords, load_map, read_yaml, world_to_cell
+from ..services.map_server.mapio import MapError, load_map, read_yaml
+from ..geometry.grid import GRID_OBSTACLE, cell_to_world, grid_coords, world_to_cell
 from .barn import BarnWorldError, barn_world_doc
 
 WALL_THICKNESS = 0.1          # m, walls and the outer walls along the bounds
@@ -30,7 +31,6 @@ DEFAULT_FOOTPRINT = np.array([[0.416, 0.318], [-0.416, 0.318], [-0.416, -0.318],
 DRIVES = ("mecanum", "omni3", "diff")
 DATA_ENV = "OMNINAV_DATA"     # overrides where `map: {relative_to: data}` looks
 BARN_SUFFIX = ".world"        # a BARN Challenge world (Gazebo SDF), read by sim/barn.py
-GRID_OBSTACLE = 50            # map cells above this occupancy (percent) are obstacles
 _EPS = 1e-9                   # shapes that only touch a cell's border do not occupy it
 
 

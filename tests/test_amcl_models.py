@@ -10,7 +10,7 @@ from omninav.services.localizer import motion
 from omninav.services.localizer.reference import likelihood_field_numpy
 from omninav.services.localizer.params import AmclParams
 from omninav.services.localizer.sensor import LaserModel, prepare_scan
-from omninav.services.map_server.mapio import cell_to_world
+from omninav.geometry.grid import cell_to_world
 from omninav.services.runtime.params import ParamError, load_params, load_params_file
 from omninav.geometry.se2 import compose, wrap_angle
 from omninav.sim.raycast import LidarParams, scan

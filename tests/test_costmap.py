@@ -12,7 +12,8 @@ from omninav.services.costmap.layers import (INSCRIBED_INFLATED_OBSTACLE, LETHAL
 from omninav.services.costmap.params import (CostmapParams, InflationLayerParams, KeepoutLayerParams,
                                              ObservationSource, ObstacleLayerParams, StaticLayerParams,
                                              load_costmap_params)
-from omninav.services.map_server.mapio import cell_to_world, load_map
+from omninav.services.map_server.mapio import load_map
+from omninav.geometry.grid import cell_to_world
 from omninav.services.runtime.params import ParamError
 
 from conftest import REPO, SHARED_DATA

@@ -14,7 +14,7 @@ from omninav.bench.scenarios import overall
 from omninav.experiments.scenarios.layout import TIMING
 from omninav.services.global_planner.astar import GlobalPlanner
 from omninav.services.global_planner.params import GlobalPlannerParams
-from omninav.services.map_server.mapio import world_to_cell
+from omninav.geometry.grid import world_to_cell
 from omninav.sim.world import load_world, point_segment_distance
 
 SEEDS = range(10)

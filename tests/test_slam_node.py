@@ -14,7 +14,8 @@ from omninav.schemas.messages import Header, LaserScan, OccupancyGrid, Odometry,
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.experiments.localize_eval import HarnessParams, Route
-from omninav.services.map_server.mapio import load_map, world_to_cell
+from omninav.services.map_server.mapio import load_map
+from omninav.geometry.grid import world_to_cell
 from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.geometry.se2 import compose

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from ...services.map_server.mapio import world_to_cell
+from ...geometry.grid import world_to_cell
 from ...sim.world import WALL_THICKNESS, World, point_segment_distance, world_from_mapping
 
 WIDTH_M = (7.0, 12.0)           # the maze's bounds

@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 from ...schemas.messages import Header, LaserScan, MapMetaData, OccupancyGrid, Pose2D
-from ..map_server.mapio import cell_to_world, in_grid, load_map, world_to_cell
+from ..map_server.mapio import load_map
+from ...geometry.grid import cell_to_world, in_grid, world_to_cell
 from .footprint import Footprint, footprint_from_params
 from .layers import (FREE_SPACE, NO_INFORMATION, Box, InflationLayer, KeepoutLayer, ObstacleLayer, StaticLayer,
                      View, grow, same_geometry, shift_grid, union, whole)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...schemas.messages import MapMetaData
-from ..map_server.mapio import grid_coords
+from ...geometry.grid import grid_coords
 from .params import CostmapParams
 
 CIRCLE_POINTS = 16

@@ -21,7 +21,7 @@ import numpy as np
 from numba import njit
 
 from ...schemas.messages import LaserScan, MapMetaData, OccupancyGrid, Pose2D
-from ..map_server.mapio import cell_to_world, grid_coords, in_grid, world_to_cell
+from ...geometry.grid import cell_to_world, grid_coords, in_grid, world_to_cell
 from .footprint import cells_inside, transform
 from .params import InflationLayerParams, KeepoutLayerParams, ObstacleLayerParams, StaticLayerParams
 

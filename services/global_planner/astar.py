@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 from ...schemas.messages import MapMetaData
-from ..map_server.mapio import cell_to_world, grid_coords, in_grid
+from ...geometry.grid import cell_to_world, grid_coords, in_grid
 from .params import GlobalPlannerParams
 from .smoother import smooth
 

@@ -41,7 +41,7 @@ from scipy import ndimage
 from ...schemas.messages import MapMetaData
 from ..costmap.footprint import pad
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
-from ..map_server.mapio import in_grid, world_to_cell
+from ...geometry.grid import in_grid, world_to_cell
 from .dynamic import Movers, critic, slack
 from .dynamic import warm_up as warm_up_movers
 from .params import DwaParams

@@ -53,7 +53,7 @@ from scipy import ndimage
 
 from ...schemas.messages import MapMetaData
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE
-from ..map_server.mapio import in_grid, world_to_cell
+from ...geometry.grid import in_grid, world_to_cell
 from ...geometry.se2 import wrap_angle
 from .dwa import _densify, footprint_outline, local_path
 from .params import ElasticBandParams

@@ -34,7 +34,7 @@ from scipy import ndimage
 
 from ...schemas.messages import LaserScan, OccupancyGrid
 from ...sim.raycast import _cast_grid
-from ..map_server.mapio import grid_coords
+from ...geometry.grid import grid_coords
 from .params import AmclParams
 
 OCCUPIED, FREE = 100, 0  # amcl's map conversion: everything else is unknown

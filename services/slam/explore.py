@@ -38,12 +38,12 @@ from scipy import ndimage
 from scipy.spatial import cKDTree
 
 from ...schemas.messages import MapMetaData, OccupancyGrid
-from ...sim.world import GRID_OBSTACLE
+from ...geometry.grid import GRID_OBSTACLE
 from ..costmap.layers import InflationLayer
 from ..costmap.params import InflationLayerParams
 from ..global_planner.astar import NO_INFORMATION, search
 from ..global_planner.params import GlobalPlannerParams
-from ..map_server.mapio import cell_to_world, in_grid, world_to_cell
+from ...geometry.grid import cell_to_world, in_grid, world_to_cell
 
 LETHAL, INSCRIBED = 254, 253
 SEARCH = GlobalPlannerParams(use_dijkstra=True, allow_unknown=False, outline_map=False)

@@ -37,7 +37,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...schemas.messages import CancelGoal, Goal, OccupancyGrid, Pose2D, PoseWithCovariance
-from ..map_server.mapio import cell_to_world
+from ...geometry.grid import cell_to_world
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from .explore import (ExploreGoal, Explorer, ExploreParams, FailedFrontiers, find_frontiers, frontier_cells, known_area,
