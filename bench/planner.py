@@ -25,7 +25,8 @@ from scipy import ndimage
 from scipy.sparse import csgraph
 
 from ..schemas.messages import OccupancyGrid
-from ..sim.world import DEFAULT_FOOTPRINT, shared_data_dir
+from ..sim.world import shared_data_dir
+from ..geometry.footprint import DEFAULT_FOOTPRINT
 from ..services.costmap import layers as costmap_layers
 from ..services.costmap.costmap import Costmap
 from ..services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams

@@ -34,7 +34,8 @@ from ..schemas.messages import Costmap, Diagnostic, Goal, LaserScan, Obstacles, 
 from ..services.recorder.mcap_io import Record, RecordingError, read_records
 from ..geometry.se2 import compose, inverse, wrap_angle
 from ..sim.raycast import LidarParams, laser_pose
-from ..sim.world import DEFAULT_FOOTPRINT, World, WorldError, load_world, world_path
+from ..sim.world import World, WorldError, load_world, world_path
+from ..geometry.footprint import DEFAULT_FOOTPRINT
 from ..geometry.grid import GRID_OBSTACLE
 
 NS_PER_S = 1e9

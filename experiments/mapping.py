@@ -28,7 +28,7 @@ from ..sim.node import SimNode, SimNodeParams
 from ..sim.world import World
 from ..geometry.grid import GRID_OBSTACLE
 from ..services.chassis.node import ChassisNode, ChassisNodeParams
-from ..services.costmap.footprint import radii
+from ..geometry.footprint import radii
 from ..services.costmap.node import CostmapNode, CostmapNodeParams
 from ..services.global_planner.node import PlannerNode, PlannerNodeParams
 from ..services.lidar.node import LidarNode, LidarNodeParams

@@ -19,7 +19,7 @@ import numpy as np
 from scipy import ndimage
 
 from ..schemas.messages import OccupancyGrid
-from ..services.costmap.footprint import cells_inside, pad, radii, transform
+from ..geometry.footprint import cells_inside, pad, radii, transform
 from ..services.global_planner.astar import GlobalPlanner
 from ..services.global_planner.params import GlobalPlannerParams
 from ..geometry.grid import in_grid, world_to_cell

@@ -22,12 +22,12 @@ from scipy import ndimage
 from ..schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
 from ..services.runtime.params import unknown_names
 from ..services.map_server.mapio import MapError, load_map, read_yaml
+from ..geometry.footprint import DEFAULT_FOOTPRINT
 from ..geometry.grid import GRID_OBSTACLE, cell_to_world, grid_coords, world_to_cell
 from .barn import BarnWorldError, barn_world_doc
 
 WALL_THICKNESS = 0.1          # m, walls and the outer walls along the bounds
 # The mecanum paper's robot: 0.832 m long (x) and 0.636 m wide (y), centred on the robot's origin.
-DEFAULT_FOOTPRINT = np.array([[0.416, 0.318], [-0.416, 0.318], [-0.416, -0.318], [0.416, -0.318]])
 DRIVES = ("mecanum", "omni3", "diff")
 DATA_ENV = "OMNINAV_DATA"     # overrides where `map: {relative_to: data}` looks
 BARN_SUFFIX = ".world"        # a BARN Challenge world (Gazebo SDF), read by sim/barn.py

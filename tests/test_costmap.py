@@ -6,7 +6,7 @@ import pytest
 
 from omninav.schemas.messages import Header, LaserScan, MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.costmap.costmap import Costmap, occupancy_values
-from omninav.services.costmap.footprint import cells_inside, make_footprint, transform
+from omninav.geometry.footprint import cells_inside, make_footprint, transform
 from omninav.services.costmap.layers import (INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, NO_INFORMATION,
                                              interpret_map)
 from omninav.services.costmap.params import (CostmapParams, InflationLayerParams, KeepoutLayerParams,

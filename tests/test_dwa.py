@@ -6,7 +6,7 @@ import pytest
 
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.costmap.costmap import Costmap
-from omninav.services.costmap.footprint import make_footprint
+from omninav.geometry.footprint import make_footprint
 from omninav.services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
 from omninav.services.local_planner.reference import reference_pose_cost, reference_rollout
 from omninav.services.local_planner.dwa import (DwaPlanner, dynamic_window, footprint_check_cost, path_maps,

@@ -22,7 +22,7 @@ from numba import njit
 
 from ...schemas.messages import LaserScan, MapMetaData, OccupancyGrid, Pose2D
 from ...geometry.grid import cell_to_world, grid_coords, in_grid, world_to_cell
-from .footprint import cells_inside, transform
+from ...geometry.footprint import cells_inside, transform
 from .params import InflationLayerParams, KeepoutLayerParams, ObstacleLayerParams, StaticLayerParams
 
 FREE_SPACE, INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, NO_INFORMATION = 0, 253, 254, 255

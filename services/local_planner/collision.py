@@ -31,7 +31,7 @@ import numpy as np
 
 from ...schemas.messages import LaserScan
 from ...sim.world import points_in_polygons
-from ..costmap.footprint import pad
+from ...geometry.footprint import pad
 from ..costmap.layers import scan_points
 from ...geometry.se2 import integrate
 from .dynamic import Movers

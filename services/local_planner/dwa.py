@@ -39,7 +39,7 @@ from numba import njit
 from scipy import ndimage
 
 from ...schemas.messages import MapMetaData
-from ..costmap.footprint import pad
+from ...geometry.footprint import pad
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
 from ...geometry.grid import in_grid, world_to_cell
 from .dynamic import Movers, critic, slack

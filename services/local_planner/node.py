@@ -46,8 +46,8 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Path, Tracks
-from ...sim.world import DEFAULT_FOOTPRINT
-from ..costmap.footprint import make_footprint
+from ...geometry.footprint import DEFAULT_FOOTPRINT
+from ...geometry.footprint import make_footprint
 from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, Ticks

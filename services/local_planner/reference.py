@@ -7,7 +7,7 @@ import numpy as np
 
 from ...schemas.messages import MapMetaData
 from ..costmap import layers as costmap_layers
-from ..costmap.footprint import transform
+from ...geometry.footprint import transform
 from ...geometry.grid import in_grid, world_to_cell
 from ...geometry.se2 import integrate
 from .dwa import DwaPlanner, PoseCheck

@@ -13,11 +13,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...schemas.messages import MapMetaData
-from ...geometry.grid import grid_coords
-from .params import CostmapParams
+from ..schemas.messages import MapMetaData
+from .grid import grid_coords
 
 CIRCLE_POINTS = 16
+# the mecanum paper's robot, 0.832 × 0.636 m: every robot's footprint unless its world or profile says otherwise
+DEFAULT_FOOTPRINT = np.array([[0.416, 0.318], [-0.416, 0.318], [-0.416, -0.318], [0.416, -0.318]])
 
 
 @dataclass(frozen=True)
@@ -67,10 +68,6 @@ def make_footprint(polygon=(), robot_radius: float = 0.46, padding: float = 0.01
     points = pad(raw, padding)
     inscribed, circumscribed = radii(points)
     return Footprint(points=points, inscribed_radius=inscribed, circumscribed_radius=circumscribed)
-
-
-def footprint_from_params(params: CostmapParams) -> Footprint:
-    return make_footprint(params.footprint, params.robot_radius, params.footprint_padding)
 
 
 def transform(points: np.ndarray, pose) -> np.ndarray:
