@@ -35,7 +35,8 @@ import numpy as np
 from ..schemas import MessageError, decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ..schemas.messages import Goal, NavStatus, Path as PathMsg
-from ..sim.world import World, point_segment_distance, points_in_polygons, transform_points
+from ..sim.world import World
+from ..geometry.polygons import point_segment_distance, points_in_polygons, transform_points
 from ..services.recorder.mcap_io import RecordingError, read_records
 from ..services.runtime.errors import UserError
 from ..services.runtime.node import NS_PER_S

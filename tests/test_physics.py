@@ -12,8 +12,8 @@ from omninav.services.chassis.kinematics import ChassisParams
 from omninav.services.chassis.odometry import wheel_odometry
 from omninav.geometry.se2 import relative
 from omninav.sim.physics import CONTACT_SLOP, SimParams, Simulation, occupied_rectangles, se2_log
-from omninav.sim.world import (YIELD_MARGIN, load_world, point_segment_distance, points_in_polygons,
-                               transform_points, world_path)
+from omninav.sim.world import YIELD_MARGIN, load_world, world_path
+from omninav.geometry.polygons import point_segment_distance, points_in_polygons, transform_points
 
 from conftest import SHARED_DATA
 

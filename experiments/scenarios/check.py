@@ -13,7 +13,8 @@ from __future__ import annotations
 import numpy as np
 
 from ..reachability import ReachabilityParams, mission_problems
-from ...sim.world import World, point_segment_distance
+from ...sim.world import World
+from ...geometry.polygons import point_segment_distance
 from .layout import polyline_length
 
 RESOLUTION = 0.05       # m, as `navigate` rasterises a world into its map

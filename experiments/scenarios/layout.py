@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...sim.world import point_segment_distance, segment_distance
+from ...geometry.polygons import point_segment_distance, segment_distance
 
 
 @dataclass(frozen=True)

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...schemas.messages import LaserScan
-from ...sim.world import points_in_polygons
+from ...geometry.polygons import points_in_polygons
 from ...geometry.footprint import pad
 from ..costmap.layers import scan_points
 from ...geometry.se2 import integrate
