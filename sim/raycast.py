@@ -13,10 +13,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ..schemas.messages import Header, LaserScan
 from ..geometry.grid import grid_coords
+from ..geometry.raycast import cast_grid, cast_shapes
 from .world import World
 
 FULL_CIRCLE = 2.0 * math.pi
@@ -79,90 +79,6 @@ def laser_pose(pose, params: LidarParams) -> tuple[float, float, float]:
             yaw + params.mount_yaw)
 
 
-@njit(cache=True)
-def _cast_shapes(ox, oy, angles, segments, circles, max_range):
-    out = np.full(angles.shape[0], np.inf)
-    for k in range(angles.shape[0]):
-        dx, dy = math.cos(angles[k]), math.sin(angles[k])
-        best, found = max_range, False
-        for n in range(segments.shape[0]):
-            ax, ay = segments[n, 0], segments[n, 1]
-            ex, ey = segments[n, 2] - ax, segments[n, 3] - ay
-            denom = dx * ey - dy * ex
-            if denom == 0.0:  # parallel: the solid's other edges catch the ray
-                continue
-            wx, wy = ax - ox, ay - oy
-            t = (wx * ey - wy * ex) / denom
-            s = (wx * dy - wy * dx) / denom
-            if 0.0 <= t <= best and 0.0 <= s <= 1.0:
-                best, found = t, True
-        for m in range(circles.shape[0]):
-            fx, fy, r = ox - circles[m, 0], oy - circles[m, 1], circles[m, 2]
-            b = fx * dx + fy * dy
-            c = fx * fx + fy * fy - r * r
-            if c <= 0.0:
-                t = 0.0  # the laser is inside the circle
-            else:
-                disc = b * b - c
-                if disc < 0.0 or b > 0.0:  # misses, or lies behind
-                    continue
-                t = -b - math.sqrt(disc)
-            if t <= best:
-                best, found = t, True
-        if found:
-            out[k] = best
-    return out
-
-
-@njit(cache=True)
-def _cast_grid(u0, v0, angles, occupied, max_t):
-    """Distances in cells from (u0, v0) (grid coordinates) to the first occupied cell."""
-    height, width = occupied.shape
-    out = np.full(angles.shape[0], np.inf)
-    for k in range(angles.shape[0]):
-        du, dv = math.cos(angles[k]), math.sin(angles[k])
-        t0, t1 = 0.0, max_t
-        if du != 0.0:  # clip the ray to the grid's box
-            ta, tb = -u0 / du, (width - u0) / du
-            t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
-        elif not 0.0 <= u0 < width:
-            continue
-        if dv != 0.0:
-            ta, tb = -v0 / dv, (height - v0) / dv
-            t0, t1 = max(t0, min(ta, tb)), min(t1, max(ta, tb))
-        elif not 0.0 <= v0 < height:
-            continue
-        if t0 > t1:
-            continue
-        u, v = u0 + t0 * du, v0 + t0 * dv
-        col = min(max(int(math.floor(u)), 0), width - 1)
-        row = min(max(int(math.floor(v)), 0), height - 1)
-        step_c, next_u, delta_u = 0, np.inf, np.inf
-        if du > 0.0:
-            step_c, next_u, delta_u = 1, t0 + (col + 1 - u) / du, 1.0 / du
-        elif du < 0.0:
-            step_c, next_u, delta_u = -1, t0 + (col - u) / du, -1.0 / du
-        step_r, next_v, delta_v = 0, np.inf, np.inf
-        if dv > 0.0:
-            step_r, next_v, delta_v = 1, t0 + (row + 1 - v) / dv, 1.0 / dv
-        elif dv < 0.0:
-            step_r, next_v, delta_v = -1, t0 + (row - v) / dv, -1.0 / dv
-        t = t0
-        while t <= t1:
-            if occupied[row, col]:
-                out[k] = t
-                break
-            if next_u < next_v:
-                t, col, next_u = next_u, col + step_c, next_u + delta_u
-                if col < 0 or col >= width:
-                    break
-            else:
-                t, row, next_v = next_v, row + step_r, next_v + delta_v
-                if row < 0 or row >= height:
-                    break
-    return out
-
-
 def cast(world: World, x: float, y: float, angles: np.ndarray, mover_circles: np.ndarray | None = None,
          max_range: float = np.inf) -> np.ndarray:
     """Exact distances from (x, y) along world-frame `angles` to the first obstacle (inf: none
@@ -170,11 +86,11 @@ def cast(world: World, x: float, y: float, angles: np.ndarray, mover_circles: np
     angles = np.ascontiguousarray(angles, np.float64)
     segments = np.ascontiguousarray(world.segments, np.float64).reshape(-1, 4)
     circles = np.ascontiguousarray(world.obstacle_circles(mover_circles), np.float64).reshape(-1, 3)
-    ranges = _cast_shapes(float(x), float(y), angles, segments, circles, float(max_range))
+    ranges = cast_shapes(float(x), float(y), angles, segments, circles, float(max_range))
     if world.grid_occupied is not None:
         info = world.grid.info
         u0, v0 = grid_coords(info, x, y)
-        cells = _cast_grid(float(u0), float(v0), angles - info.origin.theta,
+        cells = cast_grid(float(u0), float(v0), angles - info.origin.theta,
                            np.ascontiguousarray(world.grid_occupied), float(max_range) / info.resolution)
         ranges = np.minimum(ranges, cells * info.resolution)
     return ranges
@@ -215,5 +131,5 @@ def make_scan(params: LidarParams, ranges: np.ndarray, stamp_ns: int, frame_id: 
 def warm_up() -> None:
     """Compile (or load from cache) the casting kernels, so the first real scan is not slow."""
     angles = np.zeros(1)
-    _cast_shapes(0.0, 0.0, angles, np.zeros((1, 4)), np.zeros((1, 3)), 1.0)
-    _cast_grid(0.5, 0.5, angles, np.zeros((1, 1), np.bool_), 1.0)
+    cast_shapes(0.0, 0.0, angles, np.zeros((1, 4)), np.zeros((1, 3)), 1.0)
+    cast_grid(0.5, 0.5, angles, np.zeros((1, 1), np.bool_), 1.0)

@@ -33,7 +33,7 @@ from numba import njit
 from scipy import ndimage
 
 from ...schemas.messages import LaserScan, OccupancyGrid
-from ...sim.raycast import _cast_grid
+from ...geometry.raycast import cast_grid
 from ...geometry.grid import grid_coords
 from .params import AmclParams
 
@@ -223,7 +223,7 @@ def _beam(poses, n, affine, yaw, blocked, resolution, origin_x, origin_y, ranges
         v0 = affine[1, 0] * lx + affine[1, 1] * ly + affine[1, 2]
         for b in range(bearings.shape[0]):
             angles[b] = theta - yaw + bearings[b]
-        expected = _cast_grid(u0, v0, angles, blocked, range_max / resolution)
+        expected = cast_grid(u0, v0, angles, blocked, range_max / resolution)
         p = 1.0
         for b in range(bearings.shape[0]):
             z = ranges[b]
