@@ -56,7 +56,8 @@ from ..services.replay.into import replay_into
 from ..services.runtime.node import NS_PER_S
 from ..services.runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
 from ..geometry.se2 import compose, relative, wrap_angle
-from ..services.localizer.node import LocalizerNode, LocalizerParams, OdomHistory
+from ..services.localizer.node import LocalizerNode, LocalizerParams
+from ..geometry.odometry_history import OdomHistory
 from ..services.localizer.params import AmclParams
 from ..services.localizer.sensor import FREE, OCCUPIED, GridFrame, LaserModel, prepare_scan, share_near_obstacles
 

@@ -13,7 +13,7 @@ from omninav.schemas.codec import encode
 from omninav.experiments.localize_eval import (PARAMS_FILE, ROUTES, Route, Series, kidnap_result, route_command,
                                                  route_problems)
 from omninav.services.localizer.params import AmclParams
-from omninav.services.localizer.node import OdomHistory
+from omninav.geometry.odometry_history import OdomHistory
 from omninav.experiments.localize_realdata import Agreement, judge_start, load_run, search_start
 from omninav.services.runtime.params import load_params_file
 from omninav.sim.raycast import LidarParams, make_scan, scan
