@@ -15,6 +15,11 @@ from ..schemas.messages import Odometry, Pose2D, PoseWithCovariance, Transform
 from .se2 import compose
 
 
+# (x, y, yaw) of the laser in base_link (m, m, rad): the simulated lidar's mount, and the default of
+# every node that places scan points on the robot
+LASER_MOUNT = (0.0, 0.0, 0.0)
+
+
 class RobotFrames:
     def __init__(self, map_frame: str, odom_frame: str, start=(0.0, 0.0, 0.0)):
         self.map_frame, self.odom_frame = map_frame, odom_frame

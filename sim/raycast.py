@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..schemas.messages import Header, LaserScan
+from ..geometry.frames import LASER_MOUNT
 from ..geometry.grid import grid_coords
 from ..geometry.raycast import cast_grid, cast_shapes
 from .world import World
@@ -35,9 +36,9 @@ class LidarParams:
     range_max: float = 12.0           # m
     noise_std: float = 0.01           # m, Gaussian range noise
     dropout_prob: float = 0.0         # chance that a beam returns nothing
-    mount_x: float = 0.0              # laser pose in the robot frame (m, m, rad)
-    mount_y: float = 0.0
-    mount_yaw: float = 0.0
+    mount_x: float = LASER_MOUNT[0]   # laser pose in the robot frame (m, m, rad)
+    mount_y: float = LASER_MOUNT[1]
+    mount_yaw: float = LASER_MOUNT[2]
     rate_hz: float = 10.0
 
     def __post_init__(self):

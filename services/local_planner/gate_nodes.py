@@ -34,10 +34,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...schemas.messages import Clock, Header, Odometry, Tracks, Twist
-from ...sim.raycast import LidarParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, Ticks
 from ..runtime.params import require_nonnegative
+from ...geometry.frames import LASER_MOUNT
 from ...geometry.se2 import integrate, inverse
 from .collision import CollisionMonitor, robot_frame_points
 from .dynamic import Movers, movers_at, tracks_problem
@@ -96,9 +96,9 @@ class VelocitySmootherNode(Node):
 
 @dataclass(frozen=True)
 class CollisionMonitorNodeParams(CollisionMonitorParams):
-    laser_x: float = LidarParams.mount_x     # m: the laser on the robot (the simulated lidar's mount)
-    laser_y: float = LidarParams.mount_y
-    laser_yaw: float = LidarParams.mount_yaw
+    laser_x: float = LASER_MOUNT[0]     # m: the laser on the robot (the simulated lidar's mount)
+    laser_y: float = LASER_MOUNT[1]
+    laser_yaw: float = LASER_MOUNT[2]
     scan_delay_s: float = 0.05               # sim s from a scan's stamp until it is used
     source_timeout: float = 1.0              # s: an older scan is no scan (Nav2's name; its default is 2)
     tracks_delay_s: float = 0.5              # sim s from a tracks / odom stamp until it is used (live, tracks trailed
