@@ -33,7 +33,8 @@ from ..services.costmap.node import CostmapNode, CostmapNodeParams
 from ..services.global_planner.node import PlannerNode, PlannerNodeParams
 from ..services.lidar.node import LidarNode, LidarNodeParams
 from ..services.cmd_vel_mux.node import CmdVelMuxNode
-from ..services.local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
+from ..services.velocity_smoother.node import VelocitySmootherNode
+from ..services.collision_monitor.node import CollisionMonitorNode
 from ..services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from .localize_eval import ROUTES, Harness, HarnessParams, Route, route_problems
 from ..geometry.grid import cell_to_world, in_grid, world_to_cell

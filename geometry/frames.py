@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..schemas.messages import Odometry, Pose2D, PoseWithCovariance, Transform
+from ..schemas.messages import Header, Odometry, Pose2D, PoseWithCovariance, Transform, Twist
 from .se2 import compose
 
 
@@ -84,3 +84,14 @@ class FrameParams:
     def robot_frames(self) -> RobotFrames:
         return RobotFrames(self.map_frame, self.odom_frame, (self.initial_pose_x, self.initial_pose_y,
                                                              self.initial_pose_a))
+
+
+def twist_vector(msg: Twist) -> np.ndarray:
+    """A Twist as (vx, vy, wz), base_link."""
+    return np.array([msg.linear_x, msg.linear_y, msg.angular_z])
+
+
+def twist_message(twist: np.ndarray, stamp_ns: int) -> Twist:
+    """(vx, vy, wz) as a Twist in base_link."""
+    vx, vy, wz = (float(v) for v in twist)
+    return Twist(header=Header(stamp_ns=stamp_ns, frame_id="base_link"), linear_x=vx, linear_y=vy, angular_z=wz)

@@ -18,7 +18,8 @@ from omninav.services.cmd_vel_mux.node import CmdVelMuxNode
 from omninav.services.costmap.node import CostmapNode, CostmapNodeParams
 from omninav.services.global_planner.node import PlannerNode, PlannerNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
-from omninav.services.local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
+from omninav.services.velocity_smoother.node import VelocitySmootherNode
+from omninav.services.collision_monitor.node import CollisionMonitorNode
 from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from omninav.services.map_server.node import MapServerNode, MapServerParams
 from omninav.services.localizer.node import LocalizerNode, LocalizerParams

@@ -1,20 +1,8 @@
-"""The two gates between the navigator and the chassis: velocity_smoother and collision_monitor.
+"""collision_monitor, the second of the two gates between the navigator and the chassis:
 
     cmd_vel_mux --cmd_vel_mux--> velocity_smoother --cmd_vel_smoothed--> collision_monitor --cmd_vel--> chassis
 
-(the mux takes the navigator's cmd_vel_nav and teleop's cmd_vel_teleop: services/cmd_vel_mux/)
-
-velocity_smoother (VelocitySmoother, smoother.py) runs on the sim clock: a smoothing tick falls on
-the clock stamped at or first after each multiple of 1/smoothing_frequency of sim time, and every
-tick publishes the smoothed command (zeros while there is nothing to do, so the collision monitor
-downstream always has a stream to follow). cmd_vel_mux is sporadic: a command stamped t takes
-effect at the first tick after t + command_delay_s — the time the navigator's command may take to
-get here (through the mux), live, behind the clock; whether it arrives before or after the clocks stamped in
-(t, t + delay] then cannot change the output. Added latency: with the local planner and the
-smoother both at 20 Hz (ticks on the same multiples of 50 ms) and the default 0.04 s delay, one
-period, 50 ms. No command for velocity_timeout seconds of sim time → the output decelerates to zero.
-
-collision_monitor (CollisionMonitor, collision.py) follows cmd_vel_smoothed (its only synced input)
+The monitor (CollisionMonitor, collision.py) follows cmd_vel_smoothed (its only synced input)
 and answers every command at once with cmd_vel, stamped the same: no added latency. Scans are
 sporadic: a scan stamped t is used from the first command stamped after t + scan_delay_s (the
 time a scan may take to arrive, live) until a newer one takes effect; its points are placed in the
@@ -33,65 +21,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...schemas.messages import Clock, Header, Odometry, Tracks, Twist
-from ..runtime.deferred import Deferred
-from ..runtime.node import NS_PER_S, Node, Ticks
-from ..runtime.params import require_nonnegative
-from ...geometry.frames import LASER_MOUNT
+from ...geometry.frames import LASER_MOUNT, twist_message, twist_vector
 from ...geometry.se2 import integrate, inverse
-from .collision import CollisionMonitor, robot_frame_points
-from .dynamic import Movers, movers_at, tracks_problem
-from .params import CollisionMonitorParams, VelocitySmootherParams
-from .smoother import VelocitySmoother
-
-
-def _twist(msg: Twist) -> np.ndarray:
-    return np.array([msg.linear_x, msg.linear_y, msg.angular_z])
-
-
-def _message(twist: np.ndarray, stamp_ns: int) -> Twist:
-    vx, vy, wz = (float(v) for v in twist)
-    return Twist(header=Header(stamp_ns=stamp_ns, frame_id="base_link"), linear_x=vx, linear_y=vy, angular_z=wz)
-
-
-@dataclass(frozen=True)
-class VelocitySmootherNodeParams(VelocitySmootherParams):
-    """Nav2's velocity_smoother names; the limits default to what the chassis allows on every axis
-    (Nav2's defaults are a differential drive's, vy 0, which would stop a mecanum robot strafing)."""
-    max_velocity: tuple[float, float, float] = (0.5, 0.5, 2.5)
-    min_velocity: tuple[float, float, float] = (-0.5, -0.5, -2.5)
-    max_accel: tuple[float, float, float] = (2.5, 2.5, 3.2)
-    max_decel: tuple[float, float, float] = (-2.5, -2.5, -3.2)
-    command_delay_s: float = 0.04       # sim s from a command's stamp until it takes effect
-
-    def __post_init__(self):
-        super().__post_init__()
-        require_nonnegative(self, "command_delay_s")
-
-
-class VelocitySmootherNode(Node):
-    service = "velocity_smoother"
-    Params = VelocitySmootherNodeParams
-
-    def setup(self) -> None:
-        p = self.params
-        self.smoother = VelocitySmoother(p)
-        self.ticks = Ticks(p.smoothing_frequency)
-        self.pending = Deferred(p.command_delay_s)   # commands not yet in effect
-        self.out_pub = self.publisher("cmd_vel_smoothed")
-        self.subscribe("sim/clock", self.on_clock)
-        self.subscribe_deferred("cmd_vel_mux", self.pending)
-
-    def on_clock(self, msg: Clock) -> None:
-        t = msg.header.stamp_ns
-        if not self.ticks.due(t):
-            return
-        for _, command in self.pending.due(t):
-            self.smoother.command(_twist(command), command.header.stamp_ns)
-            self.counters["commands"] += 1
-        out = self.smoother.step(t)
-        self.counters["timed_out_ticks" if out.timed_out else "ticks"] += 1
-        self.out_pub.publish(_message(out.twist, t))
+from ...schemas.messages import Odometry, Tracks, Twist
+from ..local_planner.dynamic import Movers, movers_at, tracks_problem
+from ..runtime.deferred import Deferred
+from ..runtime.node import NS_PER_S, Node
+from ..runtime.params import require_nonnegative
+from .collision import CollisionMonitor, CollisionMonitorParams, robot_frame_points
 
 
 @dataclass(frozen=True)
@@ -157,11 +94,11 @@ class CollisionMonitorNode(Node):
                 self.odom = held
             else:
                 self.tracks = held
-        twist = _twist(msg)
+        twist = twist_vector(msg)
         if self.scan_stamp_ns is None or t - self.scan_stamp_ns > self.timeout_ns:
             action, twist = "no_scan", np.zeros(3)
         else:
             result = self.monitor.check(twist, self.points, self._movers(t))
             action, twist = result.action, result.twist
         self.counters[f"action/{action}"] += 1
-        self.out_pub.publish(_message(twist, t))
+        self.out_pub.publish(twist_message(twist, t))
