@@ -26,7 +26,7 @@ from omninav.schemas.messages import Path as PathMsg
 from omninav.services.chassis.node import ChassisNode
 from omninav.experiments.mission_score import (MissionError, MissionRecord, load_mission, summarize_mission,
                                                 summary_lines)
-from omninav.services.navigator.truth_pose import TruthPoseNode, TruthPoseParams
+from omninav.services.truth_pose.node import TruthPoseNode, TruthPoseParams
 from omninav.services.map_server.mapio import load_map
 from omninav.services.recorder.mcap_io import read_records, recording_summary
 from omninav.services.runtime.acl import TOOL

@@ -25,7 +25,7 @@ from omninav.services.map_server.node import MapServerNode, MapServerParams
 from omninav.services.localizer.node import LocalizerNode, LocalizerParams
 from omninav.services.navigator.core import WAITING_FOR_CONFIDENT_POSE
 from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
-from omninav.services.navigator.truth_pose import TruthPoseNode
+from omninav.services.truth_pose.node import TruthPoseNode
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
 from omninav.services.runtime.params import read_params_mapping

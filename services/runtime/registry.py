@@ -24,7 +24,7 @@ SERVICES: dict[str, str] = {
     "velocity_smoother": "omninav.services.velocity_smoother.node:VelocitySmootherNode",
     "collision_monitor": "omninav.services.collision_monitor.node:CollisionMonitorNode",
     "navigator": "omninav.services.navigator.node:NavigatorNode",
-    "truth_pose": "omninav.services.navigator.truth_pose:TruthPoseNode",
+    "truth_pose": "omninav.services.truth_pose.node:TruthPoseNode",
     "view": "omninav.services.view.node:ViewNode",
     "tracker": "omninav.services.tracker.node:TrackerNode",
 }
