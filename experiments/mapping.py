@@ -43,8 +43,8 @@ from ..services.runtime.inprocess import InProcessRunner
 from ..services.runtime.node import Node
 from ..services.runtime.params import load_params
 from ..services.tracker.node import TrackerNode, TrackerNodeParams
-from ..services.slam.explore import Failure
-from ..services.slam.explore_node import ExploreNode, ExploreNodeParams
+from ..services.explore.explore import Failure
+from ..services.explore.node import ExploreNode, ExploreNodeParams
 from ..services.slam.node import SlamNode, SlamNodeParams
 
 # gmapping's defaults process a scan per metre driven; indoors, with a 12 m lidar, updating every
