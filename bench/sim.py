@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..services.chassis.follower import follower_odometry
+from ..services.chassis.follower_wheels import follower_odometry
 from ..services.chassis.kinematics import ChassisParams, Kinematics
 from ..services.chassis.odometry import wheel_odometry
 from ..geometry.se2 import wrap_angle

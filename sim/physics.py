@@ -44,7 +44,7 @@ import numpy as np
 import pymunk
 from pymunk.autogeometry import convex_decomposition
 
-from ..services.chassis.follower import follower_readings
+from ..services.chassis.follower_wheels import follower_readings
 from ..services.chassis.kinematics import DRIVES, ChassisParams, Kinematics
 from ..geometry.grid import cell_to_world
 from ..geometry.se2 import relative, se2_exp, wrap_angle

@@ -7,7 +7,7 @@ import pytest
 
 from omninav.schemas import decode, encode
 from omninav.schemas.messages import Header, Twist, WheelState
-from omninav.services.chassis.follower import follower_readings
+from omninav.services.chassis.follower_wheels import follower_readings
 from omninav.services.chassis.kinematics import Kinematics
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.recorder.mcap_io import Record

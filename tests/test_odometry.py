@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from omninav.services.chassis.follower import (calibrate_followers, follower_odometry,
+from omninav.services.chassis.follower_wheels import (calibrate_followers, follower_odometry,
                                                follower_readings)
 from omninav.services.chassis.kinematics import DRIVES, ChassisParams, Kinematics
 from omninav.services.chassis.odometry import wheel_odometry

@@ -7,7 +7,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from omninav.services.chassis.follower import follower_odometry
+from omninav.services.chassis.follower_wheels import follower_odometry
 from omninav.services.chassis.kinematics import ChassisParams
 from omninav.services.chassis.odometry import wheel_odometry
 from omninav.geometry.se2 import relative

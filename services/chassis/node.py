@@ -18,7 +18,7 @@ from ...schemas.messages import Header, Odometry, Pose2D, Transform, Twist, Whee
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import require_nonnegative
-from .follower import follower_odometry
+from .follower_wheels import follower_odometry
 from .kinematics import ChassisParams, Kinematics
 from .odometry import OdomEstimate, wheel_odometry
 
