@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from omninav.services.local_planner.follower import Arc, Line, PathFollower, segments_from_poses
+from omninav.services.local_planner.path_follower import Arc, Line, PathFollower, segments_from_poses
 from omninav.services.local_planner.params import FollowerParams
 from omninav.geometry.se2 import integrate
 

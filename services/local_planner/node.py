@@ -56,7 +56,7 @@ from ...geometry.se2 import compose, inverse
 from .approach import FinalApproach
 from .dwa import DwaPlanner, footprint_check_cost, reachable, warm_up
 from .dynamic import Movers, movers_at, tracks_problem
-from .follower import PathFollower, segments_from_poses
+from .path_follower import PathFollower, segments_from_poses
 from .params import DwaParams, FollowerParams
 from ..collision_monitor.collision import CollisionMonitorParams
 from .path_ahead import ahead_of
