@@ -21,7 +21,7 @@ import time
 
 import numpy as np
 
-from ..sim.raycast import LidarParams, scan
+from ..sim.lidar import LidarParams, scan
 from ..sim.world import WorldError, load_world, world_path
 from ..services.localizer.filter import Amcl, warm_up
 from ..services.localizer.params import AmclParams

@@ -33,7 +33,7 @@ from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ..schemas.messages import Costmap, Diagnostic, Goal, LaserScan, Obstacles, OccupancyGrid, Odometry, Path as PathMsg
 from ..services.recorder.mcap_io import Record, RecordingError, read_records
 from ..geometry.se2 import compose, inverse, wrap_angle
-from ..sim.raycast import LidarParams, laser_pose
+from ..sim.lidar import LidarParams, laser_pose
 from ..sim.world import World, WorldError, load_world, world_path
 from ..geometry.footprint import DEFAULT_FOOTPRINT
 from ..geometry.grid import GRID_OBSTACLE

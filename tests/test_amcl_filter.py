@@ -12,7 +12,7 @@ from omninav.services.localizer.filter import Amcl, kld_limit, map_to_odom, syst
 from omninav.services.localizer.params import AmclParams
 from omninav.services.localizer.sensor import prepare_scan
 from omninav.geometry.se2 import compose, wrap_angle
-from omninav.sim.raycast import LidarParams, scan
+from omninav.sim.lidar import LidarParams, scan
 from omninav.sim.world import load_world, world_path
 
 SEED = int(os.environ.get("AMCL_TEST_SEED", "0"))

@@ -13,7 +13,7 @@ from omninav.services.localizer.sensor import LaserModel, prepare_scan
 from omninav.geometry.grid import cell_to_world
 from omninav.services.runtime.params import ParamError, load_params, load_params_file
 from omninav.geometry.se2 import compose, wrap_angle
-from omninav.sim.raycast import LidarParams, scan
+from omninav.sim.lidar import LidarParams, scan
 from omninav.sim.world import load_world, world_path
 
 # ROS 1 amcl (navigation noetic-devel, amcl_node.cpp / cfg/AMCL.cfg), transcribed by hand

@@ -442,8 +442,8 @@ def test_a_person_crossing_the_scan_leaves_no_ghost_trail_in_the_local_costmap(t
     while a person (0.3 m circle) walks across 1.5 m in front of it: once they have passed, the
     cells they stood on are free again — cleared by the beams that now pass through them to the
     wall behind, or (no wall within the lidar's range: no return) by the inf_is_valid beams."""
-    from omninav.sim.raycast import LidarParams, make_scan
-    from omninav.sim.raycast import scan as cast_scan
+    from omninav.sim.lidar import LidarParams, make_scan
+    from omninav.sim.lidar import scan as cast_scan
     from omninav.sim.world import load_world
     bounds = "[12.0, 8.0]" if behind == "wall" else "[40.0, 40.0]"
     start = (1.0, 4.0) if behind == "wall" else (20.0, 20.0)

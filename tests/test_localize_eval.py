@@ -16,7 +16,7 @@ from omninav.services.localizer.params import AmclParams
 from omninav.geometry.odometry_history import OdomHistory
 from omninav.experiments.localize_realdata import Agreement, judge_start, load_run, search_start
 from omninav.services.runtime.params import load_params_file
-from omninav.sim.raycast import LidarParams, make_scan, scan
+from omninav.sim.lidar import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path
 
 from conftest import SHARED_DATA

@@ -10,7 +10,7 @@ from omninav.schemas.messages import (Costmap, Diagnostic, Goal, Header, MapMeta
                                       Odometry, Path, Pose2D)
 from omninav.services.recorder.mcap_io import RecordingWriter
 from omninav.geometry.se2 import integrate
-from omninav.sim.raycast import LidarParams, make_scan, scan
+from omninav.sim.lidar import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path
 
 from conftest import SHARED_DATA
