@@ -43,7 +43,7 @@ from ..services.runtime.inprocess import InProcessRunner
 from ..services.runtime.node import Node
 from ..services.runtime.params import load_params
 from ..services.tracker.node import TrackerNode, TrackerNodeParams
-from ..services.explore.explore import Failure
+from ..services.explore.frontiers import Failure
 from ..services.explore.node import ExploreNode, ExploreNodeParams
 from ..services.slam.node import SlamNode, SlamNodeParams
 

@@ -12,7 +12,7 @@ from omninav.experiments.scenarios.maze import generate as generate_maze
 from omninav.schemas import decode
 from omninav.schemas.messages import (CancelGoal, Goal, Header, MapMetaData, NavStatus, OccupancyGrid, Pose2D,
                                       PoseWithCovariance)
-from omninav.services.explore.explore import (INSCRIBED, Explorer, ExploreParams, FailedFrontiers, find_frontiers,
+from omninav.services.explore.frontiers import (INSCRIBED, Explorer, ExploreParams, FailedFrontiers, find_frontiers,
                                            frontier_cells, known_area, still_frontier)
 from omninav.services.runtime.node import NS_PER_S
 from omninav.services.explore.node import ExploreNode, ExploreNodeParams

@@ -40,7 +40,7 @@ from ...schemas.messages import CancelGoal, Goal, OccupancyGrid, Pose2D, PoseWit
 from ...geometry.grid import cell_to_world
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
-from .explore import (ExploreGoal, Explorer, ExploreParams, FailedFrontiers, find_frontiers, frontier_cells, known_area,
+from .frontiers import (ExploreGoal, Explorer, ExploreParams, FailedFrontiers, find_frontiers, frontier_cells, known_area,
                       still_frontier)
 
 PROGRESS_M = 0.1
