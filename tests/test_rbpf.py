@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from omninav.geometry.se2 import compose, relative
-from omninav.services.slam.grid import TILE
+from omninav.services.slam.particle_grids import TILE
 from omninav.services.slam.params import SlamParams
 from omninav.services.slam.rbpf import Rbpf, _Nodes
 from omninav.sim.lidar import LidarParams, scan

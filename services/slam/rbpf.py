@@ -25,7 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...geometry.se2 import compose, inverse, relative, wrap_angle
-from .grid import GridGeometry, TiledGrids, cut_beams
+from .particle_grids import GridGeometry, TiledGrids, cut_beams
 from .params import SlamParams
 from .scanmatch import gaussian_kernel, match_all
 
