@@ -18,6 +18,9 @@ from .grid import grid_coords
 
 CIRCLE_POINTS = 16
 # the mecanum paper's robot, 0.832 × 0.636 m: every robot's footprint unless its world or profile says otherwise
+# m around the footprint where the collision monitor stops the robot (its stop_padding default); the local
+# planner keeps its trajectories out of that zone
+STOP_PADDING = 0.05
 DEFAULT_FOOTPRINT = np.array([[0.416, 0.318], [-0.416, 0.318], [-0.416, -0.318], [0.416, -0.318]])
 
 

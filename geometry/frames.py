@@ -11,13 +11,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..schemas.messages import Header, Odometry, Pose2D, PoseWithCovariance, Transform, Twist
+from ..schemas.messages import Header, LaserScan, Odometry, Pose2D, PoseWithCovariance, Transform, Twist
 from .se2 import compose
 
 
 # (x, y, yaw) of the laser in base_link (m, m, rad): the simulated lidar's mount, and the default of
 # every node that places scan points on the robot
 LASER_MOUNT = (0.0, 0.0, 0.0)
+INF_EPSILON = 0.0001     # m: ROS replaces +inf by range_max − this when inf_is_valid
 
 
 class RobotFrames:
@@ -95,3 +96,17 @@ def twist_message(twist: np.ndarray, stamp_ns: int) -> Twist:
     """(vx, vy, wz) as a Twist in base_link."""
     vx, vy, wz = (float(v) for v in twist)
     return Twist(header=Header(stamp_ns=stamp_ns, frame_id="base_link"), linear_x=vx, linear_y=vy, angular_z=wz)
+
+
+def scan_points(scan: LaserScan, sensor_pose, inf_is_valid: bool) -> np.ndarray:
+    """A scan's endpoints in the global frame, as laser_geometry projects them: readings within
+    [range_min, range_max) (with inf_is_valid, +inf counts as range_max − 0.0001)."""
+    ranges = np.asarray(scan.ranges, np.float64)
+    if inf_is_valid:
+        ranges = np.where(np.isposinf(ranges), scan.range_max - INF_EPSILON, ranges)
+    angles = scan.angle_min + np.arange(ranges.shape[0]) * scan.angle_increment
+    with np.errstate(invalid="ignore"):
+        keep = np.isfinite(ranges) & (ranges >= scan.range_min) & (ranges < scan.range_max)
+    x, y, yaw = (float(v) for v in sensor_pose)
+    r, a = ranges[keep], angles[keep] + yaw
+    return np.stack([x + r * np.cos(a), y + r * np.sin(a)], axis=1)

@@ -31,8 +31,8 @@ import numpy as np
 
 from ...schemas.messages import LaserScan
 from ...geometry.polygons import points_in_polygons
-from ...geometry.footprint import pad
-from ..costmap.layers import scan_points
+from ...geometry.footprint import STOP_PADDING, pad
+from ...geometry.frames import scan_points
 from ...geometry.se2 import integrate
 from ..local_planner.dynamic import Movers
 from ..runtime.params import require_at_least, require_nonnegative, require_positive
@@ -47,7 +47,7 @@ class CollisionMonitorParams:
     """Nav2 collision_monitor's stop and slowdown polygons, here grown from the footprint."""
     footprint: tuple[tuple[float, float], ...] = ((0.416, 0.318), (-0.416, 0.318), (-0.416, -0.318),
                                                   (0.416, -0.318))   # m, robot frame (the mecanum paper's)
-    stop_padding: float = 0.05           # m added around the footprint for the stop zone
+    stop_padding: float = STOP_PADDING   # m added around the footprint for the stop zone
     slowdown_padding: float = 0.30       # m added around the footprint for the slowdown zone
     slowdown_ratio: float = 0.5          # Nav2's default
     min_points: int = 4                  # Nav2's default: fewer points inside a zone are noise

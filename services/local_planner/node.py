@@ -46,8 +46,7 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Path, Tracks
-from ...geometry.footprint import DEFAULT_FOOTPRINT
-from ...geometry.footprint import make_footprint
+from ...geometry.footprint import DEFAULT_FOOTPRINT, STOP_PADDING, make_footprint
 from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, Ticks
@@ -58,7 +57,6 @@ from .dwa import DwaPlanner, footprint_check_cost, reachable, warm_up
 from .dynamic import Movers, movers_at, tracks_problem
 from .path_follower import PathFollower, segments_from_poses
 from .params import DwaParams, FollowerParams
-from ..collision_monitor.collision import CollisionMonitorParams
 from .path_ahead import ahead_of
 from .shim import RotationShim, RotationShimParams
 
@@ -108,7 +106,7 @@ class LocalPlannerNodeParams(FrameParams, DwaParams, RotationShimParams):
     request_delay_s: float = 0.5         # sim s from a costmap / tf / path stamp to its effect
     tracks_delay_s: float = 0.3          # sim s from a tracks stamp to its effect (they are predicted to the tick)
     # m: the collision monitor's stop zone (its default), kept free by DWA's rollouts
-    stop_padding: float = CollisionMonitorParams.stop_padding
+    stop_padding: float = STOP_PADDING
 
     def __post_init__(self):
         super().__post_init__()

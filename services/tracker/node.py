@@ -21,7 +21,7 @@ import numpy as np
 from ...schemas import MessageError
 from ...schemas.messages import LaserScan, OccupancyGrid, Tracks
 from ...geometry.frames import FrameParams, LASER_MOUNT
-from ..costmap.layers import scan_points
+from ...geometry.frames import scan_points
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import require_nonnegative
