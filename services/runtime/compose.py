@@ -14,7 +14,7 @@ from typing import Any
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout
 from .node import Node
 from .params import ParamError, load_params, load_params_file, read_yaml, unknown_names, unwrap_ros
-from .registry import UnknownService, node_class
+from .service_registry import UnknownService, node_class
 from .zenoh_config import check_loopback
 
 RESTART_POLICIES = ("no", "on-failure", "always")

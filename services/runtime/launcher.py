@@ -30,7 +30,7 @@ from ...schemas.keys import KeyLayout
 from .acl import CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, write_credentials
 from .compose import Compose, ComposeError, ServiceSpec, load_compose
 from .params import ParamError
-from .registry import UnknownService
+from .service_registry import UnknownService
 from .run import build_node
 from .zenoh_config import ROUTER_ENV, open_router, router_endpoint
 
