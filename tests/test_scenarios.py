@@ -11,7 +11,7 @@ from scipy import ndimage
 from omninav.cli.main import main as cli_main
 from omninav.experiments.scenarios import DYNAMIC_KINDS, KINDS, ScenarioError, generate_world, world_text
 from omninav.bench.scenarios import overall
-from omninav.experiments.scenarios.layout import TIMING
+from omninav.experiments.scenarios.route import TIMING
 from omninav.services.global_planner.astar import GlobalPlanner
 from omninav.services.global_planner.params import GlobalPlannerParams
 from omninav.geometry.grid import world_to_cell

@@ -15,7 +15,7 @@ import numpy as np
 from ..reachability import ReachabilityParams, mission_problems
 from ...sim.world import World
 from ...geometry.polygons import point_segment_distance
-from .layout import polyline_length
+from .route import polyline_length
 
 RESOLUTION = 0.05       # m, as `navigate` rasterises a world into its map
 CLEARANCE_M = 0.1       # m, as the shipped worlds keep the footprint from everything at the start
