@@ -30,7 +30,7 @@ from ..cli.profile import load_profile
 from ..schemas.codec import decode
 from ..schemas.keys import KeyLayout, type_for_key
 from ..services.runtime.errors import UserError, exits_2_on_user_error
-from ..sim.barn import GOAL, START
+from ..sim.barn_world import GOAL, START
 from ..sim.world import World, load_world, shared_data_dir
 from .lockstep_mission import START_S, run_mission
 

@@ -26,7 +26,7 @@ from ..geometry.footprint import DEFAULT_FOOTPRINT
 from ..geometry.polygons import (point_segment_distance, points_in_polygons, polygon_area, segment_distance,
                                  transform_points)
 from ..geometry.grid import GRID_OBSTACLE, cell_to_world, grid_coords, world_to_cell
-from .barn import BarnWorldError, barn_world_doc
+from .barn_world import BarnWorldError, barn_world_doc
 
 WALL_THICKNESS = 0.1          # m, walls and the outer walls along the bounds
 # The mecanum paper's robot: 0.832 m long (x) and 0.636 m wide (y), centred on the robot's origin.
