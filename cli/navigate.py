@@ -9,7 +9,7 @@ serves the map; truth: truth_pose, the ground truth relayed as the pose), costma
 navigator. Once every service is alive, the goals are sent one after another on `goal` (stamped
 with the sim clock); each ends with its nav_status (succeeded, aborted, canceled) or, after
 --timeout sim seconds, with a cancel. A failed goal ends the mission. Then everything is stopped
-(the recorder last) and the summary is computed from the recording (services/navigator/mission.py).
+(the recorder last) and the summary is computed from the recording (experiments/mission_score.py).
 
 Exit status: 0 every goal reached without collision; 1 the mission failed; 2 a user error (unknown
 world, a goal outside the map) or a service that could not start or died — the recording is kept.

@@ -1,6 +1,6 @@
 """`omninav bench barn`: the BARN Challenge's worlds run as the challenge runs them.
 
-Each world (sim/barn.py reads its `.world` file) is one mission in lockstep, in-process
+Each world (sim/barn_world.py reads its `.world` file) is one mission in lockstep, in-process
 (experiments/lockstep_mission.py) with the services `compose_for` defines for the Jackal profile
 and no prior map (localization `odom`: the costmaps come from the robot's own scans, map→odom
 stays the start pose, as BARN's move_base baseline works in the odom frame). The rules

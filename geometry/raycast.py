@@ -1,5 +1,5 @@
 """Ray casting kernels (numba): exact distances to segments and circles, and grid traversal through
-an occupancy grid (Amanatides & Woo). The simulated lidar (sim/raycast.py) and the localizer's beam
+an occupancy grid (Amanatides & Woo). The simulated lidar (sim/lidar.py) and the localizer's beam
 model (services/localizer/sensor.py) both cast with these."""
 from __future__ import annotations
 

@@ -32,7 +32,7 @@ WALL_THICKNESS = 0.1          # m, walls and the outer walls along the bounds
 # The mecanum paper's robot: 0.832 m long (x) and 0.636 m wide (y), centred on the robot's origin.
 DRIVES = ("mecanum", "omni3", "diff")
 DATA_ENV = "OMNINAV_DATA"     # overrides where `map: {relative_to: data}` looks
-BARN_SUFFIX = ".world"        # a BARN Challenge world (Gazebo SDF), read by sim/barn.py
+BARN_SUFFIX = ".world"        # a BARN Challenge world (Gazebo SDF), read by sim/barn_world.py
 _EPS = 1e-9                   # shapes that only touch a cell's border do not occupy it
 
 
@@ -462,7 +462,7 @@ WORLD_KEYS = ("name", "bounds", "origin", "map", "walls", "boxes", "circles", "m
 
 
 def load_world(path: str | Path) -> World:
-    """Read and validate a world file (a YAML world, or a BARN `.world` file: sim/barn.py); raises
+    """Read and validate a world file (a YAML world, or a BARN `.world` file: sim/barn_world.py); raises
     WorldError naming the file and key on any problem."""
     path = Path(path)
     if path.suffix == BARN_SUFFIX:

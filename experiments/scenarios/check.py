@@ -2,7 +2,7 @@
 drawn again from the next sub-seed.
 
 - the start and the goal are free for the footprint grown by CLEARANCE_M, and the goal can be
-  reached from the start on the world rasterised at RESOLUTION (sim/reachability.py: the global
+  reached from the start on the world rasterised at RESOLUTION (experiments/reachability.py: the global
   planner core, a disk of the footprint's inscribed radius);
 - every mover's loop keeps its radius plus CLEARANCE_M from the static obstacles (people do not
   walk through furniture), and keeps off the robot standing at its start or its goal (the robot
