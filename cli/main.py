@@ -30,6 +30,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "navigate": ("omninav.cli.navigate", "drive a navigation mission in the simulator and score it"),
     "scenario": ("omninav.experiments.scenarios.cli", "generate worlds of a kind from a seed (crossing, crowd, ...)"),
     "bench": ("omninav.cli.bench", "benchmarks (transport, recorder, sim, amcl, planner, ...)"),
+    "bridge": ("omninav.cli.bridge", "drive a ROS 2 robot (rmw_zenoh): the navigation stack and the ros2_bridge"),
     "demo": ("omninav.cli.demo", "the main job: a short run of the stack, recorded and replayed"),
 }
 

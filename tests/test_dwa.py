@@ -21,8 +21,9 @@ HOLO = DwaParams(min_vel_x=0.0, max_vel_y=0.5, min_vel_y=-0.5)
 DIFF = DwaParams(min_vel_x=0.0, holonomic_robot=False)
 
 
-def costmap(boxes=(), size_m=6.0, origin=(-3.0, -3.0)):
-    """Inflated costs (static + inflation, ROS defaults) of a free map with lethal boxes (x0, y0, x1, y1)."""
+def costmap(boxes=(), size_m=6.0, origin=(-3.0, -3.0), padding=0.0):
+    """Inflated costs (static + inflation, ROS defaults) of a free map with lethal boxes (x0, y0, x1, y1),
+    for the SQUARE robot padded by `padding`."""
     n = int(round(size_m / RES))
     info = MapMetaData(resolution=RES, width=n, height=n, origin=Pose2D(*origin, 0.0))
     data = np.zeros((n, n), np.int8)
@@ -30,11 +31,12 @@ def costmap(boxes=(), size_m=6.0, origin=(-3.0, -3.0)):
         data[int((y0 - origin[1]) / RES):int((y1 - origin[1]) / RES),
              int((x0 - origin[0]) / RES):int((x1 - origin[0]) / RES)] = 100
     inflation = InflationLayerParams()
-    cm = Costmap(CostmapParams(footprint=SQUARE, footprint_padding=0.0,
+    cm = Costmap(CostmapParams(footprint=SQUARE, footprint_padding=padding,
                                layers=(StaticLayerParams(), inflation)),
                  OccupancyGrid(info=info, data=data))
     cm.update()
-    check = footprint_check_cost(FOOTPRINT.inscribed_radius, FOOTPRINT.circumscribed_radius,
+    padded = make_footprint(SQUARE, padding=padding)
+    check = footprint_check_cost(padded.inscribed_radius, padded.circumscribed_radius,
                                  inflation.inflation_radius, inflation.cost_scaling_factor)
     return cm.costs.copy(), cm.info, check
 
@@ -231,3 +233,19 @@ def test_a_robot_facing_a_wall_3_cm_away_leaves_it_for_a_goal_behind_it(params):
     trace, results = drive(planner, costs, info, around, start, 600)
     assert not any(footprint_hits_lethal(costs, info, p) for p in trace)
     assert np.hypot(trace[:, 0] - 1.2, trace[:, 1]).min() < 0.1      # behind the wall
+
+
+@pytest.mark.parametrize("params", [HOLO, DIFF], ids=["holonomic", "diff"])
+def test_a_robot_pushed_within_its_padding_of_a_wall_drives_on_with_its_own_outline(params):
+    # a corridor 0.7 m wide: the robot (0.4 m) fits, its padded footprint (0.6 m) only on the centre
+    # line; off it by 10 cm (a tracking error) the centre stands on an inscribed cell and the padded
+    # outline on the wall: every rollout of the padded footprint is illegal, the robot's own is not
+    padding = 0.1
+    costs, info, check = costmap(boxes=[(-3.0, 0.35, 3.0, 0.7), (-3.0, -0.7, 3.0, -0.35)], padding=padding)
+    padded = make_footprint(SQUARE, padding=padding)
+    planner = DwaPlanner(params, padded.points, check, stop_padding=0.02, footprint_padding=padding)
+    start = (-2.0, 0.1, 0.0)
+    assert costs[int((start[1] - info.origin.y) / RES), int((start[0] - info.origin.x) / RES)] == 253
+    trace, results = drive(planner, costs, info, straight(-2.5, 0.0, 2.5, 0.0), start, 200)
+    assert not any(footprint_hits_lethal(costs, info, p) for p in trace)
+    assert trace[-1, 0] > 1.5, "drove along the corridor"

@@ -29,6 +29,7 @@ ROOMS: dict[str, set[str]] = {
     "services/local_planner": SERVICE_BASE | {"services/costmap"},    # the cost values of the costmap it reads
     "services/collision_monitor": SERVICE_BASE | {"services/local_planner"},   # tracks predicted (dynamic.py)
     "services/explore": SERVICE_BASE | {"services/costmap", "services/global_planner"},   # inflation, A*
+    "services/ros2_bridge": SERVICE_BASE | {"services/importers"},    # the ROS → omninav conversions of rosbag.py
     "cli": LIBRARY | {"experiments", "bench"},              # the command reaches everything
     "experiments": LIBRARY | {"cli"},                       # harnesses run what `omninav navigate` composes
     "bench": LIBRARY | {"cli", "experiments"},

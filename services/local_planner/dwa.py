@@ -201,6 +201,10 @@ class PoseCheck:
     # (H, W) int8: how many outline points on from one in this cell (either way along the outline) cannot lie on a
     # lethal or unknown cell or off the grid (`outline_skips`); -1 on lethal and unknown cells
     skips: np.ndarray
+    # the centre cost from which a pose is illegal whatever its outline: inscribed, unless the robot
+    # already stands on an inscribed cell (a tracking error put it there): then lethal, and the
+    # outline alone decides, as ROS does for a polygon footprint, so the robot can drive out again
+    centre_limit: int = INSCRIBED_INFLATED_OBSTACLE
 
 
 @njit(cache=True)
@@ -298,13 +302,13 @@ def _outline_clear(skips, x, y, c, s, grid, outline):
 
 
 @njit(cache=True, inline="always")
-def _pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost):
+def _pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost, centre_limit):
     """The centre cost of the robot at (x, y), heading (cos, sin) = (c, s), or -1 when that pose is
-    illegal: its centre cell inscribed, lethal, unknown or off the grid, or — from check_cost on, or
-    where `near` — a point of the outline on a lethal or unknown cell or off the grid. near and
-    skips as in PoseCheck, grid as in _rollout."""
+    illegal: its centre cell off the grid or at centre_limit or above (inscribed, lethal, unknown),
+    or — from check_cost on, or where `near` — a point of the outline on a lethal or unknown cell or
+    off the grid. near, skips and centre_limit as in PoseCheck, grid as in _rollout."""
     row, col = _cell(x, y, grid, costs.shape[0], costs.shape[1])
-    if row < 0 or costs[row, col] >= INSCRIBED_INFLATED_OBSTACLE:
+    if row < 0 or costs[row, col] >= centre_limit:
         return -1
     cost = int(costs[row, col])
     if (cost >= check_cost or near[row, col]) and not _outline_clear(skips, x, y, c, s, grid, outline):
@@ -325,7 +329,7 @@ def _step(vx, vy, w, dt):
 
 @njit(cache=True)
 def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, skips, grid, outline, check_cost,
-             poses, max_cost, legal):
+             centre_limit, poses, max_cost, legal):
     """Roll out and check every sample; fills poses (T, n_steps+1, 3), max_cost (T,), legal (T,).
 
     grid = (origin x, origin y, cos origin yaw, sin origin yaw, 1/resolution)."""
@@ -349,7 +353,7 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, ski
             c, s = math.cos(th), math.sin(th)
             k += 1
             poses[t, k, 0], poses[t, k, 1], poses[t, k, 2] = x, y, th
-            cost = _pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost)
+            cost = _pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost, centre_limit)
             if cost < 0:
                 ok = False
                 break
@@ -362,10 +366,11 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, ski
 
 
 @njit(cache=True)
-def _check_poses(poses, costs, near, skips, grid, outline, check_cost, legal):
+def _check_poses(poses, costs, near, skips, grid, outline, check_cost, centre_limit, legal):
     for i in range(poses.shape[0]):
         x, y, th = poses[i, 0], poses[i, 1], poses[i, 2]
-        legal[i] = _pose_cost(costs, near, skips, x, y, math.cos(th), math.sin(th), grid, outline, check_cost) >= 0
+        legal[i] = _pose_cost(costs, near, skips, x, y, math.cos(th), math.sin(th), grid, outline, check_cost,
+                              centre_limit) >= 0
 
 
 def footprint_outline(points: np.ndarray, spacing: float) -> np.ndarray:
@@ -475,21 +480,25 @@ def _grid(info: MapMetaData) -> np.ndarray:
 
 
 class DwaPlanner:
-    """The pure DWA core: `compute` is one control cycle. `footprint` is the (padded) polygon in the
-    robot frame; `check_cost` the centre cost from which the footprint's outline is checked
-    (footprint_check_cost; 0 checks every pose); `stop_padding` the collision monitor's stop zone
-    around the footprint, kept free of lethal and unknown cells (see `check_setup`)."""
+    """The pure DWA core: `compute` is one control cycle. `footprint` is the polygon in the robot
+    frame, padded by `footprint_padding`; `check_cost` the centre cost from which the footprint's
+    outline is checked (footprint_check_cost; 0 checks every pose); `stop_padding` the collision
+    monitor's stop zone around the footprint, kept free of lethal and unknown cells (see `check_setup`)."""
 
-    def __init__(self, params: DwaParams, footprint: np.ndarray, check_cost: int = 0, stop_padding: float = 0.0):
+    def __init__(self, params: DwaParams, footprint: np.ndarray, check_cost: int = 0, stop_padding: float = 0.0,
+                 footprint_padding: float = 0.0):
         self.params = params
         self.footprint = np.asarray(footprint, np.float64).reshape(-1, 2)
         self.check_cost = int(check_cost)
-        if not (math.isfinite(stop_padding) and stop_padding >= 0):
-            raise ValueError(f"stop_padding must be zero or positive, got {stop_padding}")
+        for name, value in (("stop_padding", stop_padding), ("footprint_padding", footprint_padding)):
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be zero or positive, got {value}")
         self.stop_padding = float(stop_padding)
+        self.footprint_padding = float(footprint_padding)
         self._outlines: dict[tuple[float, float], tuple[np.ndarray, float]] = {}
 
-    def _check(self, clearance: np.ndarray, skips: np.ndarray, resolution: float, padding: float = 0.0) -> PoseCheck:
+    def _check(self, clearance: np.ndarray, skips: np.ndarray, resolution: float, padding: float = 0.0,
+               centre_limit: int = INSCRIBED_INFLATED_OBSTACLE) -> PoseCheck:
         """The PoseCheck of the footprint padded by `padding`: its outline is checked where a centre may
         put a point of it on a lethal or unknown cell (within its farthest point plus a cell's diagonal:
         the centre anywhere in its cell, the obstacle anywhere in its own)."""
@@ -498,7 +507,7 @@ class DwaPlanner:
             reach = float(np.max(np.hypot(outline[:, 0], outline[:, 1]))) + math.sqrt(2.0) * resolution
             self._outlines[resolution, padding] = outline, reach
         outline, reach = self._outlines[resolution, padding]
-        return PoseCheck(outline, clearance <= reach, skips)
+        return PoseCheck(outline, clearance <= reach, skips, centre_limit)
 
     def check_setup(self, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
         """What poses are checked with, starting from `pose`.
@@ -507,22 +516,27 @@ class DwaPlanner:
         stop a motion into its stop zone, and the outline's points are half a cell apart, so a cell's
         corner may reach a quarter cell in between them — while the robot stands a cell clear of
         that zone (at its edge every slide along a jagged row of obstacle cells would cross it);
-        else the footprint padded by the quarter cell only, or at last the footprint itself: the
-        robot may still move (away). The outline is checked whatever the centre cost where
-        `PoseCheck.near` (the circumscribed cost alone let a corner reach a cell one further)."""
+        else the footprint padded by the quarter cell only, or the footprint itself, or at last the
+        robot's own outline without footprint_padding: the robot may still move (away). The outline is checked whatever the centre cost where
+        `PoseCheck.near` (the circumscribed cost alone let a corner reach a cell one further). A robot
+        whose centre stands on an inscribed cell is checked by its outline alone (`centre_limit`)."""
         costs = np.ascontiguousarray(costs, np.uint8)
+        grid = _grid(info)
+        row, col = _cell(float(pose[0]), float(pose[1]), grid, costs.shape[0], costs.shape[1])
+        centre_limit = (LETHAL_OBSTACLE if row >= 0 and costs[row, col] == INSCRIBED_INFLATED_OBSTACLE
+                        else INSCRIBED_INFLATED_OBSTACLE)
         blocked = costs >= LETHAL_OBSTACLE
         clearance = _clearance_cells(blocked) * info.resolution
         skips = outline_skips(clearance, info.resolution)
         quarter = info.resolution / 4
         legal = np.empty(1, np.bool_)
         start = np.asarray(pose, np.float64).reshape(1, 3)
-        for padding, margin in ((self.stop_padding + quarter, info.resolution), (quarter, 0.0)):
-            clear = self._check(clearance, skips, info.resolution, padding + margin)
-            _check_poses(start, costs, clear.near, skips, _grid(info), clear.outline, self.check_cost, legal)
+        for padding, margin in ((self.stop_padding + quarter, info.resolution), (quarter, 0.0), (0.0, 0.0)):
+            clear = self._check(clearance, skips, info.resolution, padding + margin, centre_limit)
+            _check_poses(start, costs, clear.near, skips, grid, clear.outline, self.check_cost, centre_limit, legal)
             if legal[0]:
-                return self._check(clearance, skips, info.resolution, padding)
-        return self._check(clearance, skips, info.resolution)
+                return self._check(clearance, skips, info.resolution, padding, centre_limit)
+        return self._check(clearance, skips, info.resolution, -self.footprint_padding, centre_limit)
 
     def n_steps(self, samples: np.ndarray) -> int:
         """Poses per rollout: the fastest sample moves at most sim_granularity (m, or rad) per step."""
@@ -545,7 +559,7 @@ class DwaPlanner:
         check = check if check is not None else self.check_setup(pose, costs, info)
         _rollout(samples, np.asarray(velocity, np.float64), step_limit, not p.dwa, n, dt,
                  np.asarray(pose, np.float64), np.ascontiguousarray(costs, np.uint8), check.near, check.skips,
-                 _grid(info), check.outline, self.check_cost, poses, max_cost, legal)
+                 _grid(info), check.outline, self.check_cost, check.centre_limit, poses, max_cost, legal)
         return poses, max_cost, legal
 
     def legal_poses(self, poses, costs: np.ndarray, info: MapMetaData) -> np.ndarray:
@@ -556,7 +570,7 @@ class DwaPlanner:
             return legal
         check = self.check_setup(poses[0], costs, info)
         _check_poses(poses, np.ascontiguousarray(costs, np.uint8), check.near, check.skips, _grid(info),
-                     check.outline, self.check_cost, legal)
+                     check.outline, self.check_cost, check.centre_limit, legal)
         return legal
 
     def score(self, poses, max_cost, legal, maps: PathMaps, info: MapMetaData) -> np.ndarray:

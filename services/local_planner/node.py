@@ -181,7 +181,7 @@ class LocalPlannerNode(Node):
         check_cost = footprint_check_cost(fp.inscribed_radius, fp.circumscribed_radius, p.inflation_radius,
                                           p.cost_scaling_factor)
         self.dwa = DwaPlanner(DwaParams(**{f.name: getattr(p, f.name) for f in fields(DwaParams)}), fp.points,
-                              check_cost, p.stop_padding)
+                              check_cost, p.stop_padding, p.footprint_padding)
         self.follower_params = p.follower_params()
         self.controller = self._make_controller(fp.points, check_cost)
         self.ticks = Ticks(p.controller_frequency)

@@ -21,7 +21,7 @@ def reference_pose_cost(planner: DwaPlanner, check: PoseCheck, pose, costs: np.n
         return np.where(inside, costs[np.where(inside, rows, 0), np.where(inside, cols, 0)].astype(int), -1)
 
     centre = int(cost_at(np.asarray(pose, float)[None, :2])[0])
-    if centre < 0 or centre >= costmap_layers.INSCRIBED_INFLATED_OBSTACLE:
+    if centre < 0 or centre >= check.centre_limit:
         return -1
     row, col = world_to_cell(info, pose[0], pose[1])
     if centre >= planner.check_cost or check.near[int(row), int(col)]:

@@ -27,6 +27,7 @@ SERVICES: dict[str, str] = {
     "truth_pose": "omninav.services.truth_pose.node:TruthPoseNode",
     "view": "omninav.services.view.node:ViewNode",
     "tracker": "omninav.services.tracker.node:TrackerNode",
+    "ros2_bridge": "omninav.services.ros2_bridge.node:Ros2BridgeNode",
 }
 
 

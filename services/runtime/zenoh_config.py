@@ -83,12 +83,19 @@ def router_config(listen: str, dictionary: Path | None = None, access_control: d
 def client_config(router: str | None = None, credentials: str | None = None) -> zenoh.Config:
     """A client that connects to the router and waits for it (start order does not matter); it
     authenticates with the credentials file given, else $OMNINAV_CREDENTIALS's, if any."""
-    conf = _base("client")
+    conf = foreign_client_config(router_endpoint(router))
     credentials = credentials or os.environ.get(CREDENTIALS_ENV)
     if credentials:
         conf.insert_json5("transport/auth/usrpwd", auth_json(*read_credentials(credentials)))
+    return conf
+
+
+def foreign_client_config(endpoint: str) -> zenoh.Config:
+    """A client of the router at endpoint (loopback only) that waits for it, without omninav's
+    credentials: as such it also joins another system's router, e.g. a ROS 2 robot's rmw_zenoh one."""
+    conf = _base("client")
     conf.insert_json5("listen/endpoints", "[]")
-    conf.insert_json5("connect/endpoints", json.dumps([router_endpoint(router)]))
+    conf.insert_json5("connect/endpoints", json.dumps([check_loopback(endpoint)]))
     conf.insert_json5("connect/timeout_ms", "-1")
     conf.insert_json5("connect/exit_on_failure", "false")
     return conf

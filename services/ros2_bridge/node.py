@@ -1,0 +1,190 @@
+"""The ROS 2 bridge as a service: omninav's bus on one side, a ROS 2 robot's rmw_zenoh router on the other.
+
+omninav side (a Node like every service, so `up` grants it exactly this): it puts sim/clock, scan,
+odom, goal and initialpose (what the robot's sensors and a ROS user's requests become) and subscribes
+to cmd_vel (the collision monitor's output: the bridge takes the chassis's place), map, pose, plan
+and tf/map_odom, all sporadic.
+ROS side (a second Zenoh session, a client of the robot's router, loopback only, without omninav's
+credentials): one ROS node with a subscription per input topic and a publisher per output topic,
+each announced by its liveliness token as rmw_zenoh does (rmw.py), so `ros2 topic list` and
+`ros2 node list` on the robot show them. Transient-local topics use Zenoh's advanced publisher and
+subscriber as rmw_zenoh does: /tf_static sent before the bridge started still reaches it, and /map
+reaches an RViz that starts later. ROS samples wait in an inbox that the node drains on its
+own thread (it is paced like a source), so the Node's state is touched by one thread only.
+"""
+from __future__ import annotations
+
+import json
+import queue
+import threading
+from collections.abc import Callable
+
+import zenoh
+from zenoh.ext import CacheConfig, HistoryConfig, declare_advanced_publisher, declare_advanced_subscriber
+
+from ..runtime.live import LiveRunner
+from ..runtime.node import Node
+from ..runtime.zenoh_config import check_loopback, foreign_client_config
+from .bridge import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, RosTopic
+from .rmw import (PUBLISHER, SUBSCRIPTION, TRANSIENT_LOCAL, NodeIdentity, entity_gid, pack_attachment, topic_key,
+                  unpack_attachment)
+
+POLL_S = 0.01       # wall s between drains of the ROS inbox (a source's pace: it adds at most this latency)
+RETRY_S = 1.0       # wall s between attempts to reach the robot's router
+
+
+def ros_session_config(router: str) -> zenoh.Config:
+    """A client of the robot's router that gives up after RETRY_S if it does not answer; samples carry
+    timestamps, as in rmw_zenoh's sessions (Zenoh's advanced publisher, for transient-local topics,
+    orders by them)."""
+    conf = foreign_client_config(router)
+    conf.insert_json5("timestamping/enabled", "true")
+    conf.insert_json5("connect/timeout_ms", json.dumps(round(RETRY_S * 1000)))    # give up, to be retried
+    return conf
+
+
+def _bytes(attachment: zenoh.ZBytes | None) -> bytes:
+    return b"" if attachment is None else attachment.to_bytes()
+
+
+class Ros2BridgeNode(Node):
+    service = "ros2_bridge"
+    Params = Ros2BridgeParams
+
+    def setup(self) -> None:
+        p = self.params
+        check_loopback(p.ros_router)
+        if p.domain < 0:
+            raise ValueError(f"{self.name}: domain must be a ROS domain id ≥ 0, got {p.domain}")
+        self.bridge = Bridge(p)
+        # (topic, CDR payload, rmw_zenoh attachment or b"")
+        self.inbox: queue.SimpleQueue[tuple[RosTopic, bytes, bytes]] = queue.SimpleQueue()
+        self._last_seq: dict[bytes, int] = {}      # a ROS publisher's GID -> its last sequence number
+        # (ROS topic, CDR payload, stamp_ns) -> the robot; set by the ROS session (or a test)
+        self.ros_sink: Callable[[RosTopic, bytes, int], None] | None = None
+        self._reported: set[str] = set()
+        self.to_stack = {name: self.publisher(name) for name in ("sim/clock", "scan", "odom", "goal", "initialpose")}
+        for topic in OUTPUTS:
+            self.subscribe(topic.omninav, lambda msg, t=topic: self._to_robot(t, msg), synced=False)
+
+    def pace_s(self) -> float:
+        return POLL_S
+
+    def tick(self) -> None:
+        while True:
+            try:
+                topic, payload, attachment = self.inbox.get_nowait()
+            except queue.Empty:
+                return
+            self.from_robot(topic, payload, attachment)
+
+    def from_robot(self, topic: RosTopic, payload: bytes, attachment: bytes = b"") -> None:
+        """One ROS sample into the stack (a sample that does not decode is counted and logged once)."""
+        key = f"ros2{topic.name}"     # how counters and logs name a ROS topic
+        self.counters[f"received/{key}"] += 1
+        self._count_lost(key, attachment)
+        try:
+            pairs = self.bridge.from_ros(topic, payload)
+        except Exception as exc:    # rosbags raises several kinds on a bad payload
+            self.handler_failed(key, exc)
+            return
+        for problem in self.bridge.problems:
+            if problem not in self._reported:
+                self._reported.add(problem)
+                self.log.error("%s", problem)
+        for name, msg in pairs:
+            self.now_ns = max(self.now_ns, msg.header.stamp_ns)
+            self.to_stack[name].publish(msg)
+
+    def _count_lost(self, key: str, attachment: bytes) -> None:
+        """Samples a ROS publisher numbered but that never came (as rmw_zenoh's message-lost event);
+        one without rmw_zenoh's attachment (which rmw_zenoh itself would drop) is taken, and counted."""
+        try:
+            seq, _, gid = unpack_attachment(attachment)
+        except ValueError:
+            self.counters[f"no_attachment/{key}"] += 1
+            return
+        last = self._last_seq.get(gid)
+        if last is not None and seq > last + 1:
+            self.counters[f"lost/{key}"] += seq - last - 1
+        self._last_seq[gid] = seq
+
+    def _to_robot(self, topic: RosTopic, msg) -> None:
+        if self.ros_sink is not None:
+            self.ros_sink(topic, self.bridge.to_ros(topic, msg), msg.header.stamp_ns)
+            self.counters[f"sent/ros2{topic.name}"] += 1
+
+    def diagnostic(self):
+        diag = super().diagnostic()
+        diag.values.update(self.bridge.counts)
+        return diag
+
+    def run_live(self, router: str | None, stop_event: threading.Event) -> None:
+        """omninav's side on this thread; the robot's side joined on another as soon as its router
+        answers, and left only after the last omninav input was handled."""
+        runner = LiveRunner(self, router)
+        runner.stop_event = stop_event      # `omninav run`'s signal handlers set this one
+        finished = threading.Event()
+        robot = threading.Thread(target=self._join_robot, args=(stop_event, finished), name="ros2-session")
+        robot.start()
+        try:
+            runner.run()
+        finally:
+            finished.set()
+            robot.join()
+
+    def _join_robot(self, stop: threading.Event, finished: threading.Event) -> None:
+        p, waiting = self.params, False
+        while not stop.is_set():
+            try:
+                ros = zenoh.open(ros_session_config(p.ros_router))
+            except zenoh.ZError:
+                if not waiting:
+                    waiting = True
+                    self.log.warning("waiting for the robot's router at %s (rmw_zenohd)", p.ros_router)
+                stop.wait(RETRY_S)
+                continue
+            with ros:
+                handles = self._declare_ros(ros)
+                self.log.info("on the robot's ROS 2 graph (domain %d, router %s) as node %s", p.domain,
+                              p.ros_router, p.node_name)
+                finished.wait()
+                self.ros_sink = None
+                for handle in handles:
+                    handle.undeclare()
+            return
+
+    def _declare_ros(self, ros: zenoh.Session) -> list:
+        p = self.params
+        me = NodeIdentity(p.domain, str(ros.info.zid()), p.node_name, p.namespace)
+        handles = [ros.liveliness().declare_token(me.node_token())]
+        publishers = {}
+        for entity_id, topic in enumerate((*INPUTS, *OUTPUTS), start=me.nid + 1):
+            type_hash = self.bridge.store.hash_rihs01(topic.msgtype)
+            key = topic_key(p.domain, topic.name, topic.msgtype, type_hash)
+            kind = SUBSCRIPTION if topic in INPUTS else PUBLISHER
+            token = me.entity_token(entity_id, kind, topic.name, topic.msgtype, type_hash, topic.qos)
+            latched = topic.qos.durability == TRANSIENT_LOCAL
+            if kind == SUBSCRIPTION:
+                # as rmw_zenoh's transient-local subscriptions: ask late-detected publishers' caches for
+                # what they sent before (robot_state_publisher's /tf_static, sent once at its start)
+                history = HistoryConfig(detect_late_publishers=True, max_samples=topic.qos.depth) if latched else None
+                # only the robot's samples: not what the bridge itself puts on /tf
+                handles.append(declare_advanced_subscriber(
+                    ros, key, lambda sample, t=topic: self.inbox.put((t, sample.payload.to_bytes(), _bytes(sample.attachment))),
+                    allowed_origin=zenoh.Locality.REMOTE, history=history, subscriber_detection=latched))
+            else:
+                # a transient-local topic (/map) keeps its last samples for subscribers that come later
+                publishers[topic.name] = (declare_advanced_publisher(
+                    ros, key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE,
+                    cache=CacheConfig(max_samples=topic.qos.depth) if latched else None,
+                    publisher_detection=latched), entity_gid(token), [0])
+                handles.append(publishers[topic.name][0])
+            handles.append(ros.liveliness().declare_token(token))
+
+        def sink(topic: RosTopic, payload: bytes, stamp_ns: int) -> None:
+            publisher, gid, seq = publishers[topic.name]
+            seq[0] += 1
+            publisher.put(payload, attachment=pack_attachment(seq[0], stamp_ns, gid))
+        self.ros_sink = sink
+        return handles

@@ -1,0 +1,115 @@
+"""A stand-in for a ROS 2 robot running rmw_zenoh, for tests/test_ros2_bridge.py: no ROS needed.
+
+    python tests/fake_ros2_robot.py ROUTER BAG GOAL_X GOAL_Y GOAL_YAW
+
+Publishes as rmw_zenoh does (rmw.py: keys, 33-byte attachments; CDR by rosbags, ROS 2 Jazzy types)
+the racecar bag's /scan and its /vesc/odom as /odom, in stamp order at the bag's pace, once omninav's
+bridge has subscribed to both (its liveliness tokens: then the stack behind it is up, as `up` starts
+the bridge last); /tf_static with the racecar's laser mounting at its start, transient local as
+robot_state_publisher's (before the bridge exists: it must ask the publisher's cache), and
+/goal_pose after the tenth scan. When the bag ends the robot stands: the last scan and odometry go on with advancing stamps,
+until the process is stopped.
+"""
+from __future__ import annotations
+
+import math
+import sys
+import time
+from pathlib import Path
+
+import zenoh
+from rosbags.highlevel import AnyReader
+from zenoh.ext import CacheConfig, declare_advanced_publisher
+
+from omninav.services.ros2_bridge.bridge import typestore
+from omninav.services.ros2_bridge.node import ros_session_config
+from omninav.services.ros2_bridge.rmw import (PUBLISHER, TRANSIENT_LOCAL, NodeIdentity, Qos, entity_gid,
+                                              pack_attachment, topic_key)
+
+LASER_X = 0.285        # the MIT racecar's base_link -> laser (docs/localize_eval.md)
+STAND_PERIOD_NS = 50_000_000
+
+
+def main(router: str, bag: str, goal: tuple[float, float, float]) -> None:
+    store = typestore()
+    t = store.types
+    with zenoh.open(ros_session_config(router)) as session:
+        me = NodeIdentity(0, str(session.info.zid()), "fake_robot")
+        publishers, tokens = {}, []
+        for number, (topic, msgtype) in enumerate((("/scan", "sensor_msgs/msg/LaserScan"),
+                                                   ("/odom", "nav_msgs/msg/Odometry"),
+                                                   ("/tf_static", "tf2_msgs/msg/TFMessage"),
+                                                   ("/goal_pose", "geometry_msgs/msg/PoseStamped")), start=1):
+            type_hash = store.hash_rihs01(msgtype)
+            latched = topic == "/tf_static"     # robot_state_publisher's: transient local, kept for late joiners
+            qos = Qos(durability=TRANSIENT_LOCAL, depth=1) if latched else Qos()
+            token = me.entity_token(number, PUBLISHER, topic, msgtype, type_hash, qos)
+            publishers[topic] = [declare_advanced_publisher(session, topic_key(0, topic, msgtype, type_hash),
+                                                            congestion_control=zenoh.CongestionControl.BLOCK,
+                                                            cache=CacheConfig(max_samples=1) if latched else None,
+                                                            publisher_detection=latched),
+                                 msgtype, entity_gid(token), 0]
+            tokens.append(session.liveliness().declare_token(token))
+
+        def publish(topic: str, msg, stamp_ns: int) -> None:
+            entry = publishers[topic]
+            entry[3] += 1
+            entry[0].put(bytes(store.serialize_cdr(msg, entry[1])),
+                         attachment=pack_attachment(entry[3], stamp_ns, entry[2]))
+
+        with AnyReader([Path(bag)]) as reader:
+            used = [c for c in reader.connections if c.topic in ("/scan", "/vesc/odom")]
+            messages = [(c.topic, reader.deserialize(raw, c.msgtype)) for c, _, raw in reader.messages(connections=used)]
+        messages.sort(key=lambda item: _ns(item[1].header.stamp))
+        first = _ns(messages[0][1].header.stamp)
+        # at once, as robot_state_publisher at its start: the bridge, not there yet, gets it from the cache
+        mount = t["geometry_msgs/msg/TransformStamped"](
+            header=t["std_msgs/msg/Header"](stamp=_time(t, first), frame_id="base_link"), child_frame_id="laser",
+            transform=t["geometry_msgs/msg/Transform"](
+                translation=t["geometry_msgs/msg/Vector3"](x=LASER_X, y=0.0, z=0.0),
+                rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
+        publish("/tf_static", t["tf2_msgs/msg/TFMessage"](transforms=[mount]), first)
+        wanted = ("%scan/sensor_msgs", "%odom/nav_msgs")
+        while not all(any("/MS/" in str(r.ok.key_expr) and w in str(r.ok.key_expr)
+                          for r in session.liveliness().get("@ros2_lv/0/**", timeout=1.0) if r.ok is not None)
+                      for w in wanted):
+            time.sleep(0.2)
+        print("bridge subscribed", flush=True)
+
+
+        started, scans, last = time.monotonic(), 0, {}
+        for topic, msg in messages:
+            stamp = _ns(msg.header.stamp)
+            time.sleep(max(0.0, (stamp - first) / 1e9 - (time.monotonic() - started)))
+            name = "/scan" if topic == "/scan" else "/odom"
+            publish(name, msg, stamp)
+            last[name] = msg
+            scans += name == "/scan"
+            if scans == 10 and name == "/scan":
+                x, y, yaw = goal
+                pose = t["geometry_msgs/msg/Pose"](
+                    position=t["geometry_msgs/msg/Point"](x=x, y=y, z=0.0),
+                    orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2)))
+                publish("/goal_pose", t["geometry_msgs/msg/PoseStamped"](
+                    header=t["std_msgs/msg/Header"](stamp=msg.header.stamp, frame_id="map"), pose=pose), stamp)
+                print("goal sent", flush=True)
+        print("bag done; standing", flush=True)
+        while True:     # until stopped
+            stamp += STAND_PERIOD_NS
+            for name, msg in last.items():
+                msg.header.stamp = _time(t, stamp)
+                publish(name, msg, stamp)
+            time.sleep(STAND_PERIOD_NS / 1e9)
+
+
+def _ns(time_msg) -> int:
+    return int(time_msg.sec) * 1_000_000_000 + int(time_msg.nanosec)
+
+
+def _time(types, stamp_ns: int):
+    sec, nanosec = divmod(stamp_ns, 1_000_000_000)
+    return types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1], sys.argv[2], (float(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])))
