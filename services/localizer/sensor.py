@@ -20,7 +20,7 @@ Beams are picked as amcl picks them: every ((count âˆ’ 1) // (laser_max_beams âˆ
 likelihood_field_prob every ceil(count / laser_max_beams)-th. Readings at or below the minimum
 range become range_max (amcl has no notion of too-close); readings beyond range_max are ignored.
 
-Particle poses are mapped into grid coordinates by an affine map derived from mapio.grid_coords,
+Particle poses are mapped into grid coordinates by an affine map derived from geometry.grid.grid_coords,
 so maps with a yawed origin (the Stata basement) work without special cases.
 """
 from __future__ import annotations
