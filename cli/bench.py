@@ -7,20 +7,20 @@ import sys
 
 # name -> module with add_arguments(parser) and main(args) -> int
 BENCHES: dict[str, str] = {
-    "transport": "omninav.services.runtime.bench_transport",
-    "recorder": "omninav.services.recorder.bench",
-    "sim": "omninav.sim.bench",
-    "amcl": "omninav.services.localizer.bench",
-    "planner": "omninav.services.global_planner.bench",
-    "local": "omninav.services.local_planner.bench",
+    "transport": "omninav.bench.transport",
+    "recorder": "omninav.bench.recorder",
+    "sim": "omninav.bench.sim",
+    "amcl": "omninav.bench.amcl",
+    "planner": "omninav.bench.planner",
+    "local": "omninav.bench.local_planner",
     "fuzz": "omninav.experiments.fuzz",
-    "missions": "omninav.experiments.missions_bench",
-    "paper": "omninav.experiments.paper_bench",
-    "scenarios": "omninav.experiments.scenarios.bench",
+    "missions": "omninav.bench.missions",
+    "paper": "omninav.bench.paper",
+    "scenarios": "omninav.bench.scenarios",
     "barn": "omninav.experiments.barn",
-    "explore": "omninav.experiments.explore_bench",
-    "kills": "omninav.experiments.kills_bench",
-    "footprint": "omninav.experiments.footprint_bench",
+    "explore": "omninav.bench.explore",
+    "kills": "omninav.experiments.kills",
+    "footprint": "omninav.bench.process_footprint",
 }
 
 

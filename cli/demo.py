@@ -52,7 +52,7 @@ def _step(title: str, cmd: list[str], log: Path, show_output: bool = False) -> i
 def _params_of(compose: Path, name: str) -> list[str]:
     """`--set k=v` for each parameter the mission's compose file gave a service: the replay must
     run the service as the live run did (but for its state files, which are the live run's own)."""
-    from ..services.runtime.registry import node_class
+    from ..services.runtime.service_registry import node_class
 
     service = next(s for s in yaml.safe_load(compose.read_text())["services"] if s["name"] == name)
     state_files = node_class(service["service"]).state_files

@@ -27,12 +27,13 @@ from ..schemas.messages import OccupancyGrid
 from ..services.map_server.mapio import (MODES, UNKNOWN_GREY, MapError, load_map, map_files, read_map_yaml,
                                           save_map)
 from ..services.chassis.kinematics import DRIVES
-from ..services.localizer.evaluate import parse_waypoints
+from ..experiments.localize_eval import parse_waypoints
 from ..services.runtime.params import ParamError, parse_overrides
-from ..services.slam.mapping import (MAPPING_ROUTES, build_map, compare_with_truth, explored_share,
+from ..experiments.mapping import (MAPPING_ROUTES, build_map, compare_with_truth, explored_share,
                                      slam_params_for)
 from ..sim.node import open_world
-from ..sim.world import GRID_OBSTACLE, WorldError
+from ..sim.world import WorldError
+from ..geometry.grid import GRID_OBSTACLE
 from .introspect import ROUTER_HELP, CommandError, connect, key_expression, reports_errors
 from .report import new_figure
 

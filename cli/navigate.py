@@ -9,7 +9,7 @@ serves the map; truth: truth_pose, the ground truth relayed as the pose), costma
 navigator. Once every service is alive, the goals are sent one after another on `goal` (stamped
 with the sim clock); each ends with its nav_status (succeeded, aborted, canceled) or, after
 --timeout sim seconds, with a cancel. A failed goal ends the mission. Then everything is stopped
-(the recorder last) and the summary is computed from the recording (services/navigator/mission.py).
+(the recorder last) and the summary is computed from the recording (experiments/mission_score.py).
 
 A crash does not end the mission: `up` restarts every service but the sim and the recorder
 (restart: on-failure, at most MAX_RESTARTS times), and each resumes from a state file in the run's
@@ -46,14 +46,14 @@ from ..schemas.keys import DEFAULT_ROBOT, KeyLayout
 from ..schemas.messages import CancelGoal, Clock, Goal, Header, NavStatus, Pose2D
 from ..services.chassis.kinematics import DRIVES
 from ..services.map_server.mapio import MapError, load_map, save_map
-from ..services.navigator.mission import TERMINAL, MissionError, load_mission, summarize_mission, summary_lines
+from ..experiments.mission_score import TERMINAL, MissionError, load_mission, summarize_mission, summary_lines
 from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..services.runtime.live import LiveRunner, tokens_present
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.zenoh_config import ROUTER_ENV, free_loopback_endpoint, open_client, router_endpoint
 from ..sim.node import open_world
-from ..sim.reachability import mission_problems
+from ..experiments.reachability import mission_problems
 from ..sim.world import World, WorldError, world_path
 from .goal_args import add_goal_argument
 from .profile import Profile, load_profile

@@ -35,11 +35,13 @@ from ..schemas import MessageError, decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ..schemas.messages import (Costmap, Diagnostic, Goal, LaserScan, NavStatus, Obstacles, OccupancyGrid, Odometry,
                                 Path as PathMsg, PoseWithCovariance)
-from ..services.navigator.mission import TERMINAL
+from ..experiments.mission_score import TERMINAL
 from ..services.recorder.mcap_io import Record, RecordingError, read_records
-from ..services.se2 import compose, inverse, wrap_angle
-from ..sim.raycast import LidarParams, laser_pose
-from ..sim.world import DEFAULT_FOOTPRINT, GRID_OBSTACLE, World, WorldError, load_world, world_path
+from ..geometry.se2 import compose, inverse, wrap_angle
+from ..sim.lidar import LidarParams, laser_pose
+from ..sim.world import World, WorldError, load_world, world_path
+from ..geometry.footprint import DEFAULT_FOOTPRINT
+from ..geometry.grid import GRID_OBSTACLE
 
 NS_PER_S = 1e9
 SCAN_MOMENTS = 4

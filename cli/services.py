@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from ..services.runtime.registry import SERVICES
+from ..services.runtime.service_registry import SERVICES
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -1,6 +1,6 @@
 """`omninav bench barn`: the BARN Challenge's worlds run as the challenge runs them.
 
-Each world (sim/barn.py reads its `.world` file) is one mission in lockstep, in-process
+Each world (sim/barn_world.py reads its `.world` file) is one mission in lockstep, in-process
 (experiments/lockstep_mission.py) with the services `compose_for` defines for the Jackal profile
 and no prior map (localization `odom`: the costmaps come from the robot's own scans, map→odom
 stays the start pose, as BARN's move_base baseline works in the odom frame). The rules
@@ -30,7 +30,7 @@ from ..cli.profile import load_profile
 from ..schemas.codec import decode
 from ..schemas.keys import KeyLayout, type_for_key
 from ..services.runtime.errors import UserError, exits_2_on_user_error
-from ..sim.barn import GOAL, START
+from ..sim.barn_world import GOAL, START
 from ..sim.world import World, load_world, shared_data_dir
 from .lockstep_mission import START_S, run_mission
 

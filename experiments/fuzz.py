@@ -128,7 +128,7 @@ def main(args) -> int:
     import time
     from pathlib import Path
 
-    from ..services.runtime.registry import SERVICES
+    from ..services.runtime.service_registry import SERVICES
     from ..services.runtime.run import build_node
 
     if args.random_per_key < 0:

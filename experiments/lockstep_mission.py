@@ -5,7 +5,7 @@ Nodes and stepped by the InProcessRunner, with a goal sequencer in place of the 
 No wall clock is in the loop: the simulator advances a step only when every service has processed
 what the last step released, so the run is as fast as the CPU computes it and the same mapping
 gives the same messages — and, written with `recording`, the same MCAP file byte for byte — at any
-machine load. The summary is the one `omninav navigate` prints (services/navigator/mission.py).
+machine load. The summary is the one `omninav navigate` prints (experiments/mission_score.py).
 """
 from __future__ import annotations
 
@@ -17,7 +17,7 @@ from typing import Callable
 import numpy as np
 
 from ..schemas.messages import CancelGoal, Clock, Goal, NavStatus, Pose2D
-from ..services.navigator.mission import TERMINAL, MissionCollector, MissionSummary, summarize_mission
+from .mission_score import TERMINAL, MissionCollector, MissionSummary, summarize_mission
 from ..services.recorder.mcap_io import RecordingWriter
 from ..services.runtime.inprocess import InProcessRunner
 from ..services.runtime.node import NS_PER_S, Node

@@ -20,7 +20,8 @@ from ..services.chassis.kinematics import ChassisParams
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.params import load_params
 from .physics import Readings, SimParams, Simulation
-from .world import World, WorldError, load_world, polygon_area, shipped_worlds, world_path
+from .world import World, WorldError, load_world, shipped_worlds, world_path
+from ..geometry.polygons import polygon_area
 
 
 @dataclass(frozen=True)

@@ -44,11 +44,12 @@ import numpy as np
 import pymunk
 from pymunk.autogeometry import convex_decomposition
 
-from ..services.chassis.follower import follower_readings
+from ..services.chassis.follower_wheels import follower_readings
 from ..services.chassis.kinematics import DRIVES, ChassisParams, Kinematics
-from ..services.map_server.mapio import cell_to_world
-from ..services.se2 import relative, se2_exp, wrap_angle
-from .world import World, polygon_area, transform_points
+from ..geometry.grid import cell_to_world
+from ..geometry.se2 import relative, se2_exp, wrap_angle
+from .world import World
+from ..geometry.polygons import polygon_area, transform_points
 
 ROBOT_MASS = 40.0            # kg; with pymunk's moment it only decides how a contact splits turn and push
 CONTACT_SLOP = 1e-3          # m of overlap pymunk tolerates before pushing bodies apart

@@ -20,16 +20,18 @@ import numpy as np
 
 from ..schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
 from ..services.runtime.params import unknown_names
-from ..services.map_server.mapio import MapError, cell_to_world, grid_coords, load_map, read_yaml, world_to_cell
-from .barn import BarnWorldError, barn_world_doc
+from ..services.map_server.mapio import MapError, load_map, read_yaml
+from ..geometry.footprint import DEFAULT_FOOTPRINT
+from ..geometry.polygons import (point_segment_distance, points_in_polygons, polygon_area, segment_distance,
+                                 transform_points)
+from ..geometry.grid import GRID_OBSTACLE, cell_to_world, grid_coords, world_to_cell
+from .barn_world import BarnWorldError, barn_world_doc
 
 WALL_THICKNESS = 0.1          # m, walls and the outer walls along the bounds
 # The mecanum paper's robot: 0.832 m long (x) and 0.636 m wide (y), centred on the robot's origin.
-DEFAULT_FOOTPRINT = np.array([[0.416, 0.318], [-0.416, 0.318], [-0.416, -0.318], [0.416, -0.318]])
 DRIVES = ("mecanum", "omni3", "diff")
 DATA_ENV = "OMNINAV_DATA"     # overrides where `map: {relative_to: data}` looks
-BARN_SUFFIX = ".world"        # a BARN Challenge world (Gazebo SDF), read by sim/barn.py
-GRID_OBSTACLE = 50            # map cells above this occupancy (percent) are obstacles
+BARN_SUFFIX = ".world"        # a BARN Challenge world (Gazebo SDF), read by sim/barn_world.py
 _EPS = 1e-9                   # shapes that only touch a cell's border do not occupy it
 
 
@@ -67,53 +69,6 @@ def wall_rectangle(x1: float, y1: float, x2: float, y2: float) -> np.ndarray:
     length = math.hypot(x2 - x1, y2 - y1)
     return rectangle(((x1 + x2) / 2, (y1 + y2) / 2), (length + WALL_THICKNESS, WALL_THICKNESS),
                      math.atan2(y2 - y1, x2 - x1))
-
-
-def transform_points(points: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Points (P, 2) in the frames of poses (Q, 3) → world points (Q, P, 2)."""
-    poses = np.atleast_2d(np.asarray(poses, np.float64))
-    c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
-    px, py = points[None, :, 0], points[None, :, 1]
-    return np.stack([poses[:, 0:1] + c * px - s * py, poses[:, 1:2] + s * px + c * py], axis=-1)
-
-
-def point_segment_distance(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Distance from points p to segments ab; all (..., 2) arrays that broadcast."""
-    ab, ap = b - a, p - a
-    length2 = np.sum(ab * ab, axis=-1)
-    t = np.clip(np.sum(ap * ab, axis=-1) / np.where(length2 > 0, length2, 1.0), 0.0, 1.0)
-    closest = a + t[..., None] * ab
-    return np.hypot(*np.moveaxis(p - closest, -1, 0))
-
-
-def _cross(u: np.ndarray, v: np.ndarray) -> np.ndarray:
-    return u[..., 0] * v[..., 1] - u[..., 1] * v[..., 0]
-
-
-def segment_distance(a: np.ndarray, b: np.ndarray, c: np.ndarray, d: np.ndarray) -> np.ndarray:
-    """Distance between segments ab and cd (broadcast (..., 2) arrays); 0 where they cross."""
-    d1, d2 = _cross(b - a, c - a), _cross(b - a, d - a)
-    d3, d4 = _cross(d - c, a - c), _cross(d - c, b - c)
-    crossing = (d1 * d2 <= 0) & (d3 * d4 <= 0) & ((d1 != 0) | (d2 != 0) | (d3 != 0) | (d4 != 0))
-    ends = np.minimum(np.minimum(point_segment_distance(a, c, d), point_segment_distance(b, c, d)),
-                      np.minimum(point_segment_distance(c, a, b), point_segment_distance(d, a, b)))
-    return np.where(crossing, 0.0, ends)
-
-
-def points_in_polygons(points: np.ndarray, polygons: np.ndarray) -> np.ndarray:
-    """Whether points (..., P, 2) lie inside polygons (..., K, V, 2) (even-odd rule) → (..., P, K)."""
-    p = points[..., :, None, None, :]                      # (..., P, 1, 1, 2)
-    a = polygons[..., None, :, :, :]                        # (..., 1, K, V, 2)
-    b = np.roll(polygons, -1, axis=-2)[..., None, :, :, :]
-    straddles = (a[..., 1] > p[..., 1]) != (b[..., 1] > p[..., 1])
-    with np.errstate(divide="ignore", invalid="ignore"):
-        x_cross = a[..., 0] + (p[..., 1] - a[..., 1]) * (b[..., 0] - a[..., 0]) / (b[..., 1] - a[..., 1])
-    return (np.count_nonzero(straddles & (p[..., 0] < x_cross), axis=-1) % 2) == 1
-
-
-def polygon_area(polygon: np.ndarray) -> float:
-    x, y = polygon[:, 0], polygon[:, 1]
-    return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
 # ---------------------------------------------------------------- movers
@@ -510,7 +465,7 @@ WORLD_KEYS = ("name", "bounds", "origin", "map", "walls", "boxes", "circles", "m
 
 
 def load_world(path: str | Path) -> World:
-    """Read and validate a world file (a YAML world, or a BARN `.world` file: sim/barn.py); raises
+    """Read and validate a world file (a YAML world, or a BARN `.world` file: sim/barn_world.py); raises
     WorldError naming the file and key on any problem."""
     path = Path(path)
     if path.suffix == BARN_SUFFIX:

@@ -17,7 +17,8 @@ from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.cmd_vel_mux.node import CmdVelMuxNode
 from omninav.services.costmap.node import CostmapNode, CostmapNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
-from omninav.services.local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
+from omninav.services.velocity_smoother.node import VelocitySmootherNode
+from omninav.services.collision_monitor.node import CollisionMonitorNode
 from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node

@@ -11,8 +11,8 @@ from scipy import stats
 from omninav.services.localizer.filter import Amcl, kld_limit, map_to_odom, systematic_indices
 from omninav.services.localizer.params import AmclParams
 from omninav.services.localizer.sensor import prepare_scan
-from omninav.services.se2 import compose, wrap_angle
-from omninav.sim.raycast import LidarParams, scan
+from omninav.geometry.se2 import compose, wrap_angle
+from omninav.sim.lidar import LidarParams, scan
 from omninav.sim.world import load_world, world_path
 
 SEED = int(os.environ.get("AMCL_TEST_SEED", "0"))

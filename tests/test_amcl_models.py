@@ -7,13 +7,13 @@ import pytest
 
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.localizer import motion
-from omninav.services.localizer.bench import likelihood_field_numpy
+from omninav.services.localizer.reference import likelihood_field_numpy
 from omninav.services.localizer.params import AmclParams
 from omninav.services.localizer.sensor import LaserModel, prepare_scan
-from omninav.services.map_server.mapio import cell_to_world
+from omninav.geometry.grid import cell_to_world
 from omninav.services.runtime.params import ParamError, load_params, load_params_file
-from omninav.services.se2 import compose, wrap_angle
-from omninav.sim.raycast import LidarParams, scan
+from omninav.geometry.se2 import compose, wrap_angle
+from omninav.sim.lidar import LidarParams, scan
 from omninav.sim.world import load_world, world_path
 
 # ROS 1 amcl (navigation noetic-devel, amcl_node.cpp / cfg/AMCL.cfg), transcribed by hand

@@ -1,4 +1,4 @@
-"""BARN Challenge worlds (sim/barn.py) and `omninav bench barn` (experiments/barn.py): a `.world`
+"""BARN Challenge worlds (sim/barn_world.py) and `omninav bench barn` (experiments/barn.py): a `.world`
 file loads as the challenge sets it up, the challenge's score on hand-computed numbers, the Jackal
 profile, and one world driven through in lockstep."""
 from __future__ import annotations

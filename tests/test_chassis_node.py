@@ -7,7 +7,7 @@ import pytest
 
 from omninav.schemas import decode, encode
 from omninav.schemas.messages import Header, Twist, WheelState
-from omninav.services.chassis.follower import follower_readings
+from omninav.services.chassis.follower_wheels import follower_readings
 from omninav.services.chassis.kinematics import Kinematics
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.recorder.mcap_io import Record
@@ -15,7 +15,7 @@ from omninav.services.replay.into import replay_into
 from omninav.services.runtime.live import LiveRunner
 from omninav.services.runtime.node import NS_PER_S
 from omninav.services.runtime.params import ParamError, load_params
-from omninav.services.se2 import integrate, wrap_angle
+from omninav.geometry.se2 import integrate, wrap_angle
 
 DT = 0.01
 STEP_NS = round(DT * NS_PER_S)

@@ -6,13 +6,14 @@ import pytest
 
 from omninav.schemas.messages import Header, LaserScan, MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.costmap.costmap import Costmap, occupancy_values
-from omninav.services.costmap.footprint import cells_inside, make_footprint, transform
+from omninav.geometry.footprint import cells_inside, make_footprint, transform
 from omninav.services.costmap.layers import (INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, NO_INFORMATION,
                                              interpret_map)
 from omninav.services.costmap.params import (CostmapParams, InflationLayerParams, KeepoutLayerParams,
                                              ObservationSource, ObstacleLayerParams, StaticLayerParams,
                                              load_costmap_params)
-from omninav.services.map_server.mapio import cell_to_world, load_map
+from omninav.services.map_server.mapio import load_map
+from omninav.geometry.grid import cell_to_world
 from omninav.services.runtime.params import ParamError
 
 from conftest import REPO, SHARED_DATA
@@ -441,8 +442,8 @@ def test_a_person_crossing_the_scan_leaves_no_ghost_trail_in_the_local_costmap(t
     while a person (0.3 m circle) walks across 1.5 m in front of it: once they have passed, the
     cells they stood on are free again — cleared by the beams that now pass through them to the
     wall behind, or (no wall within the lidar's range: no return) by the inf_is_valid beams."""
-    from omninav.sim.raycast import LidarParams, make_scan
-    from omninav.sim.raycast import scan as cast_scan
+    from omninav.sim.lidar import LidarParams, make_scan
+    from omninav.sim.lidar import scan as cast_scan
     from omninav.sim.world import load_world
     bounds = "[12.0, 8.0]" if behind == "wall" else "[40.0, 40.0]"
     start = (1.0, 4.0) if behind == "wall" else (20.0, 20.0)

@@ -19,11 +19,12 @@ from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import (ClearCostmaps, Clock, Costmap as CostmapMsg, Goal, Header, LaserScan, MapMetaData,
                                       OccupancyGrid, Odometry, Path, Pose2D, Transform)
 from omninav.services.chassis.node import ChassisNode
-from omninav.services.costmap.footprint import make_footprint
+from omninav.geometry.footprint import make_footprint
 from omninav.services.costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
 from omninav.services.costmap.node import CostmapNode, CostmapNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
-from omninav.services.map_server.mapio import cell_to_world, save_map, world_to_cell
+from omninav.services.map_server.mapio import save_map
+from omninav.geometry.grid import cell_to_world, world_to_cell
 from omninav.services.map_server.node import MapServerNode, MapServerParams
 from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.inprocess import InProcessRunner

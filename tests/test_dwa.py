@@ -6,13 +6,13 @@ import pytest
 
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.costmap.costmap import Costmap
-from omninav.services.costmap.footprint import make_footprint
+from omninav.geometry.footprint import make_footprint
 from omninav.services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
-from omninav.services.local_planner.bench import reference_pose_cost, reference_rollout
+from omninav.services.local_planner.reference import reference_pose_cost, reference_rollout
 from omninav.services.local_planner.dwa import (DwaPlanner, dynamic_window, footprint_check_cost, path_maps,
                                                 sample_velocities)
 from omninav.services.local_planner.params import DwaParams
-from omninav.services.se2 import integrate, wrap_angle
+from omninav.geometry.se2 import integrate, wrap_angle
 
 RES = 0.05
 SQUARE = ((0.2, 0.2), (-0.2, 0.2), (-0.2, -0.2), (0.2, -0.2))   # a small robot, 0.4 m square

@@ -9,7 +9,7 @@ from omninav.services.local_planner.dwa import footprint_outline
 from omninav.services.local_planner.eband import (BandProblem, ElasticBandPlanner, clearance_field, covering_circles,
                                                   initial_band, local_goal, span_path)
 from omninav.services.local_planner.params import ElasticBandParams
-from omninav.services.se2 import integrate, wrap_angle
+from omninav.geometry.se2 import integrate, wrap_angle
 from test_dwa import FOOTPRINT, costmap, footprint_hits_lethal, straight
 
 HOLO = ElasticBandParams(holonomic_robot=True, max_vel_y=0.3, min_obstacle_dist=0.15, inflation_dist=0.25)

@@ -12,11 +12,11 @@ from omninav.experiments.scenarios.maze import generate as generate_maze
 from omninav.schemas import decode
 from omninav.schemas.messages import (CancelGoal, Goal, Header, MapMetaData, NavStatus, OccupancyGrid, Pose2D,
                                       PoseWithCovariance)
-from omninav.services.slam.explore import (INSCRIBED, Explorer, ExploreParams, FailedFrontiers, find_frontiers,
+from omninav.services.explore.frontiers import (INSCRIBED, Explorer, ExploreParams, FailedFrontiers, find_frontiers,
                                            frontier_cells, known_area, still_frontier)
 from omninav.services.runtime.node import NS_PER_S
-from omninav.services.slam.explore_node import ExploreNode, ExploreNodeParams
-from omninav.services.slam.mapping import build_map, compare_with_truth, explored_share, slam_params_for
+from omninav.services.explore.node import ExploreNode, ExploreNodeParams
+from omninav.experiments.mapping import build_map, compare_with_truth, explored_share, slam_params_for
 from omninav.sim.node import open_world
 
 RES = 0.1

@@ -4,9 +4,9 @@ import math
 import numpy as np
 import pytest
 
-from omninav.services.local_planner.follower import Arc, Line, PathFollower, segments_from_poses
+from omninav.services.local_planner.path_follower import Arc, Line, PathFollower, segments_from_poses
 from omninav.services.local_planner.params import FollowerParams
-from omninav.services.se2 import integrate
+from omninav.geometry.se2 import integrate
 
 DT = 0.05
 

@@ -6,7 +6,7 @@ import sys
 
 import pytest
 
-from omninav.experiments.footprint_bench import FootprintError, cpu_seconds, pss_mb, sim_time_at, tree_pids
+from omninav.bench.process_footprint import FootprintError, cpu_seconds, pss_mb, sim_time_at, tree_pids
 from omninav.schemas.codec import encode
 from omninav.schemas.messages import Clock, Header
 from omninav.services.recorder.mcap_io import RecordingWriter

@@ -9,7 +9,7 @@ import pytest
 from conftest import REPO
 from omninav.experiments.fuzz import example, fuzz_node, mutated_payloads
 from omninav.schemas import MessageError, all_types, decode, encode
-from omninav.services.runtime.registry import SERVICES
+from omninav.services.runtime.service_registry import SERVICES
 from omninav.services.runtime.run import build_node
 
 NOT_FUZZED = {"recorder"}       # it never decodes: it writes whatever arrives, untouched

@@ -12,8 +12,8 @@ from omninav.schemas import decode
 from omninav.schemas.messages import Clock, Header, LaserScan, Twist
 from omninav.services.cmd_vel_mux.mux import CommandMux, Source
 from omninav.services.cmd_vel_mux.node import CmdVelMuxNode
-from omninav.services.local_planner.gate_nodes import (CollisionMonitorNode, CollisionMonitorNodeParams,
-                                                       VelocitySmootherNode, VelocitySmootherNodeParams)
+from omninav.services.velocity_smoother.node import VelocitySmootherNode, VelocitySmootherNodeParams
+from omninav.services.collision_monitor.node import CollisionMonitorNode, CollisionMonitorNodeParams
 from omninav.services.runtime.node import NS_PER_S
 from omninav.services.runtime.params import ParamError
 from omninav.services.runtime.run import build_node

@@ -1,5 +1,5 @@
 """The house rules that a reader of the code should not have to police: ruff's checks pass, and
-imports point the way docs/architecture.md draws them."""
+imports point the way docs/architecture.md draws them (ROOMS below is that drawing's allow-list)."""
 from __future__ import annotations
 
 import ast
@@ -8,7 +8,32 @@ import sys
 
 from conftest import REPO
 
-TOP = ("schemas", "services", "sim", "cli", "experiments")
+# What each room may import besides itself. A room is a top-level package, or one folder of
+# services/ (one process each). Every service may also import schemas, geometry and services/runtime
+# (SERVICE_BASE); the few arrows between services are core reuse, each named here with its reason.
+SERVICE_BASE = {"schemas", "geometry", "services/runtime"}
+LIBRARY = {"schemas", "geometry", "sim"} | {f"services/{p.name}" for p in (REPO / "services").iterdir()
+                                            if (p / "__init__.py").is_file()}
+ROOMS: dict[str, set[str]] = {
+    "schemas": set(),                                       # the wire contract
+    "geometry": {"schemas"},                                # numpy/numba and message types only
+    "services/runtime": {"schemas"},
+    "sim": {"schemas", "geometry", "services/runtime",
+            "services/chassis",                             # the sim drives the chassis's kinematics
+            "services/map_server"},                         # worlds may load a map file
+    "services/lidar": SERVICE_BASE | {"sim"},               # the simulated lidar casts into the sim's world
+    "services/costmap": SERVICE_BASE | {"services/map_server"},       # static layer from a map file
+    "services/localizer": SERVICE_BASE | {"services/map_server"},     # map_file parameter
+    "services/replay": SERVICE_BASE | {"services/recorder"},          # reads MCAP with the recorder's mcap_io
+    "services/view": SERVICE_BASE | {"services/recorder"},            # export reads MCAP the same way
+    "services/local_planner": SERVICE_BASE | {"services/costmap"},    # the cost values of the costmap it reads
+    "services/collision_monitor": SERVICE_BASE | {"services/local_planner"},   # tracks predicted (dynamic.py)
+    "services/explore": SERVICE_BASE | {"services/costmap", "services/global_planner"},   # inflation, A*
+    "services/ros2_bridge": SERVICE_BASE | {"services/importers"},    # the ROS → omninav conversions of rosbag.py
+    "cli": LIBRARY | {"experiments", "bench"},              # the command reaches everything
+    "experiments": LIBRARY | {"cli"},                       # harnesses run what `omninav navigate` composes
+    "bench": LIBRARY | {"cli", "experiments"},
+}
 
 
 def test_ruff_finds_nothing():
@@ -17,16 +42,13 @@ def test_ruff_finds_nothing():
     assert done.returncode == 0, done.stdout + done.stderr
 
 
-def _room(path) -> str:
-    """schemas, services/runtime, services/<name>, services/<module>.py (neutral), sim, cli, experiments."""
-    parts = path.relative_to(REPO).parts
-    if parts[0] == "services" and len(parts) > 2:
-        return f"services/{parts[1]}"
-    return "services (neutral)" if parts[0] == "services" else parts[0]
+def _room(parts: tuple[str, ...]) -> str:
+    return f"services/{parts[1]}" if parts[0] == "services" and len(parts) > 1 else parts[0]
 
 
-def _imported_rooms(path) -> set[str]:
-    rooms = set()
+def _imports(path) -> list[tuple[str, set[str], int]]:
+    """(room, names imported, line) for every import of our own code in a file."""
+    found = []
     package = path.relative_to(REPO).parent.parts
     for node in ast.walk(ast.parse(path.read_text())):
         if isinstance(node, ast.ImportFrom) and node.level:
@@ -34,23 +56,73 @@ def _imported_rooms(path) -> set[str]:
             target = (*base, *(node.module.split(".") if node.module else ()))
         elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("omninav."):
             target = tuple(node.module.split(".")[1:])
+        elif isinstance(node, ast.Import) and any(a.name.startswith("omninav.") for a in node.names):
+            raise AssertionError(f"{path}:{node.lineno}: write `from omninav.x import y`, so the room is visible")
         else:
             continue
-        if target and target[0] == "services" and len(target) > 1 and (REPO / "services" / target[1]).is_dir():
-            rooms.add(f"services/{target[1]}")
+        names = {a.name for a in node.names}
+        if target == ("services",):   # from .. import <service>
+            found += [(f"services/{name}", set(), node.lineno) for name in names]
         elif target:
-            rooms.add("services (neutral)" if target[0] == "services" else target[0])
-    return rooms
+            found.append((_room(target), names, node.lineno))
+    return found
 
 
-def test_schemas_import_nothing_of_ours_and_the_runtime_only_schemas():
-    for path in (REPO / "schemas").rglob("*.py"):
-        assert _imported_rooms(path) <= {"schemas"}, path
-    for path in (REPO / "services" / "runtime").rglob("*.py"):
-        assert _imported_rooms(path) <= {"schemas", "services/runtime", "services (neutral)"}, path
+def _library_files():
+    for room in ROOMS:
+        if room not in ("cli", "experiments", "bench"):
+            yield from (REPO / room).rglob("*.py")
 
 
-def test_nothing_in_the_library_imports_the_lab_or_the_command_line():
-    for top in ("schemas", "services", "sim"):
+def test_the_allow_list_names_only_rooms_that_exist():
+    stale = [room for room in ROOMS if not (REPO / room).is_dir()]
+    stale += [f"{room} -> {target}" for room, targets in ROOMS.items() for target in targets
+              if not (REPO / target).is_dir()]
+    assert not stale, stale
+
+
+def test_imports_point_the_way_the_house_is_drawn():
+    wrong = []
+    for top in ("schemas", "geometry", "services", "sim", "cli", "experiments", "bench"):
         for path in (REPO / top).rglob("*.py"):
-            assert not _imported_rooms(path) & {"experiments", "cli"}, path
+            room = _room(path.relative_to(REPO).parts)
+            allowed = ROOMS.get(room, SERVICE_BASE)
+            for target, _, line in _imports(path):
+                if target != room and target not in allowed:
+                    wrong.append(f"{path.relative_to(REPO)}:{line}: {room} imports {target}")
+    assert not wrong, "imports outside the allow-list in tests/test_house.py:\n" + "\n".join(wrong)
+
+
+def test_nothing_imports_another_modules_private_names():
+    wrong = []
+    for top in ("schemas", "geometry", "services", "sim", "cli", "experiments", "bench"):
+        for path in (REPO / top).rglob("*.py"):
+            for _, names, line in _imports(path):
+                wrong += [f"{path.relative_to(REPO)}:{line}: {name}" for name in names
+                          if name.startswith("_") and not name.startswith("__")]
+    assert not wrong, "private names imported across modules:\n" + "\n".join(wrong)
+
+
+def test_services_holds_only_folders():
+    """One folder per process: no module loose in services/ (what services share is in geometry/)."""
+    loose = [p.name for p in (REPO / "services").glob("*.py") if p.name != "__init__.py"]
+    assert not loose, loose
+
+
+def test_the_library_does_not_import_the_lab_or_the_command_line():
+    for path in _library_files():
+        rooms = {target for target, _, _ in _imports(path)}
+        assert not rooms & {"experiments", "bench", "cli"}, path
+
+
+def test_no_two_modules_share_a_name_for_different_things():
+    """node.py, params.py, reference.py, cli.py and __init__.py are roles every room may have; any
+    other module name is used once, so a name says which thing it is."""
+    roles = {"__init__.py", "node.py", "params.py", "reference.py", "cli.py"}
+    seen: dict[str, list[str]] = {}
+    for top in ("schemas", "geometry", "services", "sim", "experiments", "bench"):
+        for path in (REPO / top).rglob("*.py"):
+            if path.name not in roles:
+                seen.setdefault(path.name, []).append(str(path.relative_to(REPO)))
+    twice = {name: paths for name, paths in seen.items() if len(paths) > 1}
+    assert not twice, twice

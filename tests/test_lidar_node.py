@@ -11,7 +11,7 @@ from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.runtime.node import NS_PER_S
 from omninav.services.runtime.params import load_params
 from omninav.services.runtime.run import build_node
-from omninav.sim.raycast import LidarParams, scan
+from omninav.sim.lidar import LidarParams, scan
 from omninav.sim.world import WorldError, load_world, world_path
 
 STEP_NS = 10_000_000

@@ -24,7 +24,7 @@ from omninav.services.runtime.node import NS_PER_S
 from omninav.services.runtime.params import ParamError
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client
-from omninav.services.se2 import integrate
+from omninav.geometry.se2 import integrate
 
 LOCAL_CMD = KEYS.robot("local_cmd")
 START = (1.2, 1.0)                       # the room's robot start

@@ -10,13 +10,13 @@ import pytest
 
 from omninav.cli.main import main as omninav
 from omninav.schemas.codec import encode
-from omninav.services.localizer.evaluate import (PARAMS_FILE, ROUTES, Route, Series, kidnap_result, route_command,
+from omninav.experiments.localize_eval import (PARAMS_FILE, ROUTES, Route, Series, kidnap_result, route_command,
                                                  route_problems)
 from omninav.services.localizer.params import AmclParams
-from omninav.services.localizer.node import OdomHistory
-from omninav.services.localizer.realdata import Agreement, judge_start, load_run, search_start
+from omninav.geometry.odometry_history import OdomHistory
+from omninav.experiments.localize_realdata import Agreement, judge_start, load_run, search_start
 from omninav.services.runtime.params import load_params_file
-from omninav.sim.raycast import LidarParams, make_scan, scan
+from omninav.sim.lidar import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path
 
 from conftest import SHARED_DATA

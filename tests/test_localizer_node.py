@@ -19,9 +19,9 @@ from omninav.services.replay.into import compare, replay_into
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
 from omninav.services.runtime.run import build_node
-from omninav.services.se2 import compose, inverse, wrap_angle
+from omninav.geometry.se2 import compose, inverse, wrap_angle
 from omninav.sim.node import SimNode, SimNodeParams
-from omninav.sim.raycast import LidarParams, make_scan, scan
+from omninav.sim.lidar import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path
 
 from launching import command_chain

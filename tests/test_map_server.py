@@ -15,7 +15,8 @@ from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.demo.talker import Talker, TalkerParams
-from omninav.services.map_server.mapio import MapError, cell_to_world, load_map, save_map
+from omninav.services.map_server.mapio import MapError, load_map, save_map
+from omninav.geometry.grid import cell_to_world
 from omninav.services.map_server.node import MapServerNode, MapServerParams
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.params import ParamError

@@ -8,8 +8,8 @@ from PIL import Image
 
 from conftest import SHARED_DATA
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
-from omninav.services.map_server.mapio import (REQUIRED_KEYS, MapError, cell_to_world, in_grid, load_map,
-                                               save_map, world_to_cell)
+from omninav.services.map_server.mapio import REQUIRED_KEYS, MapError, load_map, save_map
+from omninav.geometry.grid import cell_to_world, in_grid, world_to_cell
 
 MAPS = SHARED_DATA / "maps"
 DEFAULTS = {"resolution": 0.1, "origin": [0.0, 0.0, 0.0], "negate": 0, "occupied_thresh": 0.65,

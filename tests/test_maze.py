@@ -7,7 +7,7 @@ from scipy import ndimage
 
 from omninav.experiments.scenarios import KINDS
 from omninav.experiments.scenarios.maze import HEIGHT_M, OPENING_M, WIDTH_M, generate, maze_problems
-from omninav.services.map_server.mapio import world_to_cell
+from omninav.geometry.grid import world_to_cell
 from omninav.sim.world import world_from_mapping
 
 SEEDS = range(10)

@@ -10,7 +10,7 @@ import pytest
 from omninav.services.costmap.params import InflationLayerParams, ObstacleLayerParams, load_costmap_params
 from omninav.services.runtime.compose import ComposeError, load_compose
 from omninav.services.runtime.params import ParamError, load_node_params, read_params_mapping
-from omninav.services.runtime.registry import node_class
+from omninav.services.runtime.service_registry import node_class
 
 
 def build_params(service: str, path, name: str = ""):

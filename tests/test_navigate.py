@@ -24,9 +24,9 @@ from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Clock, Goal, Header, NavStatus, Odometry, Pose2D, Twist
 from omninav.schemas.messages import Path as PathMsg
 from omninav.services.chassis.node import ChassisNode
-from omninav.services.navigator.mission import (MissionError, MissionRecord, load_mission, summarize_mission,
+from omninav.experiments.mission_score import (MissionError, MissionRecord, load_mission, summarize_mission,
                                                 summary_lines)
-from omninav.services.navigator.truth_pose import TruthPoseNode, TruthPoseParams
+from omninav.services.truth_pose.node import TruthPoseNode, TruthPoseParams
 from omninav.services.map_server.mapio import load_map
 from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.acl import TOOL
@@ -34,7 +34,7 @@ from omninav.services.runtime.compose import load_compose
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
 from omninav.services.runtime.zenoh_config import open_client
-from omninav.services.se2 import compose
+from omninav.geometry.se2 import compose
 from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.world import load_world, world_path
 

@@ -18,17 +18,18 @@ from omninav.services.cmd_vel_mux.node import CmdVelMuxNode
 from omninav.services.costmap.node import CostmapNode, CostmapNodeParams
 from omninav.services.global_planner.node import PlannerNode, PlannerNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
-from omninav.services.local_planner.gate_nodes import CollisionMonitorNode, VelocitySmootherNode
+from omninav.services.velocity_smoother.node import VelocitySmootherNode
+from omninav.services.collision_monitor.node import CollisionMonitorNode
 from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from omninav.services.map_server.node import MapServerNode, MapServerParams
 from omninav.services.localizer.node import LocalizerNode, LocalizerParams
 from omninav.services.navigator.core import WAITING_FOR_CONFIDENT_POSE
 from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
-from omninav.services.navigator.truth_pose import TruthPoseNode
+from omninav.services.truth_pose.node import TruthPoseNode
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S, Node
 from omninav.services.runtime.params import read_params_mapping
-from omninav.services.se2 import wrap_angle
+from omninav.geometry.se2 import wrap_angle
 from omninav.services.tracker.node import TrackerNode, TrackerNodeParams
 from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.world import load_world, world_path

@@ -20,7 +20,7 @@ from omninav.services.runtime.node import NS_PER_S, Node, QueryError
 from omninav.services.runtime.params import ParamError
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client
-from omninav.services.se2 import integrate, relative, wrap_angle
+from omninav.geometry.se2 import integrate, relative, wrap_angle
 
 KEYS = KeyLayout("r1")
 DT = 0.05

@@ -6,11 +6,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from omninav.services.chassis.follower import (calibrate_followers, follower_odometry,
+from omninav.services.chassis.follower_wheels import (calibrate_followers, follower_odometry,
                                                follower_readings)
 from omninav.services.chassis.kinematics import DRIVES, ChassisParams, Kinematics
 from omninav.services.chassis.odometry import wheel_odometry
-from omninav.services.se2 import compose, integrate, inverse, relative, se2_exp, wrap_angle
+from omninav.geometry.se2 import compose, integrate, inverse, relative, se2_exp, wrap_angle
 
 poses = arrays(np.float64, 3, elements=st.floats(-20.0, 20.0, allow_nan=False))
 NS = 1_000_000_000

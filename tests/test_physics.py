@@ -7,13 +7,13 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from omninav.services.chassis.follower import follower_odometry
+from omninav.services.chassis.follower_wheels import follower_odometry
 from omninav.services.chassis.kinematics import ChassisParams
 from omninav.services.chassis.odometry import wheel_odometry
-from omninav.services.se2 import relative
+from omninav.geometry.se2 import relative
 from omninav.sim.physics import CONTACT_SLOP, SimParams, Simulation, occupied_rectangles, se2_log
-from omninav.sim.world import (YIELD_MARGIN, load_world, point_segment_distance, points_in_polygons,
-                               transform_points, world_path)
+from omninav.sim.world import YIELD_MARGIN, load_world, world_path
+from omninav.geometry.polygons import point_segment_distance, points_in_polygons, transform_points
 
 from conftest import SHARED_DATA
 
@@ -413,7 +413,7 @@ def test_drive_override_and_parameter_checks(open_world):
 
 
 def test_se2_log_inverts_se2_exp():
-    from omninav.services.se2 import se2_exp
+    from omninav.geometry.se2 import se2_exp
     rng = np.random.default_rng(0)
     for motion in np.vstack([rng.normal(size=(200, 3)), [[0.3, -0.2, 0.0], [1.0, 0.0, 1e-12]]]):
         assert se2_log(se2_exp(motion)) == pytest.approx(motion, abs=1e-12)

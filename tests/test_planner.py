@@ -11,10 +11,11 @@ from omninav.services.costmap.params import (CostmapParams, InflationLayerParams
                                              StaticLayerParams)
 from omninav.services.global_planner.astar import (GOAL_IN_OBSTACLE, NO_PATH, OFF_MAP, OK, GlobalPlanner,
                                                    orientations, search)
-from omninav.services.global_planner.bench import graph
+from omninav.services.global_planner.reference import graph
 from omninav.services.global_planner.params import GlobalPlannerParams
-from omninav.services.global_planner.smoother import segment_max_cost, smooth
-from omninav.services.map_server.mapio import cell_to_world, grid_coords, load_map
+from omninav.services.global_planner.path_smoother import segment_max_cost, smooth
+from omninav.services.map_server.mapio import load_map
+from omninav.geometry.grid import cell_to_world, grid_coords
 from omninav.services.runtime.params import ParamError
 from omninav.sim.world import WorldError, load_world, shipped_worlds, world_path
 

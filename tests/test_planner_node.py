@@ -18,8 +18,9 @@ from omninav.services.costmap.costmap import Costmap
 from omninav.services.costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE
 from omninav.services.costmap.params import load_costmap_params
 from omninav.services.global_planner.node import PlannerNode, PlannerNodeParams
-from omninav.services.global_planner.smoother import segment_max_cost
-from omninav.services.map_server.mapio import cell_to_world, grid_coords, save_map
+from omninav.services.global_planner.path_smoother import segment_max_cost
+from omninav.services.map_server.mapio import save_map
+from omninav.geometry.grid import cell_to_world, grid_coords
 from omninav.services.runtime.merge import order_key
 from omninav.services.runtime.node import NS_PER_S, QueryError
 from omninav.services.runtime.params import ParamError

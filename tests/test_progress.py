@@ -7,7 +7,7 @@ import re
 import numpy as np
 
 from omninav.cli.main import main as cli_main
-from omninav.services.slam.mapping import MAPPING_ROUTES, build_map, slam_params_for
+from omninav.experiments.mapping import MAPPING_ROUTES, build_map, slam_params_for
 from omninav.sim.world import load_world, world_path
 
 LINE = re.compile(r"sim (\d+) s: lap 1 of 1, (\d+\.\d) % of the reachable space mapped")

@@ -9,7 +9,7 @@ import yaml
 from conftest import SHARED_DATA
 from omninav.schemas.codec import decode, encode
 from omninav.schemas.messages import LaserScan
-from omninav.sim.raycast import LidarParams, cast, laser_pose, make_scan, scan, sensor_model
+from omninav.sim.lidar import LidarParams, cast, laser_pose, make_scan, scan, sensor_model
 from omninav.sim.world import load_world, world_path
 
 EXACT = dict(noise_std=0.0, range_min=0.0, range_max=100.0)

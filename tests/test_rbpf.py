@@ -4,11 +4,11 @@ import json
 import numpy as np
 import pytest
 
-from omninav.services.se2 import compose, relative
-from omninav.services.slam.grid import TILE
+from omninav.geometry.se2 import compose, relative
+from omninav.services.slam.particle_grids import TILE
 from omninav.services.slam.params import SlamParams
 from omninav.services.slam.rbpf import Rbpf, _Nodes
-from omninav.sim.raycast import LidarParams, scan
+from omninav.sim.lidar import LidarParams, scan
 from omninav.sim.world import load_world, world_path
 
 from conftest import SHARED_DATA

@@ -17,7 +17,7 @@ from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.services.replay.source import RecordingSource
 from omninav.services.runtime.inprocess import InProcessRunner
-from omninav.services.se2 import wrap_angle
+from omninav.geometry.se2 import wrap_angle
 from omninav.sim.world import load_world, world_path
 
 FIXTURE = REPO / "recordings" / "fixtures" / "room_mission.mcap"

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from omninav.services.se2 import compose, relative
+from omninav.geometry.se2 import compose, relative
 from omninav.services.slam.relations import RelationsError, interpolate, load_relations, relation_errors, score
 
 

@@ -25,7 +25,7 @@ from omninav.services.replay.into import (capture_outputs, compare, find_alignme
                                           payload_differences, replay_into)
 from omninav.services.runtime.merge import StampMerger
 from omninav.services.runtime.node import PARAMS_VALUE
-from omninav.services.runtime.registry import SERVICES
+from omninav.services.runtime.service_registry import SERVICES
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client, open_router
 

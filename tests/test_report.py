@@ -9,8 +9,8 @@ from omninav.schemas import encode
 from omninav.schemas.messages import (Costmap, Diagnostic, Goal, Header, LaserScan, MapMetaData, NavStatus, Obstacles,
                                       OccupancyGrid, Odometry, Path, Pose2D, PoseWithCovariance)
 from omninav.services.recorder.mcap_io import RecordingWriter, read_records
-from omninav.services.se2 import integrate
-from omninav.sim.raycast import LidarParams, make_scan, scan
+from omninav.geometry.se2 import integrate
+from omninav.sim.lidar import LidarParams, make_scan, scan
 from omninav.sim.world import load_world, world_path
 
 from conftest import SHARED_DATA

@@ -11,7 +11,7 @@ from omninav.schemas.codec import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.services.importers.rosbag import RosbagError, odometry, read_bag, yaw_of
 from omninav.services.recorder.mcap_io import read_records
-from omninav.services.se2 import wrap_angle
+from omninav.geometry.se2 import wrap_angle
 
 from conftest import SHARED_DATA
 

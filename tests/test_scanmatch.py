@@ -3,8 +3,8 @@ import numpy as np
 import pytest
 
 from omninav.services.slam import scanmatch as sm
-from omninav.services.slam.grid import GridGeometry, TiledGrids, cut_beams
-from omninav.sim.raycast import cast
+from omninav.services.slam.particle_grids import GridGeometry, TiledGrids, cut_beams
+from omninav.sim.lidar import cast
 from omninav.sim.world import load_world, world_path
 
 DELTA = 0.05

@@ -10,12 +10,13 @@ from scipy import ndimage
 
 from omninav.cli.main import main as cli_main
 from omninav.experiments.scenarios import DYNAMIC_KINDS, KINDS, ScenarioError, generate_world, world_text
-from omninav.experiments.scenarios.bench import overall
-from omninav.experiments.scenarios.layout import TIMING
+from omninav.bench.scenarios import overall
+from omninav.experiments.scenarios.route import TIMING
 from omninav.services.global_planner.astar import GlobalPlanner
 from omninav.services.global_planner.params import GlobalPlannerParams
-from omninav.services.map_server.mapio import world_to_cell
-from omninav.sim.world import load_world, point_segment_distance
+from omninav.geometry.grid import world_to_cell
+from omninav.sim.world import load_world
+from omninav.geometry.polygons import point_segment_distance
 
 SEEDS = range(10)
 MOVERS = {"crossing": (1, 2), "headon": (1, 1), "overtake": (1, 1), "crowd": (4, 6), "doorway": (1, 1),

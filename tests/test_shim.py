@@ -11,8 +11,8 @@ from omninav.services.local_planner.dwa import DwaPlanner
 from omninav.services.local_planner.params import DwaParams
 from omninav.services.local_planner.shim import (RotationShim, RotationShimParams, heading_error, sampled_point,
                                                    turn_rate)
-from omninav.services.se2 import integrate
-from omninav.sim.world import DEFAULT_FOOTPRINT
+from omninav.geometry.se2 import integrate
+from omninav.geometry.footprint import DEFAULT_FOOTPRINT
 
 DT = 0.05
 PARAMS = RotationShimParams(rotate_to_heading_angular_vel=1.0)    # clamped to max_vel_theta, as the node does

@@ -4,8 +4,8 @@ import math
 import numpy as np
 import pytest
 
-from omninav.services.map_server.mapio import world_to_cell
-from omninav.services.slam.grid import TILE, GridGeometry, TiledGrids, cut_beams, segment_cells
+from omninav.geometry.grid import world_to_cell
+from omninav.services.slam.particle_grids import TILE, GridGeometry, TiledGrids, cut_beams, segment_cells
 
 L_OCC, L_FREE, L_MAX = 0.85, -0.4, 5.0
 

@@ -13,12 +13,13 @@ from omninav.schemas import decode
 from omninav.schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, Pose2D, PoseWithCovariance, Transform
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
-from omninav.services.localizer.evaluate import HarnessParams, Route
-from omninav.services.map_server.mapio import load_map, world_to_cell
+from omninav.experiments.localize_eval import HarnessParams, Route
+from omninav.services.map_server.mapio import load_map
+from omninav.geometry.grid import world_to_cell
 from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.inprocess import InProcessRunner
-from omninav.services.se2 import compose
-from omninav.services.slam.mapping import RouteDriver, compare_with_truth, slam_params_for
+from omninav.geometry.se2 import compose
+from omninav.experiments.mapping import RouteDriver, compare_with_truth, slam_params_for
 from omninav.services.slam.node import SlamNode
 from omninav.sim.node import SimNode, SimNodeParams, open_world
 from launching import command_chain

@@ -5,10 +5,11 @@ import numpy as np
 import pytest
 
 from omninav.schemas.messages import LaserScan
-from omninav.services.local_planner.collision import CollisionMonitor, robot_frame_points
+from omninav.services.collision_monitor.collision import CollisionMonitor, robot_frame_points
 from omninav.services.local_planner.dynamic import Movers
-from omninav.services.local_planner.params import CollisionMonitorParams, VelocitySmootherParams
-from omninav.services.local_planner.smoother import VelocitySmoother
+from omninav.services.collision_monitor.collision import CollisionMonitorParams
+from omninav.services.velocity_smoother.smoother import VelocitySmootherParams
+from omninav.services.velocity_smoother.smoother import VelocitySmoother
 
 PARAMS = VelocitySmootherParams(max_velocity=(0.5, 0.5, 2.0), min_velocity=(-0.5, -0.5, -2.0),
                                 max_accel=(1.0, 0.8, 2.0), max_decel=(-2.0, -1.6, -4.0))

@@ -7,7 +7,7 @@ import pytest
 
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.tracker.tracker import MoverTracker, TrackerParams, euclidean_clusters, predicted
-from omninav.sim.raycast import LidarParams, cast, scan
+from omninav.sim.lidar import LidarParams, cast, scan
 from omninav.sim.world import load_world
 
 LIDAR = LidarParams(noise_std=0.01)

@@ -12,7 +12,7 @@ from omninav.schemas.messages import Tracks
 from omninav.services.chassis.node import ChassisNode
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.map_server.node import MapServerNode, MapServerParams
-from omninav.services.navigator.truth_pose import TruthPoseNode
+from omninav.services.truth_pose.node import TruthPoseNode
 from omninav.services.recorder.mcap_io import RecordingWriter
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.node import NS_PER_S

@@ -9,9 +9,11 @@ from scipy import ndimage
 
 from conftest import SHARED_DATA
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
-from omninav.services.map_server.mapio import save_map, world_to_cell
-from omninav.sim.world import (DATA_ENV, DEFAULT_FOOTPRINT, WorldError, load_world, point_segment_distance,
-                               shipped_worlds, world_path)
+from omninav.services.map_server.mapio import save_map
+from omninav.geometry.grid import world_to_cell
+from omninav.sim.world import DATA_ENV, WorldError, load_world, shipped_worlds, world_path
+from omninav.geometry.polygons import point_segment_distance
+from omninav.geometry.footprint import DEFAULT_FOOTPRINT
 
 HAVE_WILLOW = (SHARED_DATA / "maps" / "willow-full-0.05.yaml").exists()
 

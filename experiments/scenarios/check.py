@@ -2,7 +2,7 @@
 drawn again from the next sub-seed.
 
 - the start and the goal are free for the footprint grown by CLEARANCE_M, and the goal can be
-  reached from the start on the world rasterised at RESOLUTION (sim/reachability.py: the global
+  reached from the start on the world rasterised at RESOLUTION (experiments/reachability.py: the global
   planner core, a disk of the footprint's inscribed radius);
 - every mover's loop keeps its radius plus CLEARANCE_M from the static obstacles (people do not
   walk through furniture), and keeps off the robot standing at its start or its goal (the robot
@@ -12,9 +12,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ...sim.reachability import ReachabilityParams, mission_problems
-from ...sim.world import World, point_segment_distance
-from .layout import polyline_length
+from ..reachability import ReachabilityParams, mission_problems
+from ...sim.world import World
+from ...geometry.polygons import point_segment_distance
+from .route import polyline_length
 
 RESOLUTION = 0.05       # m, as `navigate` rasterises a world into its map
 CLEARANCE_M = 0.1       # m, as the shipped worlds keep the footprint from everything at the start

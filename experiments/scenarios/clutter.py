@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import furniture, lane, uniform, world_mapping
+from .route import furniture, lane, uniform, world_mapping
 
 END_ROOM_M = 0.9        # furniture keeps this far (plus KEEP_OUT_M) from the start and the goal
 

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .layout import crossing_mover, furniture, lane, person, uniform, world_mapping
+from .route import crossing_mover, furniture, lane, person, uniform, world_mapping
 
 CIRCLE_POINTS = 12      # a circling person's loop
 

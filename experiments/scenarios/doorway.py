@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import arrival_s, furniture, lane, person, polyline_length, timed_mover, uniform, world_mapping
+from .route import arrival_s, furniture, lane, person, polyline_length, timed_mover, uniform, world_mapping
 
 APPROACH_M = 0.8        # the person walks straight through the door from this far either side
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import arrival_s, person, timed_mover, uniform, world_mapping
+from .route import arrival_s, person, timed_mover, uniform, world_mapping
 
 
 def generate(rng: np.random.Generator) -> dict:

@@ -15,8 +15,9 @@ from pathlib import Path
 import numpy as np
 from scipy import ndimage
 
-from ...services.map_server.mapio import world_to_cell
-from ...sim.world import WALL_THICKNESS, World, point_segment_distance, world_from_mapping
+from ...geometry.grid import world_to_cell
+from ...sim.world import WALL_THICKNESS, World, world_from_mapping
+from ...geometry.polygons import point_segment_distance
 
 WIDTH_M = (7.0, 12.0)           # the maze's bounds
 HEIGHT_M = (5.0, 9.0)

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .layout import TIMING, timed_mover, uniform, world_mapping
+from .route import TIMING, timed_mover, uniform, world_mapping
 
 SLOW = (0.12, 0.25)     # m/s: well below the robot's expected speed
 

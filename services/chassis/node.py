@@ -25,7 +25,7 @@ from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import ParamError, require_nonnegative
 from ..runtime.state_file import read_state, write_state
-from .follower import follower_odometry
+from .follower_wheels import follower_odometry
 from .kinematics import ChassisParams, Kinematics
 from .odometry import OdomEstimate, wheel_odometry
 

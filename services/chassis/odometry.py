@@ -5,7 +5,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..se2 import compose, se2_exp
+from ...geometry.se2 import compose, se2_exp
 from .kinematics import ChassisParams, Kinematics
 
 

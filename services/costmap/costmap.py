@@ -20,8 +20,9 @@ from pathlib import Path
 import numpy as np
 
 from ...schemas.messages import Header, LaserScan, MapMetaData, OccupancyGrid, Pose2D
-from ..map_server.mapio import cell_to_world, in_grid, load_map, world_to_cell
-from .footprint import Footprint, footprint_from_params
+from ..map_server.mapio import load_map
+from ...geometry.grid import cell_to_world, in_grid, world_to_cell
+from ...geometry.footprint import Footprint, make_footprint
 from .layers import (FREE_SPACE, NO_INFORMATION, Box, InflationLayer, KeepoutLayer, ObstacleLayer, StaticLayer,
                      View, grow, same_geometry, shift_grid, union, whole)
 from .params import CostmapParams, InflationLayerParams, KeepoutLayerParams, ObstacleLayerParams, StaticLayerParams
@@ -52,7 +53,7 @@ class Costmap:
 
     def __init__(self, params: CostmapParams, static_map: OccupancyGrid | None = None):
         self.params = params
-        self.footprint: Footprint = footprint_from_params(params)
+        self.footprint: Footprint = make_footprint(params.footprint, params.robot_radius, params.footprint_padding)
         self.default = NO_INFORMATION if params.track_unknown_space else FREE_SPACE
         self.layers = [self._make_layer(p) for p in params.layers if p.enabled]
         self.inflation = next((l for l in self.layers if isinstance(l, InflationLayer)), None)

@@ -21,12 +21,12 @@ import numpy as np
 from numba import njit
 
 from ...schemas.messages import LaserScan, MapMetaData, OccupancyGrid, Pose2D
-from ..map_server.mapio import cell_to_world, grid_coords, in_grid, world_to_cell
-from .footprint import cells_inside, transform
+from ...geometry.grid import cell_to_world, grid_coords, in_grid, world_to_cell
+from ...geometry.footprint import cells_inside, transform
+from ...geometry.frames import scan_points
 from .params import InflationLayerParams, KeepoutLayerParams, ObstacleLayerParams, StaticLayerParams
 
 FREE_SPACE, INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, NO_INFORMATION = 0, 253, 254, 255
-INF_EPSILON = 0.0001     # m: ROS replaces +inf by range_max − this when inf_is_valid
 EDGE_MARGIN = 0.001      # m: ROS stops a clipped beam this far inside the far map edges
 
 Box = tuple[int, int, int, int]   # row0, col0, row1, col1 (half-open); empty when row0 >= row1
@@ -240,20 +240,6 @@ class Observation:
     stamp_ns: int
     origin: tuple[float, float]      # sensor position in the global frame
     points: np.ndarray               # (N, 2) endpoints, m
-
-
-def scan_points(scan: LaserScan, sensor_pose, inf_is_valid: bool) -> np.ndarray:
-    """A scan's endpoints in the global frame, as laser_geometry projects them: readings within
-    [range_min, range_max) (with inf_is_valid, +inf counts as range_max − 0.0001)."""
-    ranges = np.asarray(scan.ranges, np.float64)
-    if inf_is_valid:
-        ranges = np.where(np.isposinf(ranges), scan.range_max - INF_EPSILON, ranges)
-    angles = scan.angle_min + np.arange(ranges.shape[0]) * scan.angle_increment
-    with np.errstate(invalid="ignore"):
-        keep = np.isfinite(ranges) & (ranges >= scan.range_min) & (ranges < scan.range_max)
-    x, y, yaw = (float(v) for v in sensor_pose)
-    r, a = ranges[keep], angles[keep] + yaw
-    return np.stack([x + r * np.cos(a), y + r * np.sin(a)], axis=1)
 
 
 class ObstacleLayer:

@@ -44,14 +44,13 @@ from ...schemas import MessageError
 from ...schemas.keys import type_for_key
 from ...schemas.messages import Costmap as CostmapMsg
 from ...schemas.messages import ClearCostmaps, Diagnostic, Header, LaserScan, OccupancyGrid, Transform
-from ...sim.raycast import LidarParams
 from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node, QueryError
 from ..runtime.params import require_nonnegative
-from ..se2 import compose
+from ...geometry.se2 import compose
 from .costmap import Costmap
-from .frames import FrameParams
+from ...geometry.frames import FrameParams, LASER_MOUNT
 from .layers import same_geometry, warm_up
 from .params import CostmapParams, ObstacleLayerParams, StaticLayerParams, load_costmap_params
 
@@ -67,9 +66,9 @@ class CostmapNodeParams(FrameParams):
     local_costmap_files: tuple[str, ...] = (SAMPLES + "costmap_common_params.yaml",
                                             SAMPLES + "costmap_local_params.yaml")
     map_file: str = ""          # a map_server YAML read at start, instead of the map key ("": the map key)
-    laser_x: float = LidarParams.mount_x     # m: the laser in base_link (the simulated lidar's mount)
-    laser_y: float = LidarParams.mount_y
-    laser_yaw: float = LidarParams.mount_yaw
+    laser_x: float = LASER_MOUNT[0]     # m: the laser in base_link (the simulated lidar's mount)
+    laser_y: float = LASER_MOUNT[1]
+    laser_yaw: float = LASER_MOUNT[2]
     request_delay_s: float = 0.3  # sim s from a costmap/clear stamp to its effect
 
     def __post_init__(self) -> None:

@@ -30,9 +30,9 @@ import numpy as np
 from numba import njit
 
 from ...schemas.messages import MapMetaData
-from ..map_server.mapio import cell_to_world, grid_coords, in_grid
+from ...geometry.grid import cell_to_world, grid_coords, in_grid
 from .params import GlobalPlannerParams
-from .smoother import smooth
+from .path_smoother import smooth
 
 OK, NO_PATH, GOAL_IN_OBSTACLE, OFF_MAP = "ok", "no_path", "goal_in_obstacle", "off_map"
 NO_INFORMATION = 255

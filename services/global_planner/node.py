@@ -40,7 +40,7 @@ import numpy as np
 
 from ...schemas.keys import KeyLayout, type_for_key
 from ...schemas.messages import Costmap, Diagnostic, Goal, Header, Odometry, Path, PoseWithCovariance
-from ..costmap.frames import FrameParams
+from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node, QueryError
 from ..runtime.params import require_nonnegative

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from ...schemas.messages import Header, LaserScan, Odometry, Pose2D, Twist
-from ..se2 import relative
+from ...geometry.se2 import relative
 
 # The SICK LMS code for "no return" in the FLASER lines of the benchmark logs (81.91 m).
 FLASER_MAX_RANGE = 81.91

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...schemas.messages import LaserScan, Obstacles, Odometry
-from ...sim.raycast import LidarParams, make_scan, scan, warm_up
+from ...sim.lidar import LidarParams, make_scan, scan, warm_up
 from ...sim.world import load_world, world_path
 from ..runtime.node import Node, Ticks
 

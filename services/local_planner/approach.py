@@ -27,8 +27,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..se2 import wrap_angle
-from .follower import Line, PathFollower
+from ...geometry.se2 import wrap_angle
+from .path_follower import Line, PathFollower
 from .params import FollowerParams
 
 ALIGNED = 0.2        # rad: a differential drive turns on the spot towards its line until within this

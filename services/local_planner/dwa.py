@@ -39,9 +39,10 @@ from numba import njit
 from scipy import ndimage
 
 from ...schemas.messages import MapMetaData
-from ..costmap.footprint import pad
+from ...geometry.footprint import pad
+from ...geometry.polygons import densify
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
-from ..map_server.mapio import in_grid, world_to_cell
+from ...geometry.grid import in_grid, world_to_cell
 from .dynamic import Movers, critic, slack
 from .dynamic import warm_up as warm_up_movers
 from .params import DwaParams
@@ -73,18 +74,6 @@ def local_path(path: np.ndarray, pose, info: MapMetaData) -> np.ndarray:
     first = int(np.argmin(distance))
     leaves = np.flatnonzero(~inside[first:])
     return path[first:first + (int(leaves[0]) if leaves.size else len(path) - first)]
-
-
-def _densify(points: np.ndarray, spacing: float) -> np.ndarray:
-    """(K, 2) points along the polyline, at most `spacing` apart, ends included."""
-    xy = points[:, :2]
-    if len(xy) < 2:
-        return xy
-    steps = np.maximum(1, np.ceil(np.hypot(*np.diff(xy, axis=0).T) / spacing).astype(np.int64))
-    segment = np.repeat(np.arange(len(steps)), steps)
-    fraction = (np.arange(segment.size) - np.repeat(np.cumsum(steps) - steps, steps)) / steps[segment]
-    inner = xy[segment] + (xy[segment + 1] - xy[segment]) * fraction[:, None]
-    return np.vstack([inner, xy[-1:]])
 
 
 # the flood's moves (row, col steps): 16-connected, so that in free space its distances are within
@@ -187,7 +176,7 @@ def path_maps(path: np.ndarray, pose, info: MapMetaData, costs: np.ndarray | Non
     if len(local) == 0:
         return None
     shape = (info.height, info.width)
-    points = _densify(local, info.resolution / 2)
+    points = densify(local, info.resolution / 2)
     rows, cols = world_to_cell(info, points[:, 0], points[:, 1])
     keep = in_grid(info, rows, cols)
     on_path = np.zeros(shape, bool)
@@ -387,7 +376,7 @@ def _check_poses(poses, costs, near, skips, grid, outline, check_cost, centre_li
 def footprint_outline(points: np.ndarray, spacing: float) -> np.ndarray:
     """Points along the closed footprint polygon, at most `spacing` apart (robot frame)."""
     points = np.asarray(points, np.float64).reshape(-1, 2)
-    return _densify(np.vstack([points, points[:1]]), spacing)[:-1]
+    return densify(np.vstack([points, points[:1]]), spacing)[:-1]
 
 
 def footprint_check_cost(inscribed_radius: float, circumscribed_radius: float, inflation_radius: float,

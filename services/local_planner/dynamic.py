@@ -23,7 +23,7 @@ import numpy as np
 from numba import njit
 
 from ...schemas.messages import Tracks
-from ..se2 import compose
+from ...geometry.se2 import compose
 
 
 @dataclass(frozen=True)

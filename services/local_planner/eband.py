@@ -53,9 +53,10 @@ from scipy import ndimage
 
 from ...schemas.messages import MapMetaData
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE
-from ..map_server.mapio import in_grid, world_to_cell
-from ..se2 import wrap_angle
-from .dwa import _densify, footprint_outline, local_path
+from ...geometry.grid import in_grid, world_to_cell
+from ...geometry.se2 import wrap_angle
+from ...geometry.polygons import densify
+from .dwa import footprint_outline, local_path
 from .params import ElasticBandParams
 
 MIN_INTERVAL = 1e-3     # s: the shortest time interval a new band starts with
@@ -502,7 +503,7 @@ def local_goal(span: np.ndarray, at_final_goal: bool) -> np.ndarray:
 def initial_band(span: np.ndarray, start, goal, params: ElasticBandParams) -> tuple[np.ndarray, np.ndarray]:
     """(poses (K, 3), time intervals (K-1,)) along the span, about dt_ref·max_vel_x apart."""
     spacing = params.dt_ref * params.max_vel_x
-    dense = _densify(span, spacing / 4)
+    dense = densify(span, spacing / 4)
     along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(dense, axis=0).T))])
     count = max(params.min_samples, min(params.max_samples, int(math.ceil(along[-1] / spacing)) + 1))
     stations = np.linspace(0.0, along[-1], count)

@@ -46,18 +46,17 @@ from dataclasses import dataclass, field, fields
 import numpy as np
 
 from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Path, Tracks
-from ...sim.world import DEFAULT_FOOTPRINT
-from ..costmap.footprint import make_footprint
-from ..costmap.frames import FrameParams
+from ...geometry.footprint import DEFAULT_FOOTPRINT, STOP_PADDING, make_footprint
+from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, Ticks
 from ..runtime.params import ForeignNames, ParamError, load_params, require_nonnegative
-from ..se2 import compose, inverse
+from ...geometry.se2 import compose, inverse
 from .approach import FinalApproach
 from .dwa import DwaPlanner, footprint_check_cost, reachable, warm_up
 from .dynamic import Movers, movers_at, tracks_problem
-from .follower import PathFollower, segments_from_poses
-from .params import CollisionMonitorParams, DwaParams, FollowerParams
+from .path_follower import PathFollower, segments_from_poses
+from .params import DwaParams, FollowerParams
 from .path_ahead import ahead_of
 from .shim import RotationShim, RotationShimParams
 
@@ -128,7 +127,7 @@ class LocalPlannerNodeParams(FrameParams, DwaParams, RotationShimParams):
     request_delay_s: float = 0.5         # sim s from a costmap / tf / path stamp to its effect
     tracks_delay_s: float = 0.3          # sim s from a tracks stamp to its effect (they are predicted to the tick)
     # m: the collision monitor's stop zone (its default), kept free by DWA's rollouts
-    stop_padding: float = CollisionMonitorParams.stop_padding
+    stop_padding: float = STOP_PADDING
 
     def __post_init__(self):
         super().__post_init__()

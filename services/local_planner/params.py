@@ -8,8 +8,7 @@ controller_frequency, xy/yaw_goal_tolerance, dwa; dwa_local_planner for max/min_
 sim_time (1.7), path_distance_bias (32), goal_distance_bias (24), occdist_scale (0.01),
 forward_point_distance (0.325). The biases weigh metres as DWA does (DWA multiplies them by the
 costmap resolution and measures distances in cells, which is the same thing).
-VelocitySmootherParams and CollisionMonitorParams use Nav2's names and defaults; FollowerParams has
-no ROS counterpart (the omni-wheel paper's follower).
+FollowerParams has no ROS counterpart (the omni-wheel paper's follower).
 """
 from __future__ import annotations
 
@@ -103,57 +102,6 @@ class FollowerParams:
         require_positive(self, "cruise_speed", "acc_lim", "decel_distance", "decel_exponent", "max_vel_theta")
         require_nonnegative(self, "kp_cross", "ki_cross", "kd_cross", "kp_heading", "ki_heading", "kd_heading",
                             "integral_limit", "goal_tolerance")
-
-
-@dataclass(frozen=True)
-class VelocitySmootherParams:
-    """Nav2 velocity_smoother's names and defaults; axes are (vx, vy, wz)."""
-    smoothing_frequency: float = 20.0                   # Hz
-    max_velocity: tuple[float, float, float] = (0.5, 0.0, 2.5)
-    min_velocity: tuple[float, float, float] = (-0.5, 0.0, -2.5)
-    max_accel: tuple[float, float, float] = (2.5, 0.0, 3.2)
-    max_decel: tuple[float, float, float] = (-2.5, 0.0, -3.2)
-    deadband_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    velocity_timeout: float = 1.0                       # s without a command → decelerate to a stop
-
-    def __post_init__(self):
-        require_positive(self, "smoothing_frequency", "velocity_timeout")
-        for name in ("max_velocity", "min_velocity", "max_accel", "max_decel", "deadband_velocity"):
-            value = getattr(self, name)
-            if len(value) != 3 or not all(math.isfinite(v) for v in value):
-                raise ValueError(f"{name} must be three finite numbers [vx, vy, wz], got {value}")
-        for i in range(3):
-            if self.min_velocity[i] > self.max_velocity[i]:
-                raise ValueError(f"min_velocity {self.min_velocity} exceeds max_velocity {self.max_velocity}")
-            if self.max_accel[i] < 0 or self.max_decel[i] > 0:
-                raise ValueError("max_accel must be ≥ 0 and max_decel ≤ 0 on every axis "
-                                 f"(got {self.max_accel}, {self.max_decel})")
-
-
-@dataclass(frozen=True)
-class CollisionMonitorParams:
-    """Nav2 collision_monitor's stop and slowdown polygons, here grown from the footprint."""
-    footprint: tuple[tuple[float, float], ...] = ((0.416, 0.318), (-0.416, 0.318), (-0.416, -0.318),
-                                                  (0.416, -0.318))   # m, robot frame (the mecanum paper's)
-    stop_padding: float = 0.05           # m added around the footprint for the stop zone
-    slowdown_padding: float = 0.30       # m added around the footprint for the slowdown zone
-    slowdown_ratio: float = 0.5          # Nav2's default
-    min_points: int = 4                  # Nav2's default: fewer points inside a zone are noise
-    approach_check_s: float = 0.1        # s: a stop-zone point stops commands that come closer within this
-    # Nav2's "approach" action, here against the tracker's moving obstacles (constant velocity)
-    time_before_collision: float = 2.0   # s: a command meeting a track in its stop zone sooner is slowed or stopped
-    simulation_time_step: float = 0.1    # s between the predicted poses checked
-
-    def __post_init__(self):
-        if len(self.footprint) < 3:
-            raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
-        require_nonnegative(self, "stop_padding", "slowdown_padding")
-        require_positive(self, "approach_check_s", "time_before_collision", "simulation_time_step")
-        require_at_least(self, 1, "min_points")
-        if self.slowdown_padding < self.stop_padding:
-            raise ValueError("slowdown_padding must be at least stop_padding")
-        if not 0.0 <= self.slowdown_ratio <= 1.0:
-            raise ValueError(f"slowdown_ratio must be within [0, 1], got {self.slowdown_ratio}")
 
 
 @dataclass(frozen=True)

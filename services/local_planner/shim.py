@@ -26,7 +26,7 @@ from typing import Callable
 import numpy as np
 
 from ..runtime.params import require_positive
-from ..se2 import wrap_angle
+from ...geometry.se2 import wrap_angle
 from .path_ahead import ahead_of
 
 SWEEP_STEP = 0.05    # rad between the swept poses checked: a footprint corner 0.55 m out moves half a 5 cm cell

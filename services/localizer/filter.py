@@ -43,8 +43,8 @@ import numpy as np
 from numba import njit
 
 from ...schemas.messages import OccupancyGrid
-from ..map_server.mapio import cell_to_world
-from ..se2 import compose, inverse, wrap_angle
+from ...geometry.grid import cell_to_world
+from ...geometry.se2 import compose, inverse, wrap_angle
 from . import motion, sensor
 from .params import AmclParams
 from .sensor import FREE, LaserModel, ScanBeams

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 from numba import njit
 
-from ..se2 import wrap_angle
+from ...geometry.se2 import wrap_angle
 from .params import ODOM_MODELS
 
 _ROT1_MIN_STEP = 0.01  # m: below this the step's bearing is noise (amcl: turning in place)

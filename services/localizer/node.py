@@ -27,7 +27,6 @@ last estimate (with the initial covariance), as amcl does.
 """
 from __future__ import annotations
 
-import bisect
 import math
 from dataclasses import dataclass, replace
 from pathlib import Path
@@ -42,7 +41,8 @@ from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import ParamError
 from ..runtime.state_file import read_state, write_state
-from ..se2 import compose, relative, wrap_angle
+from ...geometry.odometry_history import OdomHistory
+from ...geometry.se2 import compose, relative
 from .filter import Amcl, warm_up
 from .params import AmclParams
 from .sensor import ScanBeams, scan_beams
@@ -95,39 +95,6 @@ def read_saved_pose(path: str | Path) -> SavedPose:
 
 def write_saved_pose(path: str | Path, pose: SavedPose) -> None:
     write_state(path, pose, "the localizer's last pose (amcl parameters) and the odometry at its stamp")
-
-
-class OdomHistory:
-    """Recent odometry poses, for the pose at any stamp in between (linear, heading wrapped)."""
-
-    def __init__(self, keep_ns: int):
-        self.keep_ns = keep_ns
-        self.stamps: list[int] = []
-        self.poses: list[np.ndarray] = []
-
-    @property
-    def latest(self) -> int | None:
-        return self.stamps[-1] if self.stamps else None
-
-    def add(self, stamp_ns: int, pose: np.ndarray) -> None:
-        self.stamps.append(stamp_ns)
-        self.poses.append(pose)
-        old = bisect.bisect_left(self.stamps, stamp_ns - self.keep_ns) - 1   # keep one before the window
-        if old > 0:
-            del self.stamps[:old], self.poses[:old]
-
-    def at(self, stamp_ns: int) -> np.ndarray | None:
-        """The odometry pose at stamp_ns, or None outside the history."""
-        if not self.stamps or not self.stamps[0] <= stamp_ns <= self.stamps[-1]:
-            return None
-        i = bisect.bisect_left(self.stamps, stamp_ns)
-        if self.stamps[i] == stamp_ns:
-            return self.poses[i]
-        t0, t1 = self.stamps[i - 1], self.stamps[i]
-        a, b = self.poses[i - 1], self.poses[i]
-        f = (stamp_ns - t0) / (t1 - t0)
-        return np.array([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]),
-                         float(wrap_angle(a[2] + f * float(wrap_angle(b[2] - a[2]))))])
 
 
 class LocalizerNode(Node):

@@ -20,7 +20,7 @@ Beams are picked as amcl picks them: every ((count âˆ’ 1) // (laser_max_beams âˆ
 likelihood_field_prob every ceil(count / laser_max_beams)-th. Readings at or below the minimum
 range become range_max (amcl has no notion of too-close); readings beyond range_max are ignored.
 
-Particle poses are mapped into grid coordinates by an affine map derived from mapio.grid_coords,
+Particle poses are mapped into grid coordinates by an affine map derived from geometry.grid.grid_coords,
 so maps with a yawed origin (the Stata basement) work without special cases.
 """
 from __future__ import annotations
@@ -33,8 +33,8 @@ from numba import njit
 from scipy import ndimage
 
 from ...schemas.messages import LaserScan, OccupancyGrid
-from ...sim.raycast import _cast_grid
-from ..map_server.mapio import grid_coords
+from ...geometry.raycast import cast_grid
+from ...geometry.grid import grid_coords
 from .params import AmclParams
 
 OCCUPIED, FREE = 100, 0  # amcl's map conversion: everything else is unknown
@@ -223,7 +223,7 @@ def _beam(poses, n, affine, yaw, blocked, resolution, origin_x, origin_y, ranges
         v0 = affine[1, 0] * lx + affine[1, 1] * ly + affine[1, 2]
         for b in range(bearings.shape[0]):
             angles[b] = theta - yaw + bearings[b]
-        expected = _cast_grid(u0, v0, angles, blocked, range_max / resolution)
+        expected = cast_grid(u0, v0, angles, blocked, range_max / resolution)
         p = 1.0
         for b in range(bearings.shape[0]):
             z = ranges[b]

@@ -13,14 +13,7 @@ Palette images are read by their colours (ROS 1 would read the palette indices).
 
 The image's row 0 is the TOP of the map; OccupancyGrid.data's row 0 is the row at the origin.
 
-Cells and the world. `origin` [x, y, yaw] is the pose of the outer corner of cell (row 0, col 0)
-in the map frame: columns run along the origin's x axis (at angle yaw) and rows along its y axis.
-The centre of cell (row, col) is therefore
-
-    origin_xy + R(yaw) · ((col + 0.5)·resolution, (row + 0.5)·resolution)
-
-`cell_to_world` and `world_to_cell` implement this; everyone converts through them. With yaw = π
-(the Stata basement map) the grid grows towards −x and −y from the origin.
+Cells and the world: geometry/grid.py.
 """
 from __future__ import annotations
 
@@ -303,31 +296,3 @@ def save_map(grid: OccupancyGrid, target: str | Path, mode: str = "trinary",
            "occupied_thresh": float(occupied_thresh), "free_thresh": float(free_thresh), "mode": mode}
     _replace_atomically(yaml_path, lambda p: p.write_text(yaml.safe_dump(doc, sort_keys=False)))
     return yaml_path
-
-
-# ---------------------------------------------------------------- cells and the world
-
-def grid_coords(info: MapMetaData, x, y) -> tuple[np.ndarray, np.ndarray]:
-    """Continuous grid coordinates (u along columns, v along rows, in cells) of world points."""
-    c, s = np.cos(info.origin.theta), np.sin(info.origin.theta)
-    dx, dy = np.asarray(x, np.float64) - info.origin.x, np.asarray(y, np.float64) - info.origin.y
-    return (c * dx + s * dy) / info.resolution, (-s * dx + c * dy) / info.resolution
-
-
-def world_to_cell(info: MapMetaData, x, y) -> tuple[np.ndarray, np.ndarray]:
-    """(row, col) of the cells holding world points; may lie outside the grid (see `in_grid`)."""
-    u, v = grid_coords(info, x, y)
-    return np.floor(v).astype(np.int64), np.floor(u).astype(np.int64)
-
-
-def cell_to_world(info: MapMetaData, row, col) -> tuple[np.ndarray, np.ndarray]:
-    """World (x, y) of the centres of cells (row, col)."""
-    c, s = np.cos(info.origin.theta), np.sin(info.origin.theta)
-    lx = (np.asarray(col, np.float64) + 0.5) * info.resolution
-    ly = (np.asarray(row, np.float64) + 0.5) * info.resolution
-    return info.origin.x + c * lx - s * ly, info.origin.y + s * lx + c * ly
-
-
-def in_grid(info: MapMetaData, row, col) -> np.ndarray:
-    row, col = np.asarray(row), np.asarray(col)
-    return (row >= 0) & (row < info.height) & (col >= 0) & (col < info.width)

@@ -45,7 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ...schemas.messages import CancelGoal, Goal, Header, NavStatus
-from ..se2 import wrap_angle
+from ...geometry.se2 import wrap_angle
 from .params import NavigatorParams
 from .recovery import ZERO, Behaviour, Twist3, behaviour
 

@@ -50,7 +50,7 @@ import numpy as np
 
 from ...schemas.messages import (CancelGoal, ClearCostmaps, Goal, Header, LocalCommand, NavStatus, Odometry, Path,
                                  Pose2D, Twist)
-from ..costmap.frames import FrameParams
+from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, QueryError
 from ..runtime.params import ParamError, require_nonnegative, require_positive

@@ -30,5 +30,5 @@ def main(args: argparse.Namespace) -> int:
     if args.into:
         from .into import main_into
         return main_into(args)
-    from .live import main_live
+    from .onto_bus import main_live
     return main_live(args)

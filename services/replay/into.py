@@ -29,7 +29,7 @@ from ..runtime.live import RUN_STARTED
 from ..runtime.merge import order_key
 from ..runtime.node import NS_PER_S, PARAMS_VALUE, Node, Publisher
 from ..runtime.params import ParamError, parse_overrides
-from ..runtime.registry import UnknownService, node_class
+from ..runtime.service_registry import UnknownService, node_class
 from ..runtime.run import build_node, configure_logging
 
 FIRST_SEQ = "first_seq/"

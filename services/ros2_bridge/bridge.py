@@ -31,7 +31,7 @@ import numpy as np
 from ...schemas.messages import (Clock, Goal, Header, OccupancyGrid, Path, Pose2D, PoseWithCovariance, Transform,
                                  Twist)
 from ..importers.rosbag import laser_scan, odometry, yaw_of
-from ..se2 import compose
+from ...geometry.se2 import compose
 from .rmw import BEST_EFFORT, TRANSIENT_LOCAL, Qos
 
 NS_PER_S = 1_000_000_000

@@ -13,8 +13,9 @@ from typing import Any
 
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout
 from .node import Node
-from .params import ParamError, load_node_params, read_params_mapping, read_yaml, unknown_names
-from .registry import UnknownService, node_class
+from .params import (ParamError, load_node_params, read_params_mapping, read_yaml,
+                     unknown_names)
+from .service_registry import UnknownService, node_class
 from .zenoh_config import check_loopback
 
 RESTART_POLICIES = ("no", "on-failure", "always")

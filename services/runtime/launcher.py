@@ -31,7 +31,7 @@ from .acl import (CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, 
                   write_puts)
 from .compose import Compose, ComposeError, ProcessSpec, load_compose
 from .params import ParamError
-from .registry import UnknownService, node_class
+from .service_registry import UnknownService, node_class
 from .node import Node
 from .live import tokens_present
 from .run import build_node

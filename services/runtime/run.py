@@ -8,7 +8,7 @@ import sys
 
 from .live import LiveRunner
 from .params import ParamError, load_node_params, parse_overrides, read_params_mapping
-from .registry import UnknownService, node_class
+from .service_registry import UnknownService, node_class
 
 
 def build_node(service: str, params_file: str | None = None, overrides: dict | None = None,

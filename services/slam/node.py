@@ -27,7 +27,7 @@ import numpy as np
 
 from ...schemas import MessageError
 from ...schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, Pose2D, PoseWithCovariance, Transform
-from ..localizer.node import OdomHistory
+from ...geometry.odometry_history import OdomHistory
 from ..runtime.node import NS_PER_S, Node
 from .params import SlamParams
 from .rbpf import Rbpf

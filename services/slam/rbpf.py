@@ -24,8 +24,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..se2 import compose, inverse, relative, wrap_angle
-from .grid import GridGeometry, TiledGrids, cut_beams
+from ...geometry.se2 import compose, inverse, relative, wrap_angle
+from .particle_grids import GridGeometry, TiledGrids, cut_beams
 from .params import SlamParams
 from .scanmatch import gaussian_kernel, match_all
 

@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..se2 import relative, wrap_angle
+from ...geometry.se2 import relative, wrap_angle
 
 
 class RelationsError(ValueError):

@@ -48,7 +48,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .grid import HIT_SCALE, TILE_BITS, TILE_MASK
+from .particle_grids import HIT_SCALE, TILE_BITS, TILE_MASK
 
 INV_HIT_SCALE = 1.0 / HIT_SCALE
 

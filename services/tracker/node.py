@@ -20,13 +20,12 @@ import numpy as np
 
 from ...schemas import MessageError
 from ...schemas.messages import LaserScan, OccupancyGrid, Tracks
-from ...sim.raycast import LidarParams
-from ..costmap.frames import FrameParams
-from ..costmap.layers import scan_points
+from ...geometry.frames import FrameParams, LASER_MOUNT
+from ...geometry.frames import scan_points
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from ..runtime.params import require_nonnegative
-from ..se2 import compose
+from ...geometry.se2 import compose
 from .tracker import MoverTracker, TrackerParams, warm_up
 
 _MAP, _MAP_ODOM = range(2)      # sporadic inputs, in input order (the order of equal stamps)
@@ -34,9 +33,9 @@ _MAP, _MAP_ODOM = range(2)      # sporadic inputs, in input order (the order of 
 
 @dataclass(frozen=True)
 class TrackerNodeParams(FrameParams, TrackerParams):
-    laser_x: float = LidarParams.mount_x     # m: the laser on the robot (the simulated lidar's mount)
-    laser_y: float = LidarParams.mount_y
-    laser_yaw: float = LidarParams.mount_yaw
+    laser_x: float = LASER_MOUNT[0]     # m: the laser on the robot (the simulated lidar's mount)
+    laser_y: float = LASER_MOUNT[1]
+    laser_yaw: float = LASER_MOUNT[2]
     use_map: bool = True                     # explain scan points by the static map (the map key)
     request_delay_s: float = 0.3             # sim s from a map / tf/map_odom stamp to its effect
 

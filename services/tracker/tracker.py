@@ -40,7 +40,7 @@ from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ...schemas.messages import OccupancyGrid
-from ..se2 import compose, inverse
+from ...geometry.se2 import compose, inverse
 
 ARC_CENTROID = 2.0 / math.pi   # a half circle's points have their centroid this many radii from its centre
 UNSET = -1.0                   # an evidence cell without a streak

@@ -21,7 +21,7 @@ from foxglove.messages import (ArrowPrimitive, Color, CylinderPrimitive, FrameTr
 
 from ...schemas import messages as m
 from ...schemas.keys import KeyLayout, type_for_key
-from ...sim.world import DEFAULT_FOOTPRINT
+from ...geometry.footprint import DEFAULT_FOOTPRINT
 
 NS_PER_S = 1_000_000_000
 WORLD_FRAME, MAP_FRAME, ODOM_FRAME, BASE_FRAME = "world", "map", "odom", "base_link"

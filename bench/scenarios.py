@@ -1,0 +1,121 @@
+"""`omninav bench scenarios --kind K --count N [--seed S] [--drive D] [--json]`: N generated
+worlds of one kind (seeds S … S+N−1), each driven as one lockstep mission from its start to its
+goal with the stack `omninav navigate` composes (cli/navigate.py compose_for) — deterministic per
+world, as fast as the CPU computes, on --workers processes.
+
+Per world and overall: success (the goal reached — the navigator said so and the truth agrees —
+and no collision that was the robot's fault), false arrivals (succeeded, but far from the goal),
+robot-fault and mover-fault collisions, the closest the footprint came to a mover, the sim time,
+the driven path against the first global plan, and when the robot first came within 1 m of the goal.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+from pathlib import Path
+
+from ..cli.navigate import LOCALIZATIONS, compose_for, map_for
+from ..services.chassis.kinematics import DRIVES
+from ..services.runtime.errors import exits_2_on_user_error
+from ..sim.world import load_world
+from ..experiments.lockstep_mission import run_mission
+from ..experiments.workers import run_in_workers
+from ..experiments.scenarios import ScenarioError, check_kind, generate_world, world_text
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--kind", required=True, help="the kind of world (omninav scenario generate --kind)")
+    parser.add_argument("--count", type=int, default=20, help="worlds to generate and drive (default 20)")
+    parser.add_argument("--seed", type=int, default=0, help="the first world's seed (default 0)")
+    parser.add_argument("--drive", choices=DRIVES, help="the robot's drive (default: the world's, mecanum)")
+    parser.add_argument("--localization", choices=LOCALIZATIONS, default="amcl",
+                        help="amcl on the rasterised world (default, as navigate), slam, or truth")
+    parser.add_argument("--timeout", type=float, default=120.0, metavar="S", help="sim s for the goal (default 120)")
+    parser.add_argument("--workers", type=int, default=2, help="missions driven at once, one process each (default 2)")
+    parser.add_argument("-o", "--out", help="folder for the worlds and maps (default out/scenarios-<kind>-<date>-<time>)")
+
+
+def drive_world(job: tuple[str, int, str | None, str, float, str]) -> dict:
+    """One world: generate it, write it and its map, drive the mission; its row."""
+    kind, seed, drive, localization, timeout_s, out = job
+    folder = Path(out) / f"{kind}-{seed}"
+    folder.mkdir(parents=True, exist_ok=True)
+    world_file = folder / "world.yaml"
+    world_file.write_text(world_text(generate_world(kind, seed)))
+    world = load_world(world_file)
+    drive = drive or world.robot.drive
+    compose = compose_for(world, world_file, map_for(world, world.name, folder), drive, localization,
+                          folder / "run.mcap", seed, 1.0, "r1")
+    began = time.monotonic()
+    run = run_mission(compose["services"], world, world.goals, timeout_s=timeout_s)
+    summary = run.summary.to_json()
+    goal = summary["goals"][0] if summary["goals"] else {}
+    return {"world": world.name, "seed": seed, "drive": drive, **{k: summary[k] for k in (
+        "success", "collisions", "robot_fault_collisions", "mover_fault_collisions", "min_mover_clearance_m",
+        "min_clearance_m", "time_s", "path_length_m", "plan_length_m", "final_xy_error_m")},
+        "status": goal.get("status", "none"), "reached": goal.get("reached", False), "within_1m_s": goal.get("within_1m_s"),
+        "wall_s": round(time.monotonic() - began, 1)}
+
+
+def _fmt(value, spec: str) -> str:
+    return "-" if value is None else format(value, spec)
+
+
+def _ratio(row: dict) -> float | None:
+    return row["path_length_m"] / row["plan_length_m"] if row.get("plan_length_m") else None
+
+
+HEADER = (f"{'world':14} {'ok':3} {'status':13} {'robot':>5} {'mover':>5} {'mover m':>7} {'time s':>7} "
+          f"{'1 m s':>6} {'path m':>7} {'plan m':>7} {'ratio':>5}")
+
+
+def row_line(r: dict) -> str:
+    status = "false arrival" if r["status"] == "succeeded" and not r["reached"] else r["status"]
+    return (f"{r['world']:14} {'yes' if r['success'] else 'NO':3} {status:13} "
+            f"{_fmt(r['robot_fault_collisions'], 'd'):>5} {_fmt(r['mover_fault_collisions'], 'd'):>5} "
+            f"{_fmt(r['min_mover_clearance_m'], '7.3f')} {r['time_s']:7.1f} {_fmt(r['within_1m_s'], '6.1f')} "
+            f"{r['path_length_m']:7.2f} {_fmt(r['plan_length_m'], '7.2f')} {_fmt(_ratio(r), '5.2f')}")
+
+
+def overall(rows: list[dict]) -> dict:
+    ratios = [x for x in map(_ratio, rows) if x is not None]
+    approaches = [r["min_mover_clearance_m"] for r in rows if r["min_mover_clearance_m"] is not None]
+    return {"worlds": len(rows), "success_rate": sum(r["success"] for r in rows) / len(rows),
+            "robot_fault_collisions": sum(r["robot_fault_collisions"] or 0 for r in rows),
+            "mover_fault_collisions": sum(r["mover_fault_collisions"] or 0 for r in rows),
+            "worlds_with_robot_fault": sum(bool(r["robot_fault_collisions"]) for r in rows),
+            "false_arrivals": sum(r["status"] == "succeeded" and not r["reached"] for r in rows),
+            "closest_mover_approach_m": min(approaches) if approaches else None,
+            "median_time_s": statistics.median(r["time_s"] for r in rows),
+            "median_path_over_plan": statistics.median(ratios) if ratios else None}
+
+
+@exits_2_on_user_error("bench scenarios")
+def main(args: argparse.Namespace) -> int:
+    check_kind(args.kind)
+    if args.count < 1 or args.workers < 1 or args.seed < 0:
+        raise ScenarioError(f"--count and --workers must be >= 1 and --seed >= 0, got {args.count}, "
+                            f"{args.workers} and {args.seed}")
+    out = Path(args.out or REPO / "out" / time.strftime(f"scenarios-{args.kind}-%Y%m%d-%H%M%S")).resolve()
+    out.mkdir(parents=True, exist_ok=True)
+    jobs = [(args.kind, seed, args.drive, args.localization, args.timeout, str(out))
+            for seed in range(args.seed, args.seed + args.count)]
+    if not args.json:
+        print(f"{args.count} {args.kind} worlds, {args.localization} localization, {args.workers} workers; in {out}")
+        print(HEADER, flush=True)
+    rows = run_in_workers(drive_world, jobs, args.workers, None if args.json else lambda r: print(row_line(r), flush=True))
+    figures = {"kind": args.kind, "seeds": [args.seed, args.seed + args.count - 1], "drive": args.drive or "world's",
+               "localization": args.localization, **overall(rows), "rows": rows}
+    if args.json:
+        print(json.dumps(figures))
+    else:
+        print(f"success {figures['success_rate']:.0%} ({sum(r['success'] for r in rows)}/{len(rows)}), collisions: "
+              f"{figures['robot_fault_collisions']} the robot's fault (in {figures['worlds_with_robot_fault']} worlds), "
+              f"{figures['mover_fault_collisions']} a mover's; closest to a mover "
+              f"{_fmt(figures['closest_mover_approach_m'], '.3f')} m; median {figures['median_time_s']:.1f} sim s, "
+              f"path/plan {_fmt(figures['median_path_over_plan'], '.2f')}")
+    return 0 if figures["success_rate"] == 1.0 and figures["robot_fault_collisions"] == 0 else 1

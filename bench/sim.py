@@ -1,0 +1,179 @@
+"""`omninav bench sim [--json]`: how fast the simulator steps, and how far odometry drifts in it.
+
+Speed: steps per second of `Simulation.step()` in the room, the warehouse (movers) and willow
+(a real map: thousands of static boxes), median over repeats, beside the reference measured in
+the same run — pymunk stepping an identical Space with nothing of ours around it. The robot
+turns on the spot at its start and is timed after one full turn, when the minimum clearance is
+set, so the figure is the common case; the cost of one exact clearance query and how many the
+timed steps made are reported beside it (only a step that may set a new minimum pays one).
+Times are this process's CPU time (time.process_time): the machine is shared, and other users'
+load would otherwise count against whichever side ran while it peaked; both sides are
+single-threaded, so CPU time is what they cost.
+
+Drift: a mecanum robot with the default noise drives 60 s in an open 20 m × 20 m arena — two
+figure-eights (1 m radius circles at 0.5 m/s), a strafe left and back, then stands still —
+its commands shaped by the chassis's own limits (Kinematics.limit) every step, and wheel
+odometry integrated by services.chassis.odometry from the sim's encoders, as the chassis runs
+it. Reported: final and largest position (m) and heading (deg) error against the truth, median
+over seeds; the follower-wheel odometry (followers + gyro) likewise.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..services.chassis.follower_wheels import follower_odometry
+from ..services.chassis.kinematics import ChassisParams, Kinematics
+from ..services.chassis.odometry import wheel_odometry
+from ..geometry.se2 import wrap_angle
+from ..sim.physics import SimParams, Simulation
+from ..sim.world import World, WorldError, load_world, world_path
+
+WORLDS = ("room", "warehouse", "willow")
+SPIN = (0.0, 0.0, 0.5)                          # m/s, m/s, rad/s while measuring speed
+CIRCLE_S = 4 * math.pi                          # one 1 m radius circle at 0.5 m/s
+DRIFT_PATTERN = (                               # (seconds, twist) — 60 s in all
+    (CIRCLE_S, (0.5, 0.0, 0.5)), (CIRCLE_S, (0.5, 0.0, -0.5)),
+    (CIRCLE_S, (0.5, 0.0, 0.5)), (CIRCLE_S, (0.5, 0.0, -0.5)),
+    (3.0, (0.0, 0.3, 0.0)), (3.0, (0.0, -0.3, 0.0)),
+    (60.0 - 4 * CIRCLE_S - 6.0, (0.0, 0.0, 0.0)),
+)
+ARENA = "name: arena\nbounds: [20.0, 20.0]\nrobot: {start: [10.0, 10.0, 0.0], drive: mecanum}\n"
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--steps", type=int, default=1000, help="steps per timed repeat (default 1000)")
+    parser.add_argument("--repeats", type=int, default=5, help="timed repeats per world (default 5)")
+    parser.add_argument("--seeds", type=int, default=3, help="60 s drift runs, seeds 0..N-1 (default 3)")
+
+
+def step_rates(world: World, steps: int, repeats: int) -> tuple[float, float, float]:
+    """Median steps/s of Simulation.step() and of the bare pymunk Space of an identical simulation,
+    and the exact clearance queries per 1000 timed steps."""
+    sim, bare = Simulation(world), Simulation(world)
+    sim.set_wheel_command(sim.kinematics.ik(SPIN))
+    dt = sim.params.dt
+    for _ in range(round(2 * math.pi / SPIN[2] / dt) + 1):   # one full turn: the clearance minimum is set
+        sim.step()
+        bare.space.step(dt)
+    queries_before = sim.clearance_queries
+    ours, reference = [], []
+    for _ in range(repeats):                    # interleaved, so load changes hit both alike
+        start = time.process_time()
+        for _ in range(steps):
+            sim.step()
+        ours.append(steps / (time.process_time() - start))
+        start = time.process_time()
+        for _ in range(steps):
+            bare.space.step(dt)
+        reference.append(steps / (time.process_time() - start))
+    queries = (sim.clearance_queries - queries_before) * 1000 / (steps * repeats)
+    return statistics.median(ours), statistics.median(reference), queries
+
+
+def clearance_query_ms(world: World, calls: int = 50) -> float:
+    movers = world.movers.circles_at(0.0)
+    world.footprint_clearance(world.robot.start, movers)
+    times = []
+    for _ in range(calls):
+        start = time.process_time()
+        world.footprint_clearance(world.robot.start, movers)
+        times.append(time.process_time() - start)
+    return statistics.median(times) * 1e3
+
+
+def drift_run(world: World, seed: int) -> dict:
+    """Drive DRIFT_PATTERN with the default noise; errors of wheel and follower odometry vs truth."""
+    sim = Simulation(world, SimParams(seed=seed), ChassisParams(drive="mecanum"))
+    kinematics = Kinematics(sim.chassis)
+    step_ns = round(sim.params.dt * 1e9)
+    odometers = {"wheel": wheel_odometry(sim.chassis, sim.pose), "follower": follower_odometry(sim.chassis, sim.pose)}
+    odometers["wheel"].update(0, np.zeros(kinematics.n_wheels))
+    odometers["follower"].update(0, np.zeros(2))
+    worst = {name: [0.0, 0.0] for name in odometers}
+    previous = np.zeros(3)
+    for seconds, twist in DRIFT_PATTERN:
+        for _ in range(round(seconds / sim.params.dt)):
+            command = kinematics.limit(twist, previous, sim.params.dt)
+            previous = command.twist
+            sim.set_wheel_command(command.wheels)
+            r = sim.step()
+            readings = {"wheel": r.encoder_positions, "follower": r.follower_positions}
+            for name, odometer in odometers.items():
+                estimate = odometer.update(sim.steps * step_ns, readings[name], r.gyro_z)
+                errors = _errors(estimate.pose, r.pose)
+                worst[name] = [max(w, e) for w, e in zip(worst[name], errors)]
+    return {name: {"final_m": _errors(odometer.pose, sim.pose)[0], "final_deg": _errors(odometer.pose, sim.pose)[1],
+                   "max_m": worst[name][0], "max_deg": worst[name][1], "collisions": sim.collisions}
+            for name, odometer in odometers.items()}
+
+
+def _errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
+    return (float(np.hypot(*(estimate[:2] - truth[:2]))),
+            float(np.degrees(abs(wrap_angle(estimate[2] - truth[2])))))
+
+
+def measure(steps: int, repeats: int, seeds: int) -> dict:
+    figures: dict = {"steps_per_s": {}, "reference_steps_per_s": {}, "clearance_query_ms": {},
+                     "clearance_queries_per_1000_steps": {}}
+    for name in WORLDS:
+        world = load_world(world_path(name))
+        ours, reference, queries = step_rates(world, steps, repeats)
+        figures["steps_per_s"][name] = round(ours)
+        figures["reference_steps_per_s"][name] = round(reference)
+        figures["clearance_queries_per_1000_steps"][name] = round(queries, 1)
+        figures["clearance_query_ms"][name] = round(clearance_query_ms(world), 3)
+    with tempfile.TemporaryDirectory() as folder:
+        arena = Path(folder) / "arena.yaml"
+        arena.write_text(ARENA)
+        runs = [drift_run(load_world(arena), seed) for seed in range(seeds)]
+    for name, prefix in (("wheel", "drift_60s"), ("follower", "follower_drift_60s")):
+        for key, suffix in (("final_m", "m"), ("final_deg", "deg"), ("max_m", "max_m"), ("max_deg", "max_deg")):
+            figures[f"{prefix}_{suffix}"] = round(statistics.median(run[name][key] for run in runs), 4)
+    figures["drift_collisions"] = sum(run["wheel"]["collisions"] for run in runs)
+    figures["drift_seeds"] = seeds
+    figures["sim_params"] = {k: getattr(SimParams(), k) for k in
+                             ("dt", "wheel_slip_std", "encoder_noise_std", "encoder_ticks_per_rev",
+                              "gyro_noise_std", "gyro_bias", "wheel_acc_limit")}
+    return figures
+
+
+def report(fig: dict) -> str:
+    lines = [f"{'world':12s}{'sim steps/s':>14s}{'bare pymunk steps/s':>22s}{'clearance query':>18s}"
+             f"{'queries/1000 steps':>21s}"]
+    for name in WORLDS:
+        lines.append(f"{name:12s}{fig['steps_per_s'][name]:14d}{fig['reference_steps_per_s'][name]:22d}"
+                     f"{fig['clearance_query_ms'][name]:15.3f} ms{fig['clearance_queries_per_1000_steps'][name]:21.1f}")
+    lines += [
+        "(robot turning on the spot at its start, after one full turn; medians; the bare reference has",
+        " no motors, noise, sensors or clearance tracking)",
+        f"odometry drift after 60 s (figure-eights and a strafe, default noise, median of "
+        f"{fig['drift_seeds']} seeds):",
+        f"  wheel odometry:    final {fig['drift_60s_m']:.4f} m, {fig['drift_60s_deg']:.3f} deg; "
+        f"max {fig['drift_60s_max_m']:.4f} m, {fig['drift_60s_max_deg']:.3f} deg",
+        f"  follower + gyro:   final {fig['follower_drift_60s_m']:.4f} m, {fig['follower_drift_60s_deg']:.3f} deg; "
+        f"max {fig['follower_drift_60s_max_m']:.4f} m, {fig['follower_drift_60s_max_deg']:.3f} deg",
+        "  noise: " + ", ".join(f"{k} {v}" for k, v in fig["sim_params"].items()),
+    ]
+    return "\n".join(lines)
+
+
+def main(args: argparse.Namespace) -> int:
+    if min(args.steps, args.repeats, args.seeds) < 1:
+        print("omninav bench sim: --steps, --repeats and --seeds must be at least 1", file=sys.stderr)
+        return 2
+    try:
+        figures = measure(args.steps, args.repeats, args.seeds)
+    except WorldError as exc:                   # e.g. willow's map missing from the shared data folder
+        print(f"omninav bench sim: {exc}", file=sys.stderr)
+        return 2
+    print(json.dumps(figures) if args.json else report(figures), flush=True)
+    return 0

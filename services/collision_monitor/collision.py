@@ -1,0 +1,176 @@
+"""Collision monitor after Nav2's collision_monitor, on the raw scan: the last check between the
+planner and the chassis, independent of the costmaps.
+
+Two polygons around the footprint (each vertex pushed out by stop_padding / slowdown_padding, as
+costmap_2d pads a footprint): with at least min_points scan points inside the stop zone that the
+command brings closer to the footprint, the command becomes zero; else with at least min_points
+inside the slowdown zone it is scaled by slowdown_ratio (all axes, so the direction is kept).
+Points are in the robot frame.
+
+Moving obstacles (the tracker's tracks, circles at constant velocity, robot frame at the command's
+time): as Nav2's "approach" action, the command and each track are carried forward every
+simulation_time_step up to time_before_collision; a command that brings a track into the stop zone
+within that time, deeper than standing still would at the same time, is scaled down (in quarters)
+to the fastest that does not, or stopped ("approach"). Standing still is the measure, not a
+refuge: a person walking into a robot that moves away from them is no reason to stop. Scan points
+on a track (within its radius + TRACKED_POINT_MARGIN) are left to the approach action and count in
+neither zone: halving the speed of a robot leaving a person's way behind it, or stopping it because
+a slight turn swung its corner a millimetre towards the person pressing on, let them walk into it
+(generated crossing variant).
+
+Unlike Nav2's stop polygon, a point in the stop zone stops only a command that approaches it (its
+distance to the footprint would shrink over approach_check_s): a robot that has come within
+stop_padding of a door post may still turn or move away from it, instead of standing there until
+the navigator gives up.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ...schemas.messages import LaserScan
+from ...geometry.polygons import points_in_polygons
+from ...geometry.footprint import STOP_PADDING, pad
+from ...geometry.frames import scan_points
+from ...geometry.se2 import integrate
+from ..local_planner.dynamic import Movers
+from ..runtime.params import require_at_least, require_nonnegative, require_positive
+
+APPROACH_SCALES = (1.0, 0.75, 0.5, 0.25)   # of a command, tried in turn against the tracks (then standing)
+TRACKED_POINT_MARGIN = 0.15   # m beyond a track's radius within which a scan point is that track's
+APPROACH_TOLERANCE = 0.01     # m deeper into the stop zone than standing that a command may bring a track
+
+
+@dataclass(frozen=True)
+class CollisionMonitorParams:
+    """Nav2 collision_monitor's stop and slowdown polygons, here grown from the footprint."""
+    footprint: tuple[tuple[float, float], ...] = ((0.416, 0.318), (-0.416, 0.318), (-0.416, -0.318),
+                                                  (0.416, -0.318))   # m, robot frame (the mecanum paper's)
+    stop_padding: float = STOP_PADDING   # m added around the footprint for the stop zone
+    slowdown_padding: float = 0.30       # m added around the footprint for the slowdown zone
+    slowdown_ratio: float = 0.5          # Nav2's default
+    min_points: int = 4                  # Nav2's default: fewer points inside a zone are noise
+    approach_check_s: float = 0.1        # s: a stop-zone point stops commands that come closer within this
+    # Nav2's "approach" action, here against the tracker's moving obstacles (constant velocity)
+    time_before_collision: float = 2.0   # s: a command meeting a track in its stop zone sooner is slowed or stopped
+    simulation_time_step: float = 0.1    # s between the predicted poses checked
+
+    def __post_init__(self):
+        if len(self.footprint) < 3:
+            raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
+        require_nonnegative(self, "stop_padding", "slowdown_padding")
+        require_positive(self, "approach_check_s", "time_before_collision", "simulation_time_step")
+        require_at_least(self, 1, "min_points")
+        if self.slowdown_padding < self.stop_padding:
+            raise ValueError("slowdown_padding must be at least stop_padding")
+        if not 0.0 <= self.slowdown_ratio <= 1.0:
+            raise ValueError(f"slowdown_ratio must be within [0, 1], got {self.slowdown_ratio}")
+
+
+@dataclass(frozen=True)
+class MonitorResult:
+    twist: np.ndarray    # (3,) the command to send
+    action: str          # none | slowdown | stop
+    points: int          # scan points inside the zone that acted (0 for none)
+    reason: str
+
+
+def distance_to_outline(points: np.ndarray, polygon: np.ndarray) -> np.ndarray:
+    """(K,) distance from each point to the nearest edge of the polygon (its outline)."""
+    a = polygon[:, None, :]                                   # (E, 1, 2) edge starts
+    edge = np.roll(polygon, -1, axis=0)[:, None, :] - a       # (E, 1, 2)
+    t = np.clip(np.sum((points[None] - a) * edge, axis=2) / np.sum(edge * edge, axis=2), 0.0, 1.0)
+    nearest = a + t[..., None] * edge                         # (E, K, 2)
+    return np.min(np.hypot(*(points[None] - nearest).transpose(2, 0, 1)), axis=0)
+
+
+def robot_frame_points(scan: LaserScan, sensor_pose) -> np.ndarray:
+    """(K, 2) scan endpoints in the robot frame; sensor_pose (x, y, yaw) is the laser on the robot."""
+    return scan_points(scan, sensor_pose, inf_is_valid=False)
+
+
+class CollisionMonitor:
+    def __init__(self, params: CollisionMonitorParams):
+        self.params = params
+        footprint = np.asarray(params.footprint, float)
+        self.stop_zone = pad(footprint, params.stop_padding)
+        self.slowdown_zone = pad(footprint, params.slowdown_padding)
+
+    def check(self, twist, points, movers: Movers | None = None) -> MonitorResult:
+        """The command allowed with these obstacle points and moving obstacles (robot frame)."""
+        points = np.asarray(points, float).reshape(-1, 2)
+        if movers is not None and len(movers):
+            gap = np.hypot(*(points[:, None, :] - movers.positions[None]).transpose(2, 0, 1))
+            points = points[~np.any(gap <= movers.radii[None] + TRACKED_POINT_MARGIN, axis=1)]
+        result = self._check_points(np.asarray(twist, float), points)
+        if movers is None or len(movers) == 0 or result.action == "stop":
+            return result
+        return self._check_movers(result, movers)
+
+    def gaps(self, twist, movers: Movers) -> np.ndarray:
+        """(K,) metres between the stop zone and the nearest track's circle every
+        simulation_time_step up to time_before_collision while the robot drives twist (negative:
+        the circle reaches into the zone, as deep as its radius when its centre is inside)."""
+        p = self.params
+        taus = np.arange(0.0, p.time_before_collision + 1e-9, p.simulation_time_step)
+        robot = integrate((0.0, 0.0, 0.0), np.asarray(twist, float), taus)          # (K, 3)
+        where = movers.positions[None] + movers.velocities[None] * taus[:, None, None]   # (K, N, 2)
+        shifted = where - robot[:, None, :2]
+        c, s = np.cos(robot[:, 2])[:, None], np.sin(robot[:, 2])[:, None]
+        local = np.stack([c * shifted[..., 0] + s * shifted[..., 1], -s * shifted[..., 0] + c * shifted[..., 1]], -1)
+        flat = local.reshape(-1, 2)
+        inside = points_in_polygons(flat, self.stop_zone[None])[:, 0]
+        distance = np.where(inside, 0.0, distance_to_outline(flat, self.stop_zone)).reshape(len(taus), -1)
+        return np.min(distance - movers.radii[None], axis=1)
+
+    def time_to_collision(self, twist, movers: Movers) -> float:
+        """Seconds until a track's circle first reaches the stop zone while the robot drives twist
+        (inf: not within time_before_collision)."""
+        hit = self.gaps(twist, movers) <= 0
+        return float(np.argmax(hit) * self.params.simulation_time_step) if hit.any() else np.inf
+
+    def _worse_than_standing(self, twist: np.ndarray, movers: Movers, standing: np.ndarray) -> bool:
+        """Whether driving twist brings a track into the stop zone, deeper than standing still would
+        at the same time (by more than APPROACH_TOLERANCE), until standing is met: beyond, the
+        prediction has a person walk through the robot."""
+        moving = self.gaps(twist, movers)
+        met = np.flatnonzero(standing < 0)
+        until = met[0] + 1 if len(met) else len(standing)
+        return bool(np.any((moving[:until] < 0) & (moving[:until] < standing[:until] - APPROACH_TOLERANCE)))
+
+    def _check_movers(self, result: MonitorResult, movers: Movers) -> MonitorResult:
+        standing = self.gaps(np.zeros(3), movers)
+        for scale in APPROACH_SCALES:
+            twist = result.twist * scale
+            if not self._worse_than_standing(twist, movers, standing):
+                if scale == 1.0:
+                    return result
+                return MonitorResult(twist, "approach", 0, f"a track met within {self.params.time_before_collision} s "
+                                                           f"at full speed, deeper than standing")
+        return MonitorResult(np.zeros(3), "approach", 0, "a track would be met deeper than standing still")
+
+    def _check_points(self, twist: np.ndarray, points: np.ndarray) -> MonitorResult:
+        p = self.params
+        zones = points_in_polygons(points, np.stack([self.stop_zone, self.slowdown_zone]))
+        inside = zones.sum(axis=0)
+        approached = self._approached(twist, points[zones[:, 0]])
+        if approached >= p.min_points:
+            return MonitorResult(np.zeros(3), "stop", approached,
+                                 f"{approached} scan points within {p.stop_padding} m of the footprint, approached")
+        if inside[1] >= p.min_points:
+            return MonitorResult(twist * p.slowdown_ratio, "slowdown", int(inside[1]),
+                                 f"{inside[1]} scan points within {p.slowdown_padding} m of the footprint")
+        return MonitorResult(twist.copy(), "none", 0, "")
+
+    def _approached(self, twist: np.ndarray, points: np.ndarray) -> int:
+        """How many of the points the command brings closer to the footprint's outline."""
+        if len(points) == 0:
+            return 0
+        dx, dy, dtheta = integrate((0.0, 0.0, 0.0), twist, self.params.approach_check_s)
+        cos, sin = np.cos(dtheta), np.sin(dtheta)
+        shifted = points - (dx, dy)
+        after = np.column_stack([cos * shifted[:, 0] + sin * shifted[:, 1], -sin * shifted[:, 0] + cos * shifted[:, 1]])
+        footprint = np.asarray(self.params.footprint, float)
+        closer = distance_to_outline(after, footprint) < distance_to_outline(points, footprint) - 1e-9
+        return int(np.count_nonzero(closer))
