@@ -126,3 +126,25 @@ def test_no_two_modules_share_a_name_for_different_things():
                 seen.setdefault(path.name, []).append(str(path.relative_to(REPO)))
     twice = {name: paths for name, paths in seen.items() if len(paths) > 1}
     assert not twice, twice
+
+
+def test_no_parameter_class_redefines_a_field_it_inherits():
+    """A node's parameters extend its core's: a field declared again would silently give the node another
+    default than the core documents."""
+    import dataclasses
+    import importlib
+    import pkgutil
+
+    redefined = []
+    for top in ("geometry", "services", "sim"):
+        package = importlib.import_module(f"omninav.{top}")
+        for info in pkgutil.walk_packages(package.__path__, f"omninav.{top}."):
+            module = importlib.import_module(info.name)
+            for cls in vars(module).values():
+                if not (isinstance(cls, type) and dataclasses.is_dataclass(cls) and cls.__module__ == info.name):
+                    continue
+                own = cls.__dict__.get("__annotations__", {})
+                redefined += [f"{cls.__qualname__}.{f.name} (from {base.__qualname__})"
+                              for base in cls.__mro__[1:] if dataclasses.is_dataclass(base)
+                              for f in dataclasses.fields(base) if f.name in own]
+    assert not redefined, redefined

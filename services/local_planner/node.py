@@ -131,6 +131,7 @@ class LocalPlannerNodeParams(FrameParams, DwaParams, RotationShimParams):
 
     def __post_init__(self):
         super().__post_init__()
+        require_nonnegative(self, "xy_goal_tolerance", "yaw_goal_tolerance")
         if self.controller not in CONTROLLERS:
             raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
         require_nonnegative(self, "final_approach_distance", "request_delay_s", "tracks_delay_s", "robot_radius", "footprint_padding",

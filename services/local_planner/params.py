@@ -4,10 +4,11 @@ DwaParams holds base_local_planner's TrajectoryPlannerROS names (the ones the me
 lists) and dwa_local_planner's where base_local_planner has none. Defaults are the ROS wiki's:
 base_local_planner for acc_lim_*, max/min_vel_x, max/min_vel_theta, min_in_place_vel_theta,
 escape_vel, holonomic_robot, y_vels, sim_granularity, vx_samples, vtheta_samples,
-controller_frequency, xy/yaw_goal_tolerance, dwa; dwa_local_planner for max/min_vel_y, vy_samples,
+controller_frequency, dwa; dwa_local_planner for max/min_vel_y, vy_samples,
 sim_time (1.7), path_distance_bias (32), goal_distance_bias (24), occdist_scale (0.01),
 forward_point_distance (0.325). The biases weigh metres as DWA does (DWA multiplies them by the
 costmap resolution and measures distances in cells, which is the same thing).
+The goal tolerances are the local planner node's (its final approach): DWA itself never reads them.
 FollowerParams has no ROS counterpart (the omni-wheel paper's follower).
 """
 from __future__ import annotations
@@ -55,15 +56,12 @@ class DwaParams:
     dynamic_obstacle_scale: float = 20.0   # per unit of intrusion into dynamic_influence_distance
     dynamic_influence_distance: float = 0.8  # m beyond the kept distance within which a track costs
     dynamic_min_speed: float = 0.1         # m/s: slower tracks are left to the costmap (a standing person is in it)
-    # goal
-    xy_goal_tolerance: float = 0.10      # m
-    yaw_goal_tolerance: float = 0.05     # rad
 
     def __post_init__(self):
         require_positive(self, "acc_lim_x", "acc_lim_theta", "max_vel_theta", "min_in_place_vel_theta", "sim_time",
                          "sim_granularity", "controller_frequency")
         require_nonnegative(self, "acc_lim_y", "path_distance_bias", "goal_distance_bias", "occdist_scale",
-                            "forward_point_distance", "xy_goal_tolerance", "yaw_goal_tolerance",
+                            "forward_point_distance",
                             "dynamic_obstacle_margin", "dynamic_obstacle_sigmas", "dynamic_obstacle_scale",
                             "dynamic_min_speed")
         require_positive(self, "dynamic_influence_distance")

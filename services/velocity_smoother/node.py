@@ -29,12 +29,7 @@ from .smoother import VelocitySmoother, VelocitySmootherParams
 
 @dataclass(frozen=True)
 class VelocitySmootherNodeParams(VelocitySmootherParams):
-    """Nav2's velocity_smoother names; the limits default to what the chassis allows on every axis
-    (Nav2's defaults are a differential drive's, vy 0, which would stop a mecanum robot strafing)."""
-    max_velocity: tuple[float, float, float] = (0.5, 0.5, 2.5)
-    min_velocity: tuple[float, float, float] = (-0.5, -0.5, -2.5)
-    max_accel: tuple[float, float, float] = (2.5, 2.5, 3.2)
-    max_decel: tuple[float, float, float] = (-2.5, -2.5, -3.2)
+    """Nav2's velocity_smoother names (VelocitySmootherParams) and the node's own."""
     command_delay_s: float = 0.04       # sim s from a command's stamp until it takes effect
 
     def __post_init__(self):

@@ -21,10 +21,12 @@ from ..runtime.params import require_positive
 class VelocitySmootherParams:
     """Nav2 velocity_smoother's names and defaults; axes are (vx, vy, wz)."""
     smoothing_frequency: float = 20.0                   # Hz
-    max_velocity: tuple[float, float, float] = (0.5, 0.0, 2.5)
-    min_velocity: tuple[float, float, float] = (-0.5, 0.0, -2.5)
-    max_accel: tuple[float, float, float] = (2.5, 0.0, 3.2)
-    max_decel: tuple[float, float, float] = (-2.5, 0.0, -3.2)
+    # what the chassis allows on every axis: Nav2's defaults are a differential drive's (vy 0), which
+    # would stop a mecanum robot strafing
+    max_velocity: tuple[float, float, float] = (0.5, 0.5, 2.5)
+    min_velocity: tuple[float, float, float] = (-0.5, -0.5, -2.5)
+    max_accel: tuple[float, float, float] = (2.5, 2.5, 3.2)
+    max_decel: tuple[float, float, float] = (-2.5, -2.5, -3.2)
     deadband_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
     velocity_timeout: float = 1.0                       # s without a command → decelerate to a stop
 
