@@ -1,4 +1,4 @@
-"""`omninav bench kills [--seeds N] [--services a,b] [--json]`: does a mission survive a crash?
+"""`omninav bench kills [--seeds N] [--first-seed S] [--services a,b] [--json]`: does a mission survive a crash?
 
 For each service of `omninav navigate`'s stack but the sim and the recorder (which the mission
 cannot do without, see cli/navigate.py) and each seed, one room mission (the demo's two goals, amcl
@@ -154,7 +154,10 @@ def _last_json(output: bytes) -> dict:
 
 
 def add_arguments(parser) -> None:
-    parser.add_argument("--seeds", type=int, default=3, help="missions per service, seeds 0..N-1 (default 3)")
+    parser.add_argument("--seeds", type=int, default=3,
+                        help="missions per service, seeds FIRST..FIRST+N-1 (default 3)")
+    parser.add_argument("--first-seed", type=int, default=0, metavar="FIRST",
+                        help="the first seed (default 0): split one experiment over several runs")
     parser.add_argument("--services", help=f"comma-separated, of {', '.join(SERVICES)} (default all)")
     parser.add_argument("--rate", type=float, default=1.0, help="sim seconds per wall second (default 1)")
     parser.add_argument("-o", "--out", help="folder for the runs (default out/kills-<date>-<time>)")
@@ -168,8 +171,8 @@ def main(args) -> int:
         why = f" ({', '.join(excluded)}: the mission cannot do without it)" if excluded else ""
         raise SystemExit(f"omninav bench kills: unknown service(s) {', '.join(unknown)}{why}; "
                          f"known: {', '.join(SERVICES)}")
-    if args.seeds < 1 or not (math.isfinite(args.rate) and args.rate > 0):
-        raise SystemExit("omninav bench kills: --seeds must be ≥ 1 and --rate positive")
+    if args.seeds < 1 or args.first_seed < 0 or not (math.isfinite(args.rate) and args.rate > 0):
+        raise SystemExit("omninav bench kills: --seeds must be ≥ 1, --first-seed ≥ 0 and --rate positive")
     out = Path(args.out or REPO / "out" / time.strftime("kills-%Y%m%d-%H%M%S")).resolve()
     out.mkdir(parents=True, exist_ok=True)
 
@@ -178,7 +181,7 @@ def main(args) -> int:
 
     runs = []
     for service in services:
-        for seed in range(args.seeds):
+        for seed in range(args.first_seed, args.first_seed + args.seeds):
             run = run_one(service, seed, out, args.rate, say)
             runs.append(run)
             say(f"{service} seed {seed}: {'completed' if run.completed else 'GIVEN UP'}, "
