@@ -11,12 +11,18 @@ import time
 from pathlib import Path
 
 import pytest
+from hypothesis import settings
 
 from omninav.schemas.keys import KeyLayout
 from omninav.services.runtime.acl import CREDENTIALS_ENV, DICTIONARY, TOOL
 from omninav.services.runtime.zenoh_config import ROUTER_ENV, open_client, open_router
 
 from launching import processes_using
+
+# tests assert behaviour, never timing: Hypothesis's per-example deadline (200 ms) failed property
+# tests on a loaded machine
+settings.register_profile("behaviour", deadline=None)
+settings.load_profile("behaviour")
 
 REPO = Path(__file__).resolve().parents[1]
 SHARED_DATA = REPO.parent / "shared" / "data"
