@@ -138,9 +138,9 @@ def test_scan_waits_for_odometry_and_is_interpolated():
 def test_map_world_writes_and_scores_the_map(tmp_path, capsys):
     out = tmp_path / "room"
     assert omninav(["map", "--world", "sim/worlds/room.yaml", "-o", str(out),
-                    "--waypoints", SHORT_ROUTE, "--set", "particles=10"]) == 0
+                    "--waypoints", SHORT_ROUTE, "--set", "particles=10", "--quiet"]) == 0
     text = capsys.readouterr().out
-    assert text.startswith("drove the route in ")
+    assert text.startswith("drove the route in ")     # --quiet: no progress lines before the summary
     assert (tmp_path / "room.yaml").is_file() and (tmp_path / "room.pgm").is_file()
     assert yaml.safe_load((tmp_path / "room.yaml").read_text())["resolution"] == pytest.approx(0.05)
     agreement = float(text.split("agreement ")[1].split(" %")[0])
