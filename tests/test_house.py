@@ -3,6 +3,9 @@ imports point the way docs/architecture.md draws them (ROOMS below is that drawi
 from __future__ import annotations
 
 import ast
+import dataclasses
+import importlib
+import pkgutil
 import subprocess
 import sys
 
@@ -131,10 +134,6 @@ def test_no_two_modules_share_a_name_for_different_things():
 def test_no_parameter_class_redefines_a_field_it_inherits():
     """A node's parameters extend its core's: a field declared again would silently give the node another
     default than the core documents."""
-    import dataclasses
-    import importlib
-    import pkgutil
-
     redefined = []
     for top in ("geometry", "services", "sim"):
         package = importlib.import_module(f"omninav.{top}")
