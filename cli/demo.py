@@ -1,7 +1,9 @@
 """`omninav demo`: the main job. A navigation mission in the simulated room: `omninav navigate`
 starts every service as its own process (recorder, sim, chassis, lidar, map_server, AMCL on the
 room's map, costmap, global and local planner, velocity smoother, collision monitor, navigator;
-each but the sim and the recorder restarted after a crash, resuming where it was), sends the goals one after another and scores the run against the ground truth; then the recording
+each but the sim and the recorder restarted after a crash, resuming where it was), in lockstep with
+the simulator (or at wall-clock pace with --real-time), sends the goals one after another and scores
+the run against the ground truth; then the recording
 is replayed deterministically into the chassis (byte-for-byte compare) and drawn as a picture:
 map, global costmap, planned and driven paths, scans."""
 from __future__ import annotations
@@ -27,9 +29,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--out", help="output folder (default out/demo-<date>-<time>)")
     add_goal_argument(parser, "a goal in the room (default: "
                       + ", then ".join(f"({x:g}, {y:g}, {yaw:g}°)" for x, y, yaw in GOALS) + ")")
-    # real time by default: the chassis takes a command 50 ms of sim time after its stamp, and at twice real
-    # time a loaded 2-core machine sometimes delivers one later than that (then the replay is not exact)
-    parser.add_argument("--rate", type=float, default=1.0, help="sim speed, sim seconds per wall second (default 1)")
+    # lockstep by default: as fast as the services compute and exactly replayable at any machine load;
+    # at wall-clock pace a loaded machine can deliver a command later than the chassis waits for it
+    parser.add_argument("--real-time", dest="rate", type=float, nargs="?", const=1.0, metavar="RATE",
+                        help="run at RATE sim seconds per wall second (default 1) instead of in lockstep")
     parser.add_argument("--composed", nargs="?", const="two", choices=("one", "two"),
                         help="run the services in one or two containers (navigate --composed), not a process each")
 
@@ -68,9 +71,11 @@ def main(args: argparse.Namespace) -> int:
     goals = [str(v) for goal in (args.goal or [(x, y, math.radians(yaw)) for x, y, yaw in GOALS])
              for v in ("--goal", *goal[:2], f"{goal[2]!r}rad")]
     composed = ["--composed", args.composed] if args.composed else []
+    pace = ["--lockstep"] if args.rate is None else ["--rate", str(args.rate)]
     navigated = _step("navigate --world room --localization amcl " +
-                      (f"(--composed {args.composed})" if composed else "(every service its own process)"),
-                      _omninav("navigate", "--world", "room", *goals, "--localization", "amcl", "--rate", str(args.rate),
+                      (f"(--composed {args.composed}" if composed else "(every service its own process") +
+                      (", in lockstep)" if args.rate is None else f", {args.rate:g}x real time)"),
+                      _omninav("navigate", "--world", "room", *goals, "--localization", "amcl", *pace,
                                "-o", str(out), "--record", str(recording), *composed), log, show_output=True)
     if not recording.is_file():
         print(f"demo failed: no recording; the log is {log}", file=sys.stderr)

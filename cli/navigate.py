@@ -49,7 +49,9 @@ from ..services.map_server.mapio import MapError, load_map, save_map
 from ..experiments.mission_score import TERMINAL, MissionError, load_mission, summarize_mission, summary_lines
 from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
 from ..services.runtime.errors import UserError, exits_2_on_user_error
+from ..experiments.lockstep_mission import GoalSequencer
 from ..services.runtime.live import LiveRunner, tokens_present
+from ..services.runtime.lockstep import Lockstep
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.zenoh_config import ROUTER_ENV, free_loopback_endpoint, open_client, router_endpoint
 from ..sim.node import open_world
@@ -85,6 +87,7 @@ READY_TIMEOUT_S = 300   # wall s for every service to come up (numba warm-ups on
 # the recorder sits with the simulator: neither restarts, so the robot's container can
 CONTAINERS = {"two": {"simulator": ("sim", "chassis", "lidar", "recorder"), "robot": ()}, "one": {"stack": ()}}
 CLOCK_WAIT_S = 30.0     # wall s for the first clock once every service is alive
+STALL_S = 120.0         # wall s without a sim step in lockstep before the mission is given up
 # a restarted sim would start its clock again from 0, a restarted recorder its file afresh: without
 # either the mission cannot go on; every other service is restarted and resumes
 NOT_RESTARTED = ("sim", "recorder")
@@ -134,9 +137,6 @@ class MissionNode(Node):
     def send(self, msg: Goal | CancelGoal) -> None:
         self.outbox.put(msg)
 
-    @property
-    def now_s(self) -> float:
-        return self.now_ns / NS_PER_S
 
 
 # ---------------------------------------------------------------- the compose file
@@ -270,12 +270,18 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="sim seconds allowed per goal before it is canceled (default 120)")
     parser.add_argument("--seed", type=int, default=0,
                         help="seed of the simulator's noise and of the localization's filter (default 0)")
-    parser.add_argument("--rate", type=float, default=1.0, help="sim seconds per wall second (default 1)")
+    parser.add_argument("--rate", type=float, help="sim seconds per wall second (default 1; with --lockstep: as "
+                                                   "fast as the services compute, and at most this fast if given)")
     parser.add_argument("--robot", default=DEFAULT_ROBOT, help="robot namespace (default r1)")
-    parser.add_argument("--lockstep", action="store_true",
-                        help="run every service in this one process, in lockstep with the simulator: as fast "
-                             "as the CPU computes, the same recording every time at any machine load (--rate "
-                             "does not apply)")
+    stepping = parser.add_mutually_exclusive_group()
+    stepping.add_argument("--lockstep", action="store_true",
+                          help="step the simulator only when every service is done with the last step "
+                               "(services/runtime/lockstep.py): no wall clock in the loop, so the same "
+                               "messages at any machine load, as fast as the services compute (or at most "
+                               "--rate)")
+    stepping.add_argument("--in-process", action="store_true",
+                          help="run every service in this one process, in lockstep with the simulator "
+                               "(the same recording byte for byte every time; --composed does not apply)")
     parser.add_argument("--composed", nargs="?", const="two", choices=sorted(CONTAINERS),
                         help="run the services in containers rather than a process each: two (the default: "
                              "sim, chassis and lidar in one, the rest in the other) or one")
@@ -314,7 +320,7 @@ def check_goals(map_file: Path, world: World, goals: np.ndarray) -> None:
 
 
 def check_numbers(args: argparse.Namespace) -> None:
-    for name, value in (("--timeout", args.timeout), ("--rate", args.rate)):
+    for name, value in (("--timeout", args.timeout), ("--rate", 1.0 if args.rate is None else args.rate)):
         if not (math.isfinite(value) and value > 0):
             raise NavigateError(f"{name} must be a positive number, got {value:g}")
     if args.seed < 0:
@@ -331,10 +337,12 @@ class Mission:
     """The running stack: `up`, the mission node, and a liveliness subscriber that notices a
     service whose token goes away (its process ended; `up` restarts it) and comes back."""
 
-    def __init__(self, router: str, names: list[str], up: subprocess.Popen, robot: str, log: Path, say):
+    def __init__(self, router: str, names: list[str], up: subprocess.Popen, node: MissionNode | GoalSequencer,
+                 log: Path, say, lockstep: Lockstep | None = None):
         self.names, self.up, self.log, self.say = names, up, log, say
-        self.node = MissionNode(robot=robot)
-        self.runner = LiveRunner(self.node, router)
+        self.node = node
+        robot = node.keys.robot_name
+        self.runner = LiveRunner(self.node, router, lockstep=lockstep)
         self.worker = threading.Thread(target=self.runner.run, name="navigate-bus", daemon=True)
         self.session = open_client(router)
         self.prefix = KeyLayout(robot).alive("x")[:-1]
@@ -347,10 +355,14 @@ class Mission:
             return
         if sample.kind == zenoh.SampleKind.DELETE:
             self.down[name] = time.monotonic()
-            self.say(f"{name} stopped at sim {self.node.now_s:.1f} s" +
+            self.say(f"{name} stopped at sim {self.now_s:.1f} s" +
                      ("" if name in NOT_RESTARTED else "; up restarts it"))
         elif self.down.pop(name, None) is not None:
-            self.say(f"{name} is back at sim {self.node.now_s:.1f} s")
+            self.say(f"{name} is back at sim {self.now_s:.1f} s")
+
+    @property
+    def now_s(self) -> float:
+        return self.node.now_ns / NS_PER_S
 
     def __enter__(self) -> "Mission":
         self.worker.start()
@@ -375,9 +387,9 @@ class Mission:
 
     def wait_sim(self, done, seconds: float) -> bool:
         """Until done() or `seconds` of sim time have passed (False then); checks the services."""
-        until = self.node.now_s + seconds
+        until = self.now_s + seconds
         while not done():
-            if self.node.now_s >= until:
+            if self.now_s >= until:
                 return False
             self.check_alive()
             time.sleep(POLL_S)
@@ -388,7 +400,7 @@ class Mission:
         node = self.node
         x, y, yaw = (float(v) for v in pose)
         node.send(Goal(header=Header(), goal_id=goal_id, pose=Pose2D(x, y, yaw)))
-        say(f"{goal_id}: goal ({x:.2f}, {y:.2f}, {math.degrees(yaw):.1f} deg) sent at sim {node.now_s:.1f} s")
+        say(f"{goal_id}: goal ({x:.2f}, {y:.2f}, {math.degrees(yaw):.1f} deg) sent at sim {self.now_s:.1f} s")
 
         def ended() -> bool:
             status = node.statuses.get(goal_id)
@@ -400,8 +412,27 @@ class Mission:
             say(f"{goal_id}: no result within {timeout_s:g} sim s; canceled")
             return "timeout"
         status = node.statuses[goal_id]
-        say(f"{goal_id}: {status.status}{f' ({status.reason})' if status.reason else ''} at sim {node.now_s:.1f} s")
+        say(f"{goal_id}: {status.status}{f' ({status.reason})' if status.reason else ''} at sim {self.now_s:.1f} s")
         return status.status
+
+
+def follow_sequence(mission: Mission, sequencer: GoalSequencer, say) -> None:
+    """Until the sequencer (which sends the goals on the sim clock, in lockstep) is done; says what
+    each goal came to; ServiceDied if the stack cannot go on."""
+    told, last_step, stepped_at = 0, -1.0, time.monotonic()
+    while not sequencer.finished:
+        mission.check_alive()
+        if mission.now_s != last_step:
+            last_step, stepped_at = mission.now_s, time.monotonic()
+        elif time.monotonic() - stepped_at > STALL_S:
+            raise ServiceDied(f"the simulator has not stepped for {STALL_S:g} s (lockstep: its log says "
+                              f"whom it waits for); see {mission.log}")
+        for goal_id, outcome in list(sequencer.outcomes.items())[told:]:
+            say(f"{goal_id}: {outcome} at sim {mission.now_s:.1f} s")
+            told += 1
+        time.sleep(POLL_S)
+    for goal_id, outcome in list(sequencer.outcomes.items())[told:]:
+        say(f"{goal_id}: {outcome}")
 
 
 def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot: str, say) -> bool:
@@ -427,14 +458,16 @@ def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot:
     return False
 
 
-def start_stack(compose_file: Path, router: str, log: Path) -> subprocess.Popen:
-    """`up` with the ACL on; this process's sessions use the run's operator identity (goals, cancels)."""
+def start_stack(compose_file: Path, router: str, log: Path, lockstep: bool) -> subprocess.Popen:
+    """`up` with the ACL on; this process's sessions use the run's operator identity (goals, cancels).
+    In lockstep the sim also waits for this process's goal sequencer ("navigate")."""
     credentials = compose_file.parent / "credentials"
     shutil.rmtree(credentials, ignore_errors=True)     # a previous run's passwords are not this run's
     os.environ[CREDENTIALS_ENV] = str(credentials / OPERATOR)
     with open(log, "wb") as sink:
         return subprocess.Popen([sys.executable, "-m", "omninav.cli.main", "up", str(compose_file), "--router", router,
-                                 "--credentials", str(credentials)],
+                                 "--credentials", str(credentials),
+                                 *(["--lockstep", GoalSequencer.service] if lockstep else [])],
                                 cwd=REPO, stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
 
 
@@ -472,19 +505,20 @@ def main(args: argparse.Namespace) -> int:
     map_file = map_for(world, args.world, out)
     check_goals(map_file, world, goals)
     say(f"{len(goals)} goal(s) checked on the map {map_file.name}: free for the footprint and reachable from the start")
-    state_dir = None if args.lockstep else out / "state"      # in one process nothing is restarted
+    state_dir = None if args.in_process else out / "state"      # in one process nothing is restarted
     if state_dir is not None:
         shutil.rmtree(state_dir, ignore_errors=True)           # a previous run's state is not this run's to resume
         state_dir.mkdir()
+    rate = args.rate if args.rate is not None else 0.0 if args.lockstep else 1.0     # 0: as fast as it may
     compose = compose_for(world, world_file, map_file, drive, args.localization, recording, args.seed,
-                          args.rate, args.robot, profile, state_dir=state_dir)
+                          rate, args.robot, profile, state_dir=state_dir)
     if args.composed:
         compose["services"] = in_containers(compose["services"], args.composed)
     compose_file = out / "compose.yaml"
     compose_file.write_text(yaml.safe_dump(compose, sort_keys=False))
     say(f"{len(compose['services'])} services ({args.localization} localization, {drive} drive) in {world.name}")
-    if args.lockstep:
-        summary = run_lockstep(compose, world, goals, args, recording, say)
+    if args.in_process:
+        summary = run_in_process(compose, world, goals, args, recording, say)
         print_summary(summary, args.json)
         return 0 if summary.success else 1
     problem = run_processes(compose, compose_file, args, recording, log, goals, say)
@@ -509,7 +543,7 @@ def print_summary(summary, as_json: bool) -> None:
     print(json.dumps(summary.to_json()) if as_json else "\n".join(summary_lines(summary)), flush=True)
 
 
-def run_lockstep(compose: dict, world: World, goals: np.ndarray, args: argparse.Namespace, recording: Path, say):
+def run_in_process(compose: dict, world: World, goals: np.ndarray, args: argparse.Namespace, recording: Path, say):
     from ..experiments.lockstep_mission import run_mission
 
     say("running them in lockstep in this process")
@@ -530,14 +564,18 @@ def run_processes(compose: dict, compose_file: Path, args: argparse.Namespace, r
     # $OMNINAV_ROUTER names the mission's router, so `omninav view` can join it; else any free port
     router = router_endpoint() if os.environ.get(ROUTER_ENV) else free_loopback_endpoint()
     say(f"starting them as processes on the router {router}; log {log}")
-    up = start_stack(compose_file, router, log)
+    up = start_stack(compose_file, router, log, args.lockstep)
     problem = ""
     try:
         # `up` validates the compose file (exit 2 naming the key) while the services start
         if not wait_until_ready(router, names, up, args.robot, say):
             problem = f"the services did not all start (up exit {up.poll()}); see {log}"
+        elif args.lockstep:
+            sequencer = GoalSequencer(goals, args.timeout, robot=args.robot)
+            with Mission(router, names, up, sequencer, log, say, Lockstep()) as mission:
+                follow_sequence(mission, sequencer, say)
         else:
-            with Mission(router, names, up, args.robot, log, say) as mission:
+            with Mission(router, names, up, MissionNode(robot=args.robot), log, say) as mission:
                 if not mission.node.clock_seen.wait(CLOCK_WAIT_S):
                     raise ServiceDied(f"no sim clock within {CLOCK_WAIT_S:g} s; see {log}")
                 for k, goal in enumerate(goals):

@@ -30,6 +30,7 @@ from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..schemas.keys import DEFAULT_ROBOT
 from ..schemas.messages import Clock, Twist
 from ..services.runtime.live import LiveRunner
+from ..services.runtime.run import add_lockstep_argument, lockstep_of
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.zenoh_config import router_endpoint
 
@@ -210,6 +211,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--key-timeout", type=float, default=KeyMap.key_timeout_s, metavar="S",
                         help="stop when no key came for this long, wall seconds (default "
                              f"{KeyMap.key_timeout_s}; longer than your keyboard's repeat delay)")
+    add_lockstep_argument(parser)
     parser.add_argument("--script", metavar="STEPS",
                         help="drive 'vx,vy,wz,seconds;…' (sim seconds) instead of the keyboard, then stop and exit")
 
@@ -230,7 +232,7 @@ def main(args: argparse.Namespace) -> int:
         node = TeleopNode(ScriptCommand(steps) if steps else keyboard, robot=args.robot)
     except ValueError as exc:            # a non-loopback router, a bad robot name
         raise TeleopError(str(exc)) from None
-    runner = LiveRunner(node, router)
+    runner = LiveRunner(node, router, lockstep=lockstep_of(args))
     worker = threading.Thread(target=runner.run, name="teleop-bus", daemon=True)
     worker.start()
     try:

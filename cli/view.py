@@ -23,4 +23,5 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     # the same as `omninav run view --set port=…`: one way to build and run the service
     return run.main(argparse.Namespace(service=SERVICE, module=None, params=args.params, set=[f"port={args.port}"],
-                                       robot=args.robot, name=None, router=args.router, log_level=args.log_level))
+                                       robot=args.robot, name=None, router=args.router, log_level=args.log_level,
+                                       lockstep=None))

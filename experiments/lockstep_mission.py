@@ -52,6 +52,9 @@ class GoalSequencer(Node):
         self.outcomes: dict[str, str] = {}     # goal_id -> final status, or "timeout"
         self.finished = False
 
+    def holds_lockstep(self) -> bool:
+        return self.finished
+
     def on_status(self, msg: NavStatus) -> None:
         if msg.goal_id == self.active and msg.status in TERMINAL:
             self._end(msg.status if self.cancel_ns is None else "timeout")

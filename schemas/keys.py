@@ -11,6 +11,7 @@ from . import messages as m
 
 ROOT = "omninav"
 DEFAULT_ROBOT = "r1"
+LOCKSTEP = "lockstep"
 ALL = f"{ROOT}/**"
 
 # topic -> message type, for keys under omninav/<robot>/
@@ -96,6 +97,13 @@ class KeyLayout:
         """The key expression of every service's diagnostics (for a viewer of them all)."""
         return f"{ROOT}/{self.robot_name}/diagnostics/*"
 
+    def lockstep(self, service: str) -> str:
+        """Where a service reports its progress in a lockstep run (services/runtime/lockstep.py)."""
+        return f"{ROOT}/{self.robot_name}/{LOCKSTEP}/{_check_segment('service name', service)}"
+
+    def lockstep_of_all(self) -> str:
+        return f"{ROOT}/{self.robot_name}/{LOCKSTEP}/*"
+
     def alive(self, service: str) -> str:
         """The liveliness token a running service declares once its inputs and outputs are in place."""
         return f"{ROOT}/{self.robot_name}/alive/{_check_segment('service name', service)}"
@@ -114,6 +122,12 @@ class KeyLayout:
         return self.robot(name)
 
 
+def is_lockstep_key(key: str) -> bool:
+    """A lockstep progress report: flow control between services, not data (the recorder skips it)."""
+    parts = key.split("/")
+    return len(parts) == 4 and parts[0] == ROOT and parts[2] == LOCKSTEP
+
+
 def type_for_key(key: str) -> type | None:
     """The message type that a concrete key carries, or None if the layout does not know it."""
     parts = key.split("/")
@@ -125,6 +139,6 @@ def type_for_key(key: str) -> type | None:
             return SIM_TOPICS[rest]
         return SIM_ROBOT_TOPICS.get("/".join(parts[3:])) if len(parts) >= 4 else None
     rest = "/".join(parts[2:])
-    if parts[2] == "diagnostics" and len(parts) == 4:
+    if parts[2] in ("diagnostics", LOCKSTEP) and len(parts) == 4:
         return m.Diagnostic
     return ROBOT_TOPICS.get(rest)

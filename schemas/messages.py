@@ -295,10 +295,10 @@ class Tracks:
 @dataclass(slots=True)
 class Clock:
     header: Header = field(default_factory=Header)     # stamp_ns is the sim time
-    rate: float = 1.0                                   # sim seconds per wall second
+    rate: float = 1.0                                   # sim seconds per wall second; 0: as fast as it may
 
     def problem(self) -> Problem:
-        return None if self.rate > 0 else ("rate", f"{self.rate} is not a positive rate")
+        return None if self.rate >= 0 else ("rate", f"{self.rate} is not a rate (positive, or 0: unpaced)")
 
 
 @message("Goal", 1)

@@ -27,15 +27,15 @@ from ..geometry.polygons import polygon_area
 @dataclass(frozen=True)
 class SimNodeParams(SimParams):
     world: str = "room"           # a shipped world's name or a world file's path
-    rate: float = 1.0             # sim seconds per wall second
+    rate: float = 1.0             # sim seconds per wall second; 0: as fast as it may (in lockstep: as the services compute)
     footprint: tuple[tuple[float, float], ...] = ()   # m, robot frame (a robot profile's); () = the world's
     chassis: dict = field(default_factory=dict)       # ChassisParams by name: the wheels the chassis drives
     wheel_cmd_timeout_s: float = 0.5   # sim s of steps without a wheel command that stop the wheels; 0: never
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if not self.rate > 0:
-            raise ValueError(f"rate must be positive, got {self.rate}")
+        if not (math.isfinite(self.rate) and self.rate >= 0):
+            raise ValueError(f"rate must be positive, or 0 for as fast as it may, got {self.rate}")
         if not (math.isfinite(self.wheel_cmd_timeout_s) and self.wheel_cmd_timeout_s >= 0):
             raise ValueError(f"wheel_cmd_timeout_s must be zero (no watchdog) or positive, got {self.wheel_cmd_timeout_s}")
         if self.footprint and (len(self.footprint) < 3 or abs(polygon_area(np.array(self.footprint))) < 1e-6):
@@ -68,6 +68,7 @@ def open_world(name_or_path: str):
 
 class SimNode(Node):
     service = "sim"
+    coordinates_lockstep = True
     Params = SimNodeParams
 
     def setup(self) -> None:
@@ -87,7 +88,7 @@ class SimNode(Node):
         self.quiet_steps: int | None = None    # steps since the last wheel command; None: none in effect
 
     def pace_s(self) -> float:
-        return self.params.dt / self.params.rate
+        return self.params.dt / self.params.rate if self.params.rate else 0.0
 
     def on_wheel_cmd(self, msg: WheelCommand) -> None:
         wanted = self.sim.command.size

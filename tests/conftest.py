@@ -15,6 +15,7 @@ from hypothesis import settings
 
 from omninav.schemas.keys import KeyLayout
 from omninav.services.runtime.acl import CREDENTIALS_ENV, DICTIONARY, TOOL
+from omninav.services.runtime.lockstep import LOCKSTEP_ENV, Lockstep
 from omninav.services.runtime.zenoh_config import ROUTER_ENV, open_client, open_router
 
 from launching import processes_using
@@ -69,10 +70,17 @@ class Processes:
     def __init__(self, tmp_path: Path, endpoint: str | None):
         self.tmp_path, self.endpoint = tmp_path, endpoint
         self.started: list[tuple[subprocess.Popen, Path]] = []
+        self.lockstep_env: dict[str, str] = {}
+
+    def in_lockstep(self, *names: str) -> None:
+        """Every process started from now on steps with the simulator (services/runtime/lockstep.py);
+        the sim waits for the named services (teleop included) before its first step."""
+        self.lockstep_env = {LOCKSTEP_ENV: Lockstep(names).env_value()}
 
     def omninav(self, *args: str, env: dict | None = None, cwd: Path | None = None) -> subprocess.Popen:
         log = self.tmp_path / f"proc{len(self.started)}-{args[0]}.log"
-        full_env = {**os.environ, **({ROUTER_ENV: self.endpoint} if self.endpoint else {}), **(env or {})}
+        full_env = {**os.environ, **({ROUTER_ENV: self.endpoint} if self.endpoint else {}), **self.lockstep_env,
+                    **(env or {})}
         proc = subprocess.Popen([sys.executable, "-m", "omninav.cli.main", *args], cwd=cwd or REPO,
                                 env=full_env, stdout=open(log, "wb"), stderr=subprocess.STDOUT,
                                 start_new_session=True)

@@ -106,7 +106,8 @@ def test_a_container_has_one_identity_with_its_services_rights_and_no_more(tmp_p
     assert [(p.name, [s.name for s in p.services]) for p in compose.processes] == [("demo", ["talker", "listener"])]
     grants = identities(compose)
     assert "talker" not in grants and "listener" not in grants
-    assert set(grants["demo"].put) == {CLOCK, CHATTER, ECHO, KEYS.diagnostics("talker"), KEYS.diagnostics("listener")}
+    assert set(grants["demo"].put) == {CLOCK, CHATTER, ECHO, *(f(name) for name in ("talker", "listener")
+                                                              for f in (KEYS.diagnostics, KEYS.lockstep))}
     assert set(grants["demo"].token) == {KEYS.alive("talker"), KEYS.alive("listener")}
 
     folder = tmp_path / "ids"

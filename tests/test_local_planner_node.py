@@ -210,13 +210,15 @@ def test_a_robot_facing_away_from_the_path_turns_on_the_spot_first_then_drives_a
 
 def test_a_live_run_replays_byte_for_byte_into_the_local_planner_and_the_gates(processes, router_endpoint, tmp_path,
                                                                                 capsys):
-    """Every service its own process, the sim at half speed and the gates with wider margins (LIVE), so
-    that the deferrals hold on a loaded test machine; the path is sent once the costmap keeps up."""
+    """Every service its own process in lockstep with the sim at half speed (so the path this test puts
+    comes within the deferrals), the gates with wider margins (LIVE); the path is sent once the
+    costmap keeps up."""
     recording = tmp_path / "local.mcap"
     recorder = processes.omninav("record", "-o", str(recording))
     wait_until(lambda: "recording" in processes.log_of(recorder), 60, what="the recorder to start")
     costmap_files = ["--set", "local_costmap_files=[compose/params/costmap_common_params.yaml, "
                               "compose/params/costmap_local_params.yaml]"]
+    processes.in_lockstep("chassis", "lidar", "costmap", *(service for service, _ in LIVE), "navigator_stand_in")
     services = [processes.omninav("run", "sim", "--set", "rate=0.5"), processes.omninav("run", "chassis"),
                 processes.omninav("run", "lidar"),
                 processes.omninav("run", "costmap", *REPLAYED[0][1], *costmap_files),

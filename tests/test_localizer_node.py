@@ -451,9 +451,12 @@ def test_a_live_run_replays_into_the_localizer_byte_for_byte(processes, room_map
     settings = ["--set", f"map_file={room_map}", "--set", "initial_pose_x=1.3", "--set", "initial_pose_y=1.1",
                 "--set", "max_particles=800", "--set", "min_particles=200", "--set", "laser_max_beams=40",
                 "--set", "update_min_d=0.05", "--set", "resample_interval=1", "--set", "gui_publish_rate=2.0"]
+    # in lockstep (services/runtime/lockstep.py), teleop included: exactly replayable at any load
+    processes.in_lockstep("localizer", "chassis", "lidar", "cmd_vel_mux", "velocity_smoother", "collision_monitor",
+                          "teleop")
     localizer = processes.omninav("run", "localizer", *settings)
     wait_until(lambda: "started" in processes.log_of(localizer), 60, what="the localizer to start")
-    services = [processes.omninav("run", "sim", "--set", "rate=2"), processes.omninav("run", "chassis"),
+    services = [processes.omninav("run", "sim", "--set", "rate=0"), processes.omninav("run", "chassis"),
                 processes.omninav("run", "lidar"), *command_chain(processes)]
     teleop = processes.omninav("teleop", "--script", SCRIPT)
     assert teleop.wait(180) == 0, processes.log_of(teleop)

@@ -1,4 +1,4 @@
-"""Missions in one process, in lockstep (experiments/lockstep_mission.py, `navigate --lockstep`):
+"""Missions in one process, in lockstep (experiments/lockstep_mission.py, `navigate --in-process`):
 the stack `omninav navigate` composes reaches the goal, and the same mission twice gives the same
 recording, message for message (diagnostics aside: they carry wall-time figures)."""
 from __future__ import annotations
@@ -38,7 +38,7 @@ def test_a_lockstep_mission_arrives_and_its_recording_is_the_same_every_time(tmp
 
 
 def test_navigate_lockstep_cancels_a_goal_it_cannot_reach_in_time_and_says_so(tmp_path, capsys):
-    code = cli_main(["navigate", "--world", "room", "--lockstep", "--goal", "8.5", "6.5", "0", "--timeout", "3",
+    code = cli_main(["navigate", "--world", "room", "--in-process", "--goal", "8.5", "6.5", "0", "--timeout", "3",
                      "-o", str(tmp_path), "--json"])
     captured = capsys.readouterr()
     summary = json.loads(captured.out)

@@ -39,7 +39,7 @@ def test_map_prints_progress_unless_quiet(tmp_path, capsys):
 
 
 def test_navigate_quiet_prints_the_summary_only(tmp_path, capsys):
-    code = cli_main(["navigate", "--world", "room", "--lockstep", "--goal", "3.2", "0.9", "30", "--timeout", "1",
+    code = cli_main(["navigate", "--world", "room", "--in-process", "--goal", "3.2", "0.9", "30", "--timeout", "1",
                      "-o", str(tmp_path), "--json", "--quiet"])
     captured = capsys.readouterr()
     assert code == 1 and "navigate:" not in captured.out + captured.err

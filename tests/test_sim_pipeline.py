@@ -1,5 +1,5 @@
 """Issue 3 end to end: sim, chassis, lidar and recorder as separate processes, driven by a teleop
-script; the recording replays byte for byte into the chassis and the lidar, and draws as a report."""
+script, in lockstep with the simulator; the recording replays byte for byte into the chassis and the lidar, and draws as a report."""
 import math
 import signal
 
@@ -8,7 +8,6 @@ import numpy as np
 from omninav.schemas import decode
 from omninav.services.recorder.mcap_io import read_records
 
-from launching import command_chain
 from conftest import wait_alive, wait_until
 
 # forward 0.9 m, turn in place, strafe right: clear of the room's furniture from the start pose
@@ -25,10 +24,13 @@ def test_drive_record_replay_and_report(processes, router_endpoint, tmp_path):
     recording = tmp_path / "sim.mcap"
     recorder = processes.omninav("record", "-o", str(recording))
     wait_until(lambda: "recording" in processes.log_of(recorder), 60, what="the recorder to start")
-    services = [processes.omninav("run", "sim", "--set", "rate=2"),
-                processes.omninav("run", "chassis"),
-                processes.omninav("run", "lidar"), *command_chain(processes)]
-    wait_alive(router_endpoint, ["sim", "chassis", "lidar", "cmd_vel_mux", "velocity_smoother", "collision_monitor"])
+    # in lockstep (services/runtime/lockstep.py): the sim steps once the others, teleop included, are
+    # done with a step, so the recording replays exactly however loaded the machine is
+    followers = ["chassis", "lidar", "cmd_vel_mux", "velocity_smoother", "collision_monitor"]
+    processes.in_lockstep(*followers, "teleop")
+    services = [processes.omninav("run", "sim", "--set", "rate=0"),
+                *(processes.omninav("run", name) for name in followers)]
+    wait_alive(router_endpoint, ["sim", *followers])
     code, log = run_omninav(processes, "teleop", "--script", SCRIPT)
     assert code == 0, log
     for proc in reversed(services):      # lidar and chassis first: their final diagnostics get recorded

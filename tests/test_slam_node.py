@@ -179,8 +179,10 @@ def test_a_live_run_replays_into_slam_byte_for_byte(processes, tmp_path):
     recording = tmp_path / "run.mcap"
     recorder = processes.omninav("record", "-o", str(recording))
     wait_until(lambda: "recording" in processes.log_of(recorder), 60, what="the recorder to start")
-    # the sensors first: slam starts into flowing streams, so it never waits for a silent one
-    services = [processes.omninav("run", "sim", "--set", "rate=2"), processes.omninav("run", "chassis"),
+    # in lockstep (services/runtime/lockstep.py), slam and teleop included: exactly replayable at any load
+    processes.in_lockstep("slam", "chassis", "lidar", "cmd_vel_mux", "velocity_smoother", "collision_monitor",
+                          "teleop")
+    services = [processes.omninav("run", "sim", "--set", "rate=0"), processes.omninav("run", "chassis"),
                 processes.omninav("run", "lidar"), *command_chain(processes)]
     for proc in services:
         wait_until(lambda: "started" in processes.log_of(proc), 60, what="the sim, chassis and lidar to start")

@@ -80,7 +80,7 @@ def test_export_refuses_to_overwrite_and_names_an_unreadable_recording(tmp_path,
 def test_an_exported_mission_recording_is_right_channel_by_channel(tmp_path, capsys):
     """A short lockstep mission in the demo's room (its own recording, every service's keys), exported
     and read back: each channel against the recorded messages it comes from."""
-    assert cli_main(["navigate", "--world", "room", "--lockstep", "--goal", "3.2", "0.9", "30", "--timeout", "2",
+    assert cli_main(["navigate", "--world", "room", "--in-process", "--goal", "3.2", "0.9", "30", "--timeout", "2",
                      "-o", str(tmp_path / "run"), "--json"]) == 1        # it cannot arrive in 2 s
     recording, exported = tmp_path / "run" / "run.mcap", tmp_path / "foxglove.mcap"
     assert cli_main(["export", "--foxglove", str(recording), "-o", str(exported)]) == 0

@@ -22,7 +22,7 @@ import zenoh
 from ...schemas import MessageError
 from ...schemas.attachment import unpack_attachment
 from ...schemas.codec import peek_type
-from ...schemas.keys import ALL
+from ...schemas.keys import ALL, is_lockstep_key
 from ..runtime.node import Node
 from ..runtime.zenoh_config import open_client
 from .mcap_io import RecordingWriter
@@ -187,6 +187,9 @@ class RecorderNode(Node):
             if sample is None:
                 break
             key = str(sample.key_expr)
+            taken += 1
+            if is_lockstep_key(key):
+                continue
             payload = sample.payload.to_bytes()
             attachment = sample.attachment
             envelope = unpack_attachment(attachment.to_bytes()) if attachment is not None else None
@@ -197,7 +200,6 @@ class RecorderNode(Node):
                 seq, stamp, type_name = envelope
             writer.write(key, type_name, payload, seq, stamp, now_ns())
             add(key, type_name, seq)
-            taken += 1
         return taken
 
     def _record(self, handlers: list, stop_event) -> None:

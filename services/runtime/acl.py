@@ -44,8 +44,11 @@ class Grants:
 
 def node_grants(node: Node) -> Grants:
     """What a service may do: exactly what its Node declared."""
-    return Grants(put=(*node.outputs, node.diagnostics.key), subscribe=tuple(node.subscriptions()),
-                  queryable=tuple(node.queryables), token=(node.keys.alive(node.name),))
+    keys = node.keys
+    follows = (keys.lockstep_of_all(),) if node.coordinates_lockstep else ()
+    return Grants(put=(*node.outputs, node.diagnostics.key, keys.lockstep(node.name)),
+                  subscribe=(*node.subscriptions(), *follows), queryable=tuple(node.queryables),
+                  token=(keys.alive(node.name),), watch=(keys.alive_of_all(),) if follows else ())
 
 
 def union(grants: Iterable[Grants]) -> Grants:
@@ -65,10 +68,12 @@ def client_grants(robot: str) -> dict[str, Grants]:
     read = Grants(subscribe=(ALL,), query=(ALL,), watch=(ALL,))
     return {
         TOOL: read,
-        TELEOP: Grants(put=(keys.robot("cmd_vel_teleop"),), subscribe=read.subscribe, query=read.query,
-                       watch=read.watch),
-        OPERATOR: Grants(put=tuple(keys.robot(t) for t in ("goal", "cancel", "initialpose")),
-                         subscribe=read.subscribe, query=read.query, watch=read.watch),
+        TELEOP: Grants(put=(keys.robot("cmd_vel_teleop"), keys.lockstep("teleop")), subscribe=read.subscribe,
+                       query=read.query, watch=read.watch, token=(keys.alive("teleop"),)),
+        # navigate's mission takes part in a lockstep run as the service "navigate"
+        OPERATOR: Grants(put=(*(keys.robot(t) for t in ("goal", "cancel", "initialpose")), keys.lockstep("navigate")),
+                         subscribe=read.subscribe, query=read.query, watch=read.watch,
+                         token=(keys.alive("navigate"),)),
     }
 
 

@@ -34,6 +34,7 @@ from .params import ParamError
 from .service_registry import UnknownService, node_class
 from .node import Node
 from .live import tokens_present
+from .lockstep import LOCKSTEP_ENV, Lockstep
 from .run import build_node
 from .zenoh_config import ROUTER_ENV, open_router, router_endpoint
 
@@ -230,6 +231,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--credentials", metavar="FOLDER",
                         help="write this run's identities here (made readable by you only); tools use "
                              f"{CREDENTIALS_ENV}=FOLDER/{TOOL} (default: a temporary folder, printed)")
+    parser.add_argument("--lockstep", nargs="?", const="", metavar="ALSO",
+                        help="run in lockstep with the simulator (services/runtime/lockstep.py): the same "
+                             "messages at any machine load, as fast as the services compute; the sim waits "
+                             "for every service and for ALSO (comma-separated clients such as navigate)")
 
 
 def build_nodes(compose: Compose) -> dict[str, Node]:
@@ -260,6 +265,17 @@ def identities(compose: Compose, nodes: dict[str, Node] | None = None) -> dict[s
     return grants
 
 
+def lockstep_participants(compose: Compose) -> list[str]:
+    """The services that report their progress in a lockstep run: all but the coordinator (the sim)
+    and those that talk to Zenoh themselves (the recorder, the view), which nothing waits for."""
+    names = []
+    for spec in compose.services:
+        cls = node_class(spec.service or spec.name, spec.module)
+        if not cls.coordinates_lockstep and not hasattr(cls, "run_live"):
+            names.append(spec.name)
+    return names
+
+
 def identity_names(compose: Compose) -> list[str]:
     """The users of a run: the hand-started clients' and one per process (ComposeError if a
     process takes a client's name)."""
@@ -276,7 +292,10 @@ def main(args: argparse.Namespace) -> int:
         compose = load_compose(args.compose)
         endpoint = router_endpoint(args.router or compose.router)
         users = identity_names(compose)
-    except (ComposeError, ValueError) as exc:
+        if args.lockstep is not None:
+            also = tuple(n for n in args.lockstep.split(",") if n)
+            os.environ[LOCKSTEP_ENV] = Lockstep((*lockstep_participants(compose), *also)).env_value()
+    except (ComposeError, UnknownService, ValueError) as exc:
         out.say(f"error: {exc}", sys.stderr)
         return 2
     stop = threading.Event()

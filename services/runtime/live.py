@@ -7,6 +7,7 @@ longer exactly replayable.
 from __future__ import annotations
 
 import json
+import math
 import queue
 import threading
 import time
@@ -15,14 +16,18 @@ from typing import Iterable
 import zenoh
 
 from ...schemas import MessageError, decode
-from ...schemas.attachment import pack_attachment
+from ...schemas.attachment import pack_attachment, unpack_attachment
 from ...schemas.codec import encode
+from ...schemas.messages import Diagnostic
+from .lockstep import Barrier, Lockstep, Report
 from .merge import StampMerger
-from .node import Node, Publisher, QueryError
+from .node import NS_PER_S, Node, Publisher, QueryError
 from .selector import parse_parameters
 from .zenoh_config import MAX_MESSAGE_SIZE, client_config, open_client
 
 _POLL_S = 0.05
+_REPORT_AGAIN_S = 0.5   # a lockstep participant's unchanged progress is repeated this often (wall)
+_STALL_LOG_S = 10.0     # a lockstep step held up this long (wall) is logged with who holds it
 RUN_STARTED = "run_started_ns"
 
 
@@ -37,14 +42,26 @@ def tokens_present(session: zenoh.Session, keys: Iterable[str], timeout_s: float
     return found & wanted
 
 
+def _seq_of(sample) -> int | None:
+    attachment = sample.attachment
+    envelope = unpack_attachment(attachment.to_bytes()) if attachment is not None else None
+    return None if envelope is None else envelope.seq
+
+
 class PayloadTooLarge(ValueError):
     """A message over what the transport carries; inside a handler the node's guard logs and counts it."""
 
 
 class LiveRunner:
     def __init__(self, node: Node, router: str | None = None, *, sync_timeout_s: float = 1.0,
-                 diagnostics_period_s: float = 1.0):
+                 diagnostics_period_s: float = 1.0, lockstep: Lockstep | None = None):
         self.node = node
+        # lockstep.py: on when the launcher set OMNINAV_LOCKSTEP; the sim coordinates, the others report
+        self.lockstep = lockstep if lockstep is not None else Lockstep.from_env()
+        self.barrier = Barrier(self.lockstep.wait_for) if self.lockstep and node.coordinates_lockstep else None
+        self._received: dict[str, int] = {}      # key -> last seq taken (lockstep progress)
+        self._reported: tuple | None = None
+        self._report_again = 0.0
         self.router = router
         self.sync_timeout_s = sync_timeout_s
         self.diagnostics_period_s = diagnostics_period_s
@@ -79,7 +96,7 @@ class LiveRunner:
         self._zpubs[pub.key].put(payload, attachment=pack_attachment(pub.seq, stamp_ns, pub.type_name))
         if self.local is not None:
             for runner, index in self.local.get(pub.key, ()):
-                runner._inbox.put(("msg", index, payload, pub.key))
+                runner._inbox.put(("msg", index, payload, pub.key, pub.seq))
 
     def _declare(self, session: zenoh.Session) -> list:
         handles = []
@@ -96,12 +113,34 @@ class LiveRunner:
         diag.sink = self._sink
         for index, inp in enumerate(self.node.inputs):
             handles.append(session.declare_subscriber(
-                inp.key, lambda s, i=index: self._inbox.put(("msg", i, s.payload.to_bytes(), str(s.key_expr)))))
+                inp.key, lambda s, i=index: self._inbox.put(("msg", i, s.payload.to_bytes(), str(s.key_expr),
+                                                             _seq_of(s)))))
         for key in self.node.queryables:
             handles.append(session.declare_queryable(key, lambda q: self._inbox.put(("query", q))))
+        if self.lockstep is not None:
+            handles += self._declare_lockstep(session, destination)
         # last: `omninav up` starts the next service only once this one can hear and speak
         handles.append(session.liveliness().declare_token(self.node.keys.alive(self.node.name)))
         return handles
+
+    def _declare_lockstep(self, session: zenoh.Session, destination) -> list:
+        keys = self.node.keys
+        self._report_pub = Publisher(keys.lockstep(self.node.name), Diagnostic)
+        self._zpubs[self._report_pub.key] = session.declare_publisher(
+            self._report_pub.key, congestion_control=zenoh.CongestionControl.BLOCK,
+            reliability=zenoh.Reliability.RELIABLE)
+        self._report_pub.sink = self._sink
+        if self.barrier is None:
+            return []
+        prefix = keys.alive("x")[:-1]
+
+        def on_token(sample) -> None:
+            if sample.kind == zenoh.SampleKind.DELETE:
+                self._inbox.put(("left", str(sample.key_expr)[len(prefix):]))
+
+        return [session.declare_subscriber(keys.lockstep_of_all(),
+                                           lambda s: self._inbox.put(("report", s.payload.to_bytes()))),
+                session.liveliness().declare_subscriber(keys.alive_of_all(), on_token)]
 
     # ------------------------------------------------------------ the processing thread
 
@@ -122,25 +161,88 @@ class LiveRunner:
 
     def _loop(self) -> None:
         pacer = self.node.pace_s()
+        if self.lockstep is not None and pacer is not None and pacer != math.inf:
+            # in lockstep the wall clock decides nothing: the sim ticks when the barrier lets it,
+            # any other paced node (teleop) on its inputs' sim time
+            self._lockstep_loop(pacer)
+            return
         next_tick = time.monotonic()
         next_diag = time.monotonic() + self.diagnostics_period_s
         while not self.stop_event.is_set():
             now = time.monotonic()
             wait = _POLL_S if pacer is None else max(0.0, min(_POLL_S, next_tick - now))
-            try:
-                self._handle(self._inbox.get(timeout=wait))
-                while True:  # take everything queued before merging, so stamps sort in one go
-                    self._handle(self._inbox.get_nowait())
-            except queue.Empty:
-                pass
+            self._take_inbox(wait)
             self._release()
             now = time.monotonic()
             if pacer is not None and now >= next_tick:
                 self.node.tick()
                 next_tick = max(next_tick + pacer, now - 10 * pacer)  # never burst more than 10 ticks
+            self._report_progress()
             if now >= next_diag:
                 self._publish_diagnostic()
                 next_diag = now + self.diagnostics_period_s
+
+    def _take_inbox(self, wait_s: float) -> None:
+        try:
+            self._handle(self._inbox.get(timeout=wait_s))
+            while True:  # take everything queued before merging, so stamps sort in one go
+                self._handle(self._inbox.get_nowait())
+        except queue.Empty:
+            pass
+
+    def _lockstep_loop(self, pacer: float) -> None:
+        """The coordinator ticks once the barrier lets it and, with a pace (the sim's rate), not
+        before its wall time: paced lockstep is real time while the services keep up, slower when
+        they do not, and never late. The others tick on their inputs' sim time."""
+        period_ns = round(pacer * NS_PER_S)
+        next_tick_ns: int | None = None
+        next_tick = time.monotonic()
+        next_diag = next_tick + self.diagnostics_period_s
+        stalled_since = next_tick
+        while not self.stop_event.is_set():
+            ready = self.barrier is not None and self._may_step()
+            self._take_inbox(max(0.0, min(_POLL_S, next_tick - time.monotonic())) if ready else _POLL_S)
+            self._release()
+            now = time.monotonic()
+            if self.barrier is not None:
+                if now >= next_tick and self._may_step():
+                    self.node.tick()
+                    next_tick = max(next_tick + pacer, now - 10 * pacer)
+                    stalled_since = now
+                elif now - stalled_since > _STALL_LOG_S:
+                    self.node.log.info("lockstep: waiting for %s", ", ".join(self._waiting_on()) or "inputs")
+                    stalled_since = now
+            elif self.node.now_ns and (next_tick_ns is None or self.node.now_ns >= next_tick_ns):
+                self.node.tick()
+                next_tick_ns = self.node.now_ns + period_ns
+            self._report_progress()
+            if now >= next_diag:
+                self._publish_diagnostic()
+                next_diag = now + self.diagnostics_period_s
+
+    def _published(self) -> dict[str, int]:
+        return {key: pub.seq for key, pub in self.node.outputs.items() if pub.seq}
+
+    def _may_step(self) -> bool:
+        return self.barrier.ready(self._published(), self._received, self.node.subscriptions())
+
+    def _waiting_on(self) -> list[str]:
+        return self.barrier.waiting_on(self._published())
+
+    def _report_progress(self) -> None:
+        """A participant's progress, when it changed (lockstep.py); only after its work is done."""
+        if self.lockstep is None or self.barrier is not None:
+            return
+        hold = self.node.holds_lockstep()
+        state = (tuple(self._received.items()), tuple(self._published().items()), hold)
+        now = time.monotonic()
+        # again now and then while idle: a coordinator that subscribed late missed the last one
+        if state == self._reported and now < self._report_again:
+            return
+        self._reported, self._report_again = state, now + _REPORT_AGAIN_S
+        report = Report(self.node.name, self.started_ns, tuple(self.node.subscriptions()), dict(self._received),
+                        self._published(), hold)
+        self._report_pub.publish(report.to_message(self.node.now_ns))
 
     def _handle(self, item: tuple) -> None:
         if item[0] == "wake":
@@ -148,7 +250,15 @@ class LiveRunner:
         if item[0] == "query":
             self._answer(item[1])
             return
-        _, index, payload, key = item
+        if item[0] == "report":
+            self._take_report(item[1])
+            return
+        if item[0] == "left":
+            self.barrier.leave(item[1])
+            return
+        _, index, payload, key, seq = item
+        if seq is not None:
+            self._received[key] = seq
         inp = self.node.inputs[index]
         try:
             msg = decode(payload, inp.msg_type, key=key)
@@ -163,6 +273,8 @@ class LiveRunner:
     def _release(self) -> None:
         for index, msg in self._merger.pop_ready():
             self.node.process(index, msg)
+        if self.lockstep is not None:
+            return      # nothing is waited out: the sim does not step until every input is in
         waited_since = self._merger.head_enqueued_at()
         if waited_since is not None and time.monotonic() - waited_since > self.sync_timeout_s:
             self.node.counters["sync_timeouts"] += 1
@@ -171,6 +283,15 @@ class LiveRunner:
                                       "(this run is not exactly replayable)", self.sync_timeout_s)
             index, msg = self._merger.pop_oldest()
             self.node.process(index, msg)
+
+    def _take_report(self, payload: bytes) -> None:
+        try:
+            report = Report.from_message(decode(payload, Diagnostic))
+        except (MessageError, ValueError) as exc:
+            self.node.reject(self.node.keys.lockstep_of_all(), MessageError(str(exc)))
+            return
+        if report.name != self.node.name:
+            self.barrier.update(report)
 
     def _answer(self, query: zenoh.Query) -> None:
         key = str(query.key_expr)
@@ -195,5 +316,6 @@ class LiveRunner:
     def _finish(self) -> None:
         for index, msg in self._merger.drain():
             self.node.process(index, msg)
+        self._report_progress()
         self.node.close()
         self._publish_diagnostic()

@@ -108,6 +108,8 @@ class Node:
     # parameters naming files the service keeps its state in to resume after a restart
     # (services/runtime/state_file.py); a replay runs without them
     state_files: ClassVar[tuple[str, ...]] = ()
+    # the source whose ticks the others follow in a lockstep run (lockstep.py): the simulator
+    coordinates_lockstep: ClassVar[bool] = False
 
     def __init__(self, params: Any = None, robot: str = DEFAULT_ROBOT, name: str | None = None):
         self.params = params if params is not None else self.Params()
@@ -248,6 +250,11 @@ class Node:
 
     def tick(self) -> None:
         """One step of a source; only called when pace_s() is not None."""
+
+    def holds_lockstep(self) -> bool:
+        """True once this node wants the simulator to step no further in a lockstep run (a mission
+        that is over), so every run of the same command ends at the same step."""
+        return False
 
     # ------------------------------------------------------------ internals
 

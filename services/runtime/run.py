@@ -7,6 +7,7 @@ import signal
 import sys
 
 from .live import LiveRunner
+from .lockstep import Lockstep
 from .params import ParamError, load_node_params, parse_overrides, read_params_mapping
 from .service_registry import UnknownService, node_class
 
@@ -42,6 +43,20 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--name", help="instance name (default: the service name)")
     parser.add_argument("--router", help="router endpoint (default $OMNINAV_ROUTER or tcp/127.0.0.1:7447)")
     parser.add_argument("--log-level", default="INFO")
+    add_lockstep_argument(parser)
+
+
+def add_lockstep_argument(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--lockstep", nargs="?", const="", metavar="SERVICES",
+                        help="step with the simulator (services/runtime/lockstep.py): no wall clock decides "
+                             "anything; for the sim, the services (comma-separated) to wait for before its "
+                             "first step (default $OMNINAV_LOCKSTEP, set by `up --lockstep`)")
+
+
+def lockstep_of(args: argparse.Namespace) -> Lockstep | None:
+    if args.lockstep is None:
+        return None         # LiveRunner then follows $OMNINAV_LOCKSTEP
+    return Lockstep(tuple(n for n in args.lockstep.split(",") if n))
 
 
 def main(args: argparse.Namespace) -> int:
@@ -54,7 +69,7 @@ def main(args: argparse.Namespace) -> int:
         log.error("%s", exc)
         return 2
     # a service that talks to Zenoh itself (the recorder) provides run_live(router, stop_event)
-    runner = LiveRunner(node, args.router)
+    runner = LiveRunner(node, args.router, lockstep=lockstep_of(args))
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: runner.stop())
     log.info("started (robot %s)", args.robot)
