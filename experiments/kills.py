@@ -2,7 +2,8 @@
 
 For each service of `omninav navigate`'s stack but the sim and the recorder (which the mission
 cannot do without, see cli/navigate.py) and each seed, one room mission (the demo's two goals, amcl
-localization) runs as `navigate` runs it — every service its own process, real time, the ACL on —
+localization) runs as `navigate` runs it — every service its own process, real time (--lockstep:
+at most real time, every service keeping up), the ACL on —
 and the service is sent SIGKILL at a moment drawn from the seed: KILL_WINDOW_S sim seconds after the
 first goal was sent. The bench watches the bus with the run's read-only tool identity (the sim
 clock, the goals) and finds the service's process in `up`'s log ("started NAME (pid N)", the last
@@ -100,12 +101,12 @@ def _wait(condition, process: subprocess.Popen, deadline: float) -> bool:
     return True
 
 
-def run_one(service: str, seed: int, out: Path, rate: float, say) -> KillRun:
+def run_one(service: str, seed: int, out: Path, rate: float, lockstep: bool, say) -> KillRun:
     folder = out / f"{service}-seed{seed}"
     router = free_loopback_endpoint()
     goals = [str(v) for goal in GOALS for v in ("--goal", *goal)]
     cmd = [sys.executable, "-m", "omninav.cli.main", "navigate", "--world", "room", *goals, "--seed", str(seed),
-           "--rate", str(rate), "-o", str(folder), "--json"]
+           "--rate", str(rate), *(["--lockstep"] if lockstep else []), "-o", str(folder), "--json"]
     started = time.monotonic()
     deadline = started + MISSION_TIMEOUT_S
     moment = kill_moment(service, seed)
@@ -160,6 +161,9 @@ def add_arguments(parser) -> None:
                         help="the first seed (default 0): split one experiment over several runs")
     parser.add_argument("--services", help=f"comma-separated, of {', '.join(SERVICES)} (default all)")
     parser.add_argument("--rate", type=float, default=1.0, help="sim seconds per wall second (default 1)")
+    parser.add_argument("--lockstep", action="store_true",
+                        help="navigate --lockstep at --rate: never faster than that, slower (never late) when "
+                             "the machine cannot keep up, so the runs do not depend on its load")
     parser.add_argument("-o", "--out", help="folder for the runs (default out/kills-<date>-<time>)")
 
 
@@ -182,7 +186,7 @@ def main(args) -> int:
     runs = []
     for service in services:
         for seed in range(args.first_seed, args.first_seed + args.seeds):
-            run = run_one(service, seed, out, args.rate, say)
+            run = run_one(service, seed, out, args.rate, args.lockstep, say)
             runs.append(run)
             say(f"{service} seed {seed}: {'completed' if run.completed else 'GIVEN UP'}, "
                 f"{'success' if run.success else 'FAILED'}, restarts {run.restarts or 'none'}, "

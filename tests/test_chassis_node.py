@@ -212,10 +212,10 @@ def _live(params, states, commands, lag_steps):
     index = {inp.key: i for i, inp in enumerate(node.inputs)}
     pending = list(commands)
     for k, state in enumerate(states):
-        runner._handle(("msg", index[WHEEL_STATE], encode(state), WHEEL_STATE))
+        runner._handle(("msg", index[WHEEL_STATE], encode(state), WHEEL_STATE, None))
         runner._release()
         while pending and pending[0].header.stamp_ns + lag_steps * STEP_NS <= state.header.stamp_ns:
-            runner._handle(("msg", index[CMD_VEL], encode(pending.pop(0)), CMD_VEL))
+            runner._handle(("msg", index[CMD_VEL], encode(pending.pop(0)), CMD_VEL, None))
             runner._release()
     return node, out
 

@@ -1,6 +1,6 @@
 """Frontier exploration: frontiers on hand-made maps, the choice of goal, the retry of failed
-frontiers, and whole explorations of the room world and a small generated maze in the simulator
-through the navigation stack."""
+frontiers, and a whole exploration of a small generated maze in the simulator through the
+navigation stack (the shipped worlds' are measured by `omninav map --world W`, two minutes each)."""
 import dataclasses
 
 import numpy as np
@@ -280,20 +280,12 @@ def test_a_goal_is_given_up_without_progress_by_the_straight_line_and_along_the_
     assert given_up == (0 if along_the_plan else 1)
 
 
-def test_exploring_the_room_maps_its_reachable_free_space_without_collision():
-    world = open_world("room")
-    result = build_map("room", params=slam_params_for(world, {"particles": 10}), max_sim_s=600.0)
-    assert result.finished and result.goals >= 3
-    assert result.collisions == 0
-    assert explored_share(result.grid, world) >= 0.95
-    comparison = compare_with_truth(result.grid, world)
-    assert comparison.agreement >= 0.95 and comparison.within_one_cell >= 0.95
-
-
 def test_exploring_a_small_generated_maze_maps_its_reachable_free_space_without_collision(tmp_path):
     path = tmp_path / "maze.yaml"
     path.write_text(yaml.safe_dump(generate_maze(np.random.default_rng(SMALL_MAZE_SEED))))
     world = open_world(str(path))
     result = build_map(str(path), params=slam_params_for(world, {"particles": 10}), max_sim_s=600.0)
-    assert result.finished and result.collisions == 0
+    assert result.finished and result.goals >= 3 and result.collisions == 0
     assert explored_share(result.grid, world) >= 0.95
+    comparison = compare_with_truth(result.grid, world)      # the map slam drew while exploring is right
+    assert comparison.agreement >= 0.95 and comparison.within_one_cell >= 0.95

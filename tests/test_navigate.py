@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import yaml
 
+from omninav.bench.lockstep import messages_by_key
 from omninav.cli.main import main as cli_main
 from omninav.cli.navigate import REPO, compose_for, in_containers, map_for
 from omninav.schemas import decode
@@ -366,15 +367,6 @@ def mission(tmp_path_factory):
     return _lockstep_mission(out), out
 
 
-def _messages_by_key(recording: Path) -> dict[str, list[bytes]]:
-    """Every message but the diagnostics (they count wall-time events), per key in seq order."""
-    by_key: dict[str, list[tuple[int, bytes]]] = {}
-    for rec in read_records(recording):
-        if "/diagnostics/" not in rec.key:
-            by_key.setdefault(rec.key, []).append((rec.seq, rec.payload))
-    return {key: [payload for _, payload in sorted(items)] for key, items in by_key.items()}
-
-
 def test_the_same_lockstep_mission_beside_a_cpu_burner_gives_the_same_messages(mission, tmp_path):
     """The run again with both cores kept busy by other processes: every message on every key is the
     same (services/runtime/lockstep.py: no wall clock decides anything)."""
@@ -388,7 +380,7 @@ def test_the_same_lockstep_mission_beside_a_cpu_burner_gives_the_same_messages(m
             burner.kill()
             burner.wait()
     assert again.returncode == 0, again.stderr.decode()
-    first, second = _messages_by_key(out / "run.mcap"), _messages_by_key(tmp_path / "again" / "run.mcap")
+    first, second = messages_by_key(out / "run.mcap"), messages_by_key(tmp_path / "again" / "run.mcap")
     assert sorted(first) == sorted(second)
     differing = [key for key in first if first[key] != second[key]]
     assert differing == [], f"{len(differing)} keys differ, e.g. {differing[0]}"
@@ -426,6 +418,16 @@ def test_the_live_mission_replays_byte_for_byte_into_the_local_planner_and_the_n
     printed = capsys.readouterr().out
     assert "parameters: the live run's, from its Diagnostic" in printed
     assert "replay reproduces the recorded outputs byte for byte" in printed and "not exactly replayable" not in printed
+
+
+def test_the_lockstep_processes_give_the_messages_of_the_same_services_in_one_process(mission, tmp_path, capsys):
+    """Run as processes over the bus or as Nodes in navigate's own process (--in-process), the
+    services compute the same messages: the bus and the process boundaries change nothing."""
+    done, out = mission
+    assert done.returncode == 0, done.stderr.decode()
+    assert cli_main(["navigate", "--world", "room", "--goal", "3.2", "0.9", "30", "--localization", "truth",
+                     "--in-process", "-o", str(tmp_path / "one"), "--quiet"]) == 0, capsys.readouterr().out
+    assert messages_by_key(out / "run.mcap") == messages_by_key(tmp_path / "one" / "run.mcap")
 
 
 # ---------------------------------------------------------------- a service dying mid-mission
