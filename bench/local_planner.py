@@ -37,7 +37,8 @@ from ..services.global_planner.params import GlobalPlannerParams
 from ..geometry.grid import cell_to_world, world_to_cell
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..services.local_planner import eband
-from ..services.local_planner.dwa import DwaPlanner, footprint_check_cost, warm_up
+from ..services.local_planner.dwa import DwaPlanner, warm_up
+from ..services.local_planner.footprint_check import FootprintCheck, footprint_check_cost
 from ..services.local_planner.params import DwaParams, ElasticBandParams
 from ..services.local_planner.reference import reference_rollout
 
@@ -96,9 +97,8 @@ def main(args: argparse.Namespace) -> int:
     velocity = np.array([SPEED, 0.0, 0.0])
 
     fp, inflation = costmap.footprint, costmap.params.layers[1]
-    planner = DwaPlanner(PARAMS, fp.points, footprint_check_cost(fp.inscribed_radius, fp.circumscribed_radius,
-                                                                 inflation.inflation_radius,
-                                                                 inflation.cost_scaling_factor))
+    planner = DwaPlanner(PARAMS, FootprintCheck(fp.points, footprint_check_cost(
+        fp.inscribed_radius, fp.circumscribed_radius, inflation.inflation_radius, inflation.cost_scaling_factor)))
     cycle_ms, samples, legal, statuses, reference_ms, mismatches = [], [], [], {}, [], 0
     for i, (pose, local_costs, local_info) in enumerate(windows):
         result, ms = timed(lambda: planner.compute(pose, velocity, local_costs, local_info, plan.poses), REPEATS)
@@ -117,7 +117,7 @@ def main(args: argparse.Namespace) -> int:
                 mismatches += int(ref_ok != ok[k] or ref_cost != max_cost[k])
             reference_ms.append((time.perf_counter() - begin) * 1e3 * len(result.samples) / REFERENCE_SAMPLES)
 
-    band = eband.ElasticBandPlanner(EBAND_PARAMS, fp.points, planner.check_cost)
+    band = eband.ElasticBandPlanner(EBAND_PARAMS, fp.points, planner.footprint_check.check_cost)
     band_ms, band_cold_ms, band_poses, band_statuses = [], [], [], {}
     for pose, local_costs, local_info in windows:
         band.reset()

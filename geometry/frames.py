@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..schemas.messages import Header, LaserScan, Odometry, Pose2D, PoseWithCovariance, Transform, Twist
-from .se2 import compose
+from .se2 import compose, inverse
 
 
 # (x, y, yaw) of the laser in base_link (m, m, rad): the simulated lidar's mount, and the default of
@@ -52,6 +52,13 @@ class RobotFrames:
         if frame == self.odom_frame:
             return np.asarray(pose_in_odom, np.float64)
         return compose(self.map_odom, pose_in_odom)
+
+    def carry(self, poses, source: str, target: str) -> np.ndarray:
+        """Poses (N, 3) given in the map or odom frame, in the other one (or the same, unchanged)."""
+        poses = np.asarray(poses, np.float64).reshape(-1, 3)
+        if source == target:
+            return poses
+        return compose(self.map_odom, poses) if target == self.map_frame else compose(inverse(self.map_odom), poses)
 
     def robot(self, frame: str) -> np.ndarray | None:
         """The robot's latest pose in `frame`, or None before any odometry."""

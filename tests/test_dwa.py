@@ -9,8 +9,8 @@ from omninav.services.costmap.costmap import Costmap
 from omninav.geometry.footprint import make_footprint
 from omninav.services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
 from omninav.services.local_planner.reference import reference_pose_cost, reference_rollout
-from omninav.services.local_planner.dwa import (DwaPlanner, dynamic_window, footprint_check_cost, path_maps,
-                                                sample_velocities)
+from omninav.services.local_planner.dwa import DwaPlanner, dynamic_window, path_maps, sample_velocities
+from omninav.services.local_planner.footprint_check import FootprintCheck, footprint_check_cost
 from omninav.services.local_planner.params import DwaParams
 from omninav.geometry.se2 import integrate, wrap_angle
 
@@ -73,7 +73,7 @@ def drive(planner, costs, info, path, pose, cycles, velocity=(0.0, 0.0, 0.0)):
 def test_free_space_drives_along_the_path_to_the_goal():
     costs, info, check = costmap()
     path = straight(-2.0, 0.0, 2.0, 0.0)
-    planner = DwaPlanner(HOLO, FOOTPRINT.points, check)
+    planner = DwaPlanner(HOLO, FootprintCheck(FOOTPRINT.points, check))
     trace, results = drive(planner, costs, info, path, (-2.0, 0.0, 0.0), 300)
     assert all(r.status == "ok" for r in results)
     near = np.hypot(trace[:, 0] - 2.0, trace[:, 1]) < 0.10
@@ -88,7 +88,7 @@ def test_free_space_drives_along_the_path_to_the_goal():
 @pytest.mark.parametrize("params", [HOLO, DIFF], ids=["holonomic", "diff"])
 def test_an_obstacle_on_the_path_is_avoided_and_never_entered(params):
     costs, info, check = costmap(boxes=[(0.0, -0.3, 0.3, 0.3)])
-    planner = DwaPlanner(params, FOOTPRINT.points, check)
+    planner = DwaPlanner(params, FootprintCheck(FOOTPRINT.points, check))
     # an obstacle that appeared on the path after planning: driving on would hit it
     through = straight(-2.5, 0.0, 2.5, 0.0)
     first = planner.compute((-1.0, 0.0, 0.0), (0.5, 0.0, 0.0), costs, info, through)
@@ -113,7 +113,7 @@ def test_an_obstacle_on_the_path_is_avoided_and_never_entered(params):
 
 def test_holonomic_mode_strafes_towards_a_goal_on_the_left():
     costs, info, check = costmap()
-    result = DwaPlanner(HOLO, FOOTPRINT.points, check).compute(
+    result = DwaPlanner(HOLO, FootprintCheck(FOOTPRINT.points, check)).compute(
         (0.0, 0.0, 0.0), (0.0, 0.0, 0.0), costs, info, straight(0.0, 0.0, 0.0, 2.0))
     low, high = dynamic_window(HOLO, (0.0, 0.0, 0.0))
     assert result.status == "ok"
@@ -123,7 +123,7 @@ def test_holonomic_mode_strafes_towards_a_goal_on_the_left():
 
 def test_diff_mode_never_commands_vy():
     costs, info, check = costmap(boxes=[(0.8, -0.3, 1.1, 0.3)])
-    planner = DwaPlanner(DIFF, FOOTPRINT.points, check)
+    planner = DwaPlanner(DIFF, FootprintCheck(FOOTPRINT.points, check))
     assert np.all(sample_velocities(DIFF, (0.2, 0.3, 0.1))[:, 1] == 0.0)
     for goal in ((0.0, 2.0), (2.0, 0.0), (-2.0, -1.0)):
         result = planner.compute((0.0, 0.0, 0.0), (0.1, 0.0, 0.0), costs, info, straight(0.0, 0.0, *goal))
@@ -135,7 +135,7 @@ def test_diff_mode_never_commands_vy():
 def test_commands_stay_within_the_dynamic_window(velocity, dwa):
     params = DwaParams(min_vel_x=0.0, max_vel_y=0.5, min_vel_y=-0.5, dwa=dwa)
     costs, info, check = costmap()
-    result = DwaPlanner(params, FOOTPRINT.points, check).compute(
+    result = DwaPlanner(params, FootprintCheck(FOOTPRINT.points, check)).compute(
         (0.0, 0.0, 0.0), velocity, costs, info, straight(0.0, 0.0, 2.0, 1.0))
     period = 1.0 / params.controller_frequency if dwa else params.sim_time
     reach = np.array([params.acc_lim_x, params.acc_lim_y, params.acc_lim_theta]) * period + 1e-12
@@ -152,11 +152,12 @@ def test_commands_stay_within_the_dynamic_window(velocity, dwa):
 
 def test_no_legal_trajectory_backs_up_or_brakes():
     costs, info, check = costmap(boxes=[(0.25, -1.0, 0.5, 1.0)])   # a wall just ahead
-    planner = DwaPlanner(DwaParams(min_vel_x=0.1, holonomic_robot=False), FOOTPRINT.points, check)
+    planner = DwaPlanner(DwaParams(min_vel_x=0.1, holonomic_robot=False), FootprintCheck(FOOTPRINT.points, check))
     result = planner.compute((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), costs, info, straight(0.0, 0.0, 2.0, 0.0))
     assert not result.legal.any()
     assert result.status == "escape" and result.cmd[0] < 0 and result.cmd[1] == 0
-    no_escape = DwaPlanner(DwaParams(min_vel_x=0.1, holonomic_robot=False, escape_vel=0.0), FOOTPRINT.points, check)
+    no_escape = DwaPlanner(DwaParams(min_vel_x=0.1, holonomic_robot=False, escape_vel=0.0),
+                           FootprintCheck(FOOTPRINT.points, check))
     result = no_escape.compute((0.0, 0.0, 0.0), (0.3, 0.0, 0.2), costs, info, straight(0.0, 0.0, 2.0, 0.0))
     assert result.status == "no_valid_trajectory"
     assert np.allclose(result.cmd, [0.3 - 2.5 / 20, 0.0, 0.2 - 3.2 / 20])   # braking as hard as allowed
@@ -164,7 +165,7 @@ def test_no_legal_trajectory_backs_up_or_brakes():
 
 def test_no_path_on_the_costmap_brakes():
     costs, info, check = costmap()
-    result = DwaPlanner(HOLO, FOOTPRINT.points, check).compute(
+    result = DwaPlanner(HOLO, FootprintCheck(FOOTPRINT.points, check)).compute(
         (0.0, 0.0, 0.0), (0.1, 0.0, 0.0), costs, info, straight(10.0, 10.0, 12.0, 10.0))
     assert result.status == "no_path" and np.allclose(result.cmd, 0.0)
 
@@ -186,7 +187,7 @@ def test_batch_rollout_matches_a_per_trajectory_python_loop():
     rng = np.random.default_rng(3)
     for dwa in (True, False):
         params = DwaParams(min_vel_x=-0.3, max_vel_y=0.5, min_vel_y=-0.5, dwa=dwa)
-        planner = DwaPlanner(params, FOOTPRINT.points, check)
+        planner = DwaPlanner(params, FootprintCheck(FOOTPRINT.points, check))
         samples = rng.uniform([-0.3, -0.5, -1.0], [0.5, 0.5, 1.0], size=(60, 3))
         velocity = np.array([0.2, -0.1, 0.3])
         poses, max_cost, legal = planner.rollout(samples, (0.0, 0.0, 0.2), velocity, costs, info)
@@ -210,10 +211,11 @@ def test_pose_checks_match_looking_at_every_outline_point_near_obstacles_and_the
     poses = np.column_stack([rng.uniform(-3.0, 3.0, 3000), rng.uniform(-3.0, 3.0, 3000), rng.uniform(-4.0, 4.0, 3000)])
     poses[0] = (-2.55, -2.45, 0.0)     # a start clear of the stop zone
     for stop_padding in (0.0, 0.05):
-        planner = DwaPlanner(HOLO, FOOTPRINT.points, check_cost, stop_padding=stop_padding)
-        legal = planner.legal_poses(poses, costs, info)
-        check = planner.check_setup(poses[0], costs, info)
-        expected = np.array([reference_pose_cost(planner, check, pose, costs, info) >= 0 for pose in poses])
+        planner = DwaPlanner(HOLO, FootprintCheck(FOOTPRINT.points, check_cost, stop_padding=stop_padding))
+        legal = planner.footprint_check.legal_poses(poses, costs, info)
+        check = planner.footprint_check.setup(poses[0], costs, info)
+        expected = np.array([reference_pose_cost(planner.footprint_check, check, pose, costs, info) >= 0
+                             for pose in poses])
         assert np.array_equal(legal, expected)
         # both verdicts, and poses whose centre cell is fine but whose outline leaves the grid
         rows, cols = (((poses[:, 1::-1] + 3.0) / RES).astype(int).clip(0, info.width - 1)).T
@@ -226,7 +228,7 @@ def test_a_robot_facing_a_wall_3_cm_away_leaves_it_for_a_goal_behind_it(params):
     # the path turns back round the wall's end: straight-line distances would pull the robot into
     # the wall, and with min_vel_x > 0 no sample of the window backs or slides away from it
     costs, info, check = costmap(boxes=[(0.25, -3.0, 0.5, 1.0)])   # round its upper end only
-    planner = DwaPlanner(params, FOOTPRINT.points, check, stop_padding=0.05)
+    planner = DwaPlanner(params, FootprintCheck(FOOTPRINT.points, check, stop_padding=0.05))
     start = (0.02, 0.0, 0.0)    # the front 3 cm from the wall
     around = np.concatenate([straight(0.02, 0.0, 0.02, 1.6), straight(0.02, 1.6, 1.2, 1.6),
                              straight(1.2, 1.6, 1.2, -1.0)])
@@ -243,7 +245,8 @@ def test_a_robot_pushed_within_its_padding_of_a_wall_drives_on_with_its_own_outl
     padding = 0.1
     costs, info, check = costmap(boxes=[(-3.0, 0.35, 3.0, 0.7), (-3.0, -0.7, 3.0, -0.35)], padding=padding)
     padded = make_footprint(SQUARE, padding=padding)
-    planner = DwaPlanner(params, padded.points, check, stop_padding=0.02, footprint_padding=padding)
+    planner = DwaPlanner(params, FootprintCheck(padded.points, check, stop_padding=0.02,
+                                                footprint_padding=padding))
     start = (-2.0, 0.1, 0.0)
     assert costs[int((start[1] - info.origin.y) / RES), int((start[0] - info.origin.x) / RES)] == 253
     trace, results = drive(planner, costs, info, straight(-2.5, 0.0, 2.5, 0.0), start, 200)

@@ -5,6 +5,7 @@ import pytest
 
 from omninav.schemas.messages import Header, MapMetaData, Pose2D, Tracks
 from omninav.services.local_planner.dwa import DwaPlanner
+from omninav.services.local_planner.footprint_check import FootprintCheck
 from omninav.services.local_planner.dynamic import Movers, critic, first_contact, movers_at, slack, tracks_problem
 from omninav.services.local_planner.params import DwaParams
 
@@ -22,13 +23,13 @@ def movers(*tracks) -> Movers:
 
 def chosen_slack(result, planner, track) -> np.ndarray:
     dt = planner.params.sim_time / (result.poses.shape[1] - 1)
-    return slack(result.trajectory[None], dt, planner.footprint, track, 0.0, 0.0)[0][0]
+    return slack(result.trajectory[None], dt, planner.footprint_check.footprint, track, 0.0, 0.0)[0][0]
 
 
 @pytest.mark.parametrize("crossing", [(1.0, -1.2, 0.0, 0.9, 0.3), (1.2, 1.4, 0.0, -0.9, 0.3),
                                       (1.3, -1.0, -0.2, 0.6, 0.25)])
 def test_dwa_does_not_drive_into_a_person_crossing_ahead_that_it_would_meet_without_the_tracks(crossing):
-    planner = DwaPlanner(PARAMS, FOOTPRINT)
+    planner = DwaPlanner(PARAMS, FootprintCheck(FOOTPRINT))
     track = movers(crossing)
     velocity = (0.5, 0.0, 0.0)           # cruising along the path
     blind = planner.compute((0.0, 0.0, 0.0), velocity, FREE, INFO, PATH)
@@ -43,7 +44,7 @@ def test_dwa_does_not_drive_into_a_person_crossing_ahead_that_it_would_meet_with
 def test_a_person_walking_into_a_standing_robot_is_left_not_waited_for():
     """Someone comes at the robot from behind faster than it can go: standing is met soonest,
     every rollout ahead is legal, and DWA drives on rather than brake."""
-    planner = DwaPlanner(PARAMS, FOOTPRINT)
+    planner = DwaPlanner(PARAMS, FootprintCheck(FOOTPRINT))
     track = movers((-1.4, 0.0, 1.0, 0.0, 0.3))
     result = planner.compute((0.0, 0.0, 0.0), (0.2, 0.0, 0.0), FREE, INFO, PATH, movers=track)
     assert result.status == "ok" and result.cmd[0] > 0.2

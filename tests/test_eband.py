@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from omninav.services.local_planner.dwa import footprint_outline
+from omninav.services.local_planner.footprint_check import footprint_outline
 from omninav.services.local_planner.eband import (BandProblem, ElasticBandPlanner, clearance_field, covering_circles,
                                                   initial_band, local_goal, span_path)
 from omninav.services.local_planner.params import ElasticBandParams

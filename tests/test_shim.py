@@ -7,8 +7,7 @@ import math
 import numpy as np
 
 from omninav.schemas.messages import MapMetaData, Pose2D
-from omninav.services.local_planner.dwa import DwaPlanner
-from omninav.services.local_planner.params import DwaParams
+from omninav.services.local_planner.footprint_check import FootprintCheck
 from omninav.services.local_planner.shim import (RotationShim, RotationShimParams, heading_error, sampled_point,
                                                    turn_rate)
 from omninav.geometry.se2 import integrate
@@ -83,10 +82,10 @@ def test_a_turn_that_would_sweep_into_a_wall_is_not_commanded():
     # in place, its front corner (0.53 m out) would sweep into the wall
     costs = np.zeros((INFO.height, INFO.width), np.uint8)
     costs[49:, :] = 254                                       # y ≥ 0.45 m
-    dwa = DwaPlanner(DwaParams(), DEFAULT_FOOTPRINT, 0, 0.05)
+    footprint_check = FootprintCheck(DEFAULT_FOOTPRINT, 0, 0.05)
 
     def legal(poses):
-        return dwa.legal_poses(poses, costs, INFO)
+        return footprint_check.legal_poses(poses, costs, INFO)
 
     shim, pose, answers = run_shim((0.0, 0.0, 0.0), WEST, legal)
     assert [a.phase for a in answers] == ["blocked"] and pose[2] == 0.0

@@ -12,11 +12,10 @@ One control cycle (`DwaPlanner.compute`):
    holonomic robots also get base_local_planner's y_vels strafe samples);
 3. every sample is rolled out for sim_time in one numba call (exact constant-twist arcs; in
    trajectory-rollout mode the twist ramps towards the sample at the acceleration limits, as
-   base_local_planner does) and checked against the costmap: a pose is illegal when its centre
-   cell is inscribed, lethal, unknown or off the grid, or — when its centre cell lies within the
-   outline's reach of a lethal or unknown cell — when any point of the outline lies on a lethal or
-   unknown cell: the footprint's grown by the collision monitor's stop zone (stop_padding), or,
-   when the robot already stands within that zone, its own (`check_setup`);
+   base_local_planner does) and every pose is held to the footprint check (footprint_check.py:
+   centre not inscribed, lethal, unknown or off the grid; near obstacles, the outline — grown by
+   the collision monitor's stop zone while the robot stands clear of it — on no lethal or unknown
+   cell);
 4. legal trajectories are scored as dwa_local_planner does, lower is better:
    path_distance_bias·(path distance of the end pose + of the point forward_point_distance ahead
    of it) + goal_distance_bias·(goal distance of both) + occdist_scale·(highest cost met);
@@ -39,12 +38,13 @@ from numba import njit
 from scipy import ndimage
 
 from ...schemas.messages import MapMetaData
-from ...geometry.footprint import pad
 from ...geometry.polygons import densify
-from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
+from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE
 from ...geometry.grid import in_grid, world_to_cell
 from .dynamic import Movers, critic, slack
 from .dynamic import warm_up as warm_up_movers
+from .footprint_check import FootprintCheck, PoseCheck, kernel_grid, pose_cost
+from .footprint_check import warm_up as warm_up_footprint_check
 from .params import DwaParams
 
 SMALL_ANGLE = 1e-9   # rad: below this a step is a straight line (sin x / x = 1)
@@ -189,133 +189,6 @@ def path_maps(path: np.ndarray, pose, info: MapMetaData, costs: np.ndarray | Non
 
 # ---------------------------------------------------------------- rollout kernel
 
-# the outline's points are at most this many cells apart (footprint_outline's spacing)
-OUTLINE_SPACING_CELLS = 0.5
-
-
-@dataclass(frozen=True)
-class PoseCheck:
-    """What one cycle's poses are checked with (`DwaPlanner.check_setup`)."""
-    outline: np.ndarray     # (K, 2) points along the (padded) footprint, robot frame
-    near: np.ndarray        # (H, W) bool: where the outline is checked whatever the centre cost
-    # (H, W) int8: how many outline points on from one in this cell (either way along the outline) cannot lie on a
-    # lethal or unknown cell or off the grid (`outline_skips`); -1 on lethal and unknown cells
-    skips: np.ndarray
-    # the centre cost from which a pose is illegal whatever its outline: inscribed, unless the robot
-    # already stands on an inscribed cell (a tracking error put it there): then lethal, and the
-    # outline alone decides, as ROS does for a polygon footprint, so the robot can drive out again
-    centre_limit: int = INSCRIBED_INFLATED_OBSTACLE
-
-
-@njit(cache=True)
-def _lower_envelope(f, out, v, z):
-    """out[q] = min over p of f[p] + (q - p)² (f may be inf; all inf gives inf): Felzenszwalb and
-    Huttenlocher's lower envelope of parabolas, v and z scratch of len(f) and len(f) + 1. Exact for
-    integer f: a boundary between two parabolas is a fraction of denominator below 2·len(f), too
-    far from any other integer for rounding to move it past one."""
-    n, k = f.shape[0], -1
-    for q in range(n):
-        if f[q] == np.inf:
-            continue
-        s = -np.inf
-        while k >= 0:
-            s = ((f[q] + q * q) - (f[v[k]] + v[k] * v[k])) / (2.0 * (q - v[k]))
-            if s > z[k]:
-                break
-            k -= 1
-        if k < 0:
-            s = -np.inf
-        k += 1
-        v[k], z[k], z[k + 1] = q, s, np.inf
-    if k < 0:
-        out[:] = np.inf
-        return
-    j = 0
-    for q in range(n):
-        while z[j + 1] < q:
-            j += 1
-        out[q] = (q - v[j]) * (q - v[j]) + f[v[j]]
-
-
-@njit(cache=True)
-def _clearance_cells(blocked):
-    """(H, W) cells from each cell's centre to the nearest blocked cell's (0 on them, inf without
-    any): the exact Euclidean distance transform, by columns then rows."""
-    height, width = blocked.shape
-    squared = np.full((height, width), np.inf)
-    size = max(height, width)
-    f, out, v, z = np.empty(size), np.empty(size), np.empty(size, np.int64), np.empty(size + 1)
-    for col in range(width):
-        for row in range(height):
-            f[row] = 0.0 if blocked[row, col] else np.inf
-        _lower_envelope(f[:height], out[:height], v, z)
-        squared[:, col] = out[:height]
-    for row in range(height):
-        f[:width] = squared[row]
-        _lower_envelope(f[:width], out[:width], v, z)
-        squared[row] = out[:width]
-    return np.sqrt(squared)
-
-
-def outline_skips(clearance: np.ndarray, resolution: float) -> np.ndarray:
-    """PoseCheck.skips from the clearance (m from each cell's centre to the nearest lethal or unknown
-    cell's, inf without one): a point of a cell is that far less a cell's diagonal (either point
-    anywhere in its cell) from any lethal or unknown cell, and from the cells just off the grid as
-    from lethal ones; the outline's next points are at most OUTLINE_SPACING_CELLS apart."""
-    height, width = clearance.shape
-    off_grid = np.minimum.outer(np.minimum(np.arange(1, height + 1), np.arange(height, 0, -1)),
-                                np.minimum(np.arange(1, width + 1), np.arange(width, 0, -1))) * resolution
-    room = np.minimum(clearance, off_grid) - (math.sqrt(2.0) * resolution + 1e-9)   # and a margin for rounding
-    skips = np.clip(np.floor(room / (OUTLINE_SPACING_CELLS * resolution)), 0, np.iinfo(np.int8).max).astype(np.int8)
-    skips[clearance == 0.0] = -1
-    return skips
-
-
-@njit(cache=True, inline="always")
-def _cell(x, y, grid, height, width):
-    """(row, col) of the cell under a world point; (-1, -1) off the grid. grid as in _rollout."""
-    dx, dy = x - grid[0], y - grid[1]
-    u = (grid[2] * dx + grid[3] * dy) * grid[4]
-    v = (-grid[3] * dx + grid[2] * dy) * grid[4]
-    if u < 0.0 or v < 0.0 or u >= width or v >= height:
-        return -1, -1
-    return int(v), int(u)
-
-
-@njit(cache=True, inline="always")
-def _outline_clear(skips, x, y, c, s, grid, outline):
-    """Whether no point of the outline around (x, y), heading (cos, sin) = (c, s), lies on a lethal or
-    unknown cell or off the grid; skips as in PoseCheck. Walked from both ends at once: two lookups
-    that do not wait for each other."""
-    height, width = skips.shape
-    first, last = 0, outline.shape[0] - 1
-    while first <= last:
-        row, col = _cell(x + c * outline[first, 0] - s * outline[first, 1],
-                         y + s * outline[first, 0] + c * outline[first, 1], grid, height, width)
-        back_row, back_col = _cell(x + c * outline[last, 0] - s * outline[last, 1],
-                                   y + s * outline[last, 0] + c * outline[last, 1], grid, height, width)
-        if row < 0 or skips[row, col] < 0 or back_row < 0 or skips[back_row, back_col] < 0:
-            return False
-        first += 1 + skips[row, col]
-        last -= 1 + skips[back_row, back_col]
-    return True
-
-
-@njit(cache=True, inline="always")
-def _pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost, centre_limit):
-    """The centre cost of the robot at (x, y), heading (cos, sin) = (c, s), or -1 when that pose is
-    illegal: its centre cell off the grid or at centre_limit or above (inscribed, lethal, unknown),
-    or — from check_cost on, or where `near` — a point of the outline on a lethal or unknown cell or
-    off the grid. near, skips and centre_limit as in PoseCheck, grid as in _rollout."""
-    row, col = _cell(x, y, grid, costs.shape[0], costs.shape[1])
-    if row < 0 or costs[row, col] >= centre_limit:
-        return -1
-    cost = int(costs[row, col])
-    if (cost >= check_cost or near[row, col]) and not _outline_clear(skips, x, y, c, s, grid, outline):
-        return -1
-    return cost
-
-
 @njit(cache=True)
 def _step(vx, vy, w, dt):
     """(bx, by, phi): the exact pose increment of a constant twist over dt, robot frame (se2_exp, inlined)."""
@@ -332,7 +205,7 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, ski
              centre_limit, poses, max_cost, legal):
     """Roll out and check every sample; fills poses (T, n_steps+1, 3), max_cost (T,), legal (T,).
 
-    grid = (origin x, origin y, cos origin yaw, sin origin yaw, 1/resolution)."""
+    grid as in kernel_grid; near, skips, outline, check_cost and centre_limit as in PoseCheck and FootprintCheck."""
     for t in range(samples.shape[0]):
         if ramp:
             vx, vy, w = v0[0], v0[1], v0[2]
@@ -353,7 +226,7 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, ski
             c, s = math.cos(th), math.sin(th)
             k += 1
             poses[t, k, 0], poses[t, k, 1], poses[t, k, 2] = x, y, th
-            cost = _pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost, centre_limit)
+            cost = pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost, centre_limit)
             if cost < 0:
                 ok = False
                 break
@@ -363,29 +236,6 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, ski
             poses[t, j, 0], poses[t, j, 1], poses[t, j, 2] = x, y, th
         legal[t] = ok
         max_cost[t] = worst
-
-
-@njit(cache=True)
-def _check_poses(poses, costs, near, skips, grid, outline, check_cost, centre_limit, legal):
-    for i in range(poses.shape[0]):
-        x, y, th = poses[i, 0], poses[i, 1], poses[i, 2]
-        legal[i] = _pose_cost(costs, near, skips, x, y, math.cos(th), math.sin(th), grid, outline, check_cost,
-                              centre_limit) >= 0
-
-
-def footprint_outline(points: np.ndarray, spacing: float) -> np.ndarray:
-    """Points along the closed footprint polygon, at most `spacing` apart (robot frame)."""
-    points = np.asarray(points, np.float64).reshape(-1, 2)
-    return densify(np.vstack([points, points[:1]]), spacing)[:-1]
-
-
-def footprint_check_cost(inscribed_radius: float, circumscribed_radius: float, inflation_radius: float,
-                         cost_scaling_factor: float) -> int:
-    """The centre cost from which the footprint may touch an obstacle (ROS's circumscribed cost);
-    0 (check every pose) when the inflation does not reach the circumscribed radius."""
-    if inflation_radius < circumscribed_radius:
-        return 0
-    return inflation_cost(circumscribed_radius, inscribed_radius, cost_scaling_factor)
 
 
 # ---------------------------------------------------------------- the planner
@@ -473,70 +323,13 @@ def _without_standing(params: DwaParams, samples: np.ndarray) -> np.ndarray:
     return samples[~(in_place & (np.abs(samples[:, 2]) < params.min_in_place_vel_theta))]
 
 
-def _grid(info: MapMetaData) -> np.ndarray:
-    """The kernels' view of the grid: (origin x, origin y, cos origin yaw, sin origin yaw, 1/resolution)."""
-    theta = info.origin.theta
-    return np.array([info.origin.x, info.origin.y, math.cos(theta), math.sin(theta), 1.0 / info.resolution])
-
-
 class DwaPlanner:
-    """The pure DWA core: `compute` is one control cycle. `footprint` is the polygon in the robot
-    frame, padded by `footprint_padding`; `check_cost` the centre cost from which the footprint's
-    outline is checked (footprint_check_cost; 0 checks every pose); `stop_padding` the collision
-    monitor's stop zone around the footprint, kept free of lethal and unknown cells (see `check_setup`)."""
+    """The pure DWA core: `compute` is one control cycle. Poses are held to `footprint_check`
+    (footprint_check.py); its footprint is the one kept clear of the moving obstacles."""
 
-    def __init__(self, params: DwaParams, footprint: np.ndarray, check_cost: int = 0, stop_padding: float = 0.0,
-                 footprint_padding: float = 0.0):
+    def __init__(self, params: DwaParams, footprint_check: FootprintCheck):
         self.params = params
-        self.footprint = np.asarray(footprint, np.float64).reshape(-1, 2)
-        self.check_cost = int(check_cost)
-        for name, value in (("stop_padding", stop_padding), ("footprint_padding", footprint_padding)):
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be zero or positive, got {value}")
-        self.stop_padding = float(stop_padding)
-        self.footprint_padding = float(footprint_padding)
-        self._outlines: dict[tuple[float, float], tuple[np.ndarray, float]] = {}
-
-    def _check(self, clearance: np.ndarray, skips: np.ndarray, resolution: float, padding: float = 0.0,
-               centre_limit: int = INSCRIBED_INFLATED_OBSTACLE) -> PoseCheck:
-        """The PoseCheck of the footprint padded by `padding`: its outline is checked where a centre may
-        put a point of it on a lethal or unknown cell (within its farthest point plus a cell's diagonal:
-        the centre anywhere in its cell, the obstacle anywhere in its own)."""
-        if (resolution, padding) not in self._outlines:
-            outline = footprint_outline(pad(self.footprint, padding), OUTLINE_SPACING_CELLS * resolution)
-            reach = float(np.max(np.hypot(outline[:, 0], outline[:, 1]))) + math.sqrt(2.0) * resolution
-            self._outlines[resolution, padding] = outline, reach
-        outline, reach = self._outlines[resolution, padding]
-        return PoseCheck(outline, clearance <= reach, skips, centre_limit)
-
-    def check_setup(self, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
-        """What poses are checked with, starting from `pose`.
-
-        The outline: the footprint padded by stop_padding plus a quarter cell — the monitor would
-        stop a motion into its stop zone, and the outline's points are half a cell apart, so a cell's
-        corner may reach a quarter cell in between them — while the robot stands a cell clear of
-        that zone (at its edge every slide along a jagged row of obstacle cells would cross it);
-        else the footprint padded by the quarter cell only, or the footprint itself, or at last the
-        robot's own outline without footprint_padding: the robot may still move (away). The outline is checked whatever the centre cost where
-        `PoseCheck.near` (the circumscribed cost alone let a corner reach a cell one further). A robot
-        whose centre stands on an inscribed cell is checked by its outline alone (`centre_limit`)."""
-        costs = np.ascontiguousarray(costs, np.uint8)
-        grid = _grid(info)
-        row, col = _cell(float(pose[0]), float(pose[1]), grid, costs.shape[0], costs.shape[1])
-        centre_limit = (LETHAL_OBSTACLE if row >= 0 and costs[row, col] == INSCRIBED_INFLATED_OBSTACLE
-                        else INSCRIBED_INFLATED_OBSTACLE)
-        blocked = costs >= LETHAL_OBSTACLE
-        clearance = _clearance_cells(blocked) * info.resolution
-        skips = outline_skips(clearance, info.resolution)
-        quarter = info.resolution / 4
-        legal = np.empty(1, np.bool_)
-        start = np.asarray(pose, np.float64).reshape(1, 3)
-        for padding, margin in ((self.stop_padding + quarter, info.resolution), (quarter, 0.0), (0.0, 0.0)):
-            clear = self._check(clearance, skips, info.resolution, padding + margin, centre_limit)
-            _check_poses(start, costs, clear.near, skips, grid, clear.outline, self.check_cost, centre_limit, legal)
-            if legal[0]:
-                return self._check(clearance, skips, info.resolution, padding, centre_limit)
-        return self._check(clearance, skips, info.resolution, -self.footprint_padding, centre_limit)
+        self.footprint_check = footprint_check
 
     def n_steps(self, samples: np.ndarray) -> int:
         """Poses per rollout: the fastest sample moves at most sim_granularity (m, or rad) per step."""
@@ -556,22 +349,12 @@ class DwaPlanner:
         poses = np.empty((len(samples), n + 1, 3))
         max_cost = np.empty(len(samples), np.int64)
         legal = np.empty(len(samples), np.bool_)
-        check = check if check is not None else self.check_setup(pose, costs, info)
+        check = check if check is not None else self.footprint_check.setup(pose, costs, info)
         _rollout(samples, np.asarray(velocity, np.float64), step_limit, not p.dwa, n, dt,
                  np.asarray(pose, np.float64), np.ascontiguousarray(costs, np.uint8), check.near, check.skips,
-                 _grid(info), check.outline, self.check_cost, check.centre_limit, poses, max_cost, legal)
+                 kernel_grid(info), check.outline, self.footprint_check.check_cost, check.centre_limit, poses, max_cost,
+                 legal)
         return poses, max_cost, legal
-
-    def legal_poses(self, poses, costs: np.ndarray, info: MapMetaData) -> np.ndarray:
-        """(N,) whether the robot may stand at each pose (N, 3), by the rollout's test from the first."""
-        poses = np.ascontiguousarray(poses, np.float64).reshape(-1, 3)
-        legal = np.empty(len(poses), np.bool_)
-        if len(poses) == 0:
-            return legal
-        check = self.check_setup(poses[0], costs, info)
-        _check_poses(poses, np.ascontiguousarray(costs, np.uint8), check.near, check.skips, _grid(info),
-                     check.outline, self.check_cost, check.centre_limit, legal)
-        return legal
 
     def score(self, poses, max_cost, legal, maps: PathMaps, info: MapMetaData) -> np.ndarray:
         """Scores (T,) of rolled-out trajectories; inf where illegal."""
@@ -605,7 +388,7 @@ class DwaPlanner:
         if maps is None:
             return DwaResult("no_path", brake, samples, np.zeros((0, 1, 3)), np.zeros(0), -1,
                              "no point of the path lies on the local costmap")
-        check = self.check_setup(pose, costs, info)
+        check = self.footprint_check.setup(pose, costs, info)
 
         def evaluate(samples):
             poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info, check)
@@ -635,9 +418,9 @@ class DwaPlanner:
         """(legal (T,), cost (T,)) of rollouts against the predicted movers (dynamic.py)."""
         p = self.params
         dt = p.sim_time / max(1, poses.shape[1] - 1)
-        hard, soft = slack(poses, dt, self.footprint, movers, p.dynamic_obstacle_margin, p.dynamic_obstacle_sigmas)
+        hard, soft = slack(poses, dt, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, p.dynamic_obstacle_sigmas)
         standing = np.repeat(poses[:1, :1], poses.shape[1], axis=1)
-        standing_hard, _ = slack(standing, dt, self.footprint, movers, p.dynamic_obstacle_margin, 0.0)
+        standing_hard, _ = slack(standing, dt, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, 0.0)
         return critic(hard, soft, standing_hard, p.dynamic_influence_distance, p.dynamic_obstacle_scale)
 
 
@@ -646,8 +429,8 @@ def warm_up() -> None:
     info = MapMetaData(resolution=0.1, width=4, height=4)
     square = np.array([[0.1, 0.1], [-0.1, 0.1], [-0.1, -0.1], [0.1, -0.1]])
     for dwa in (True, False):
-        DwaPlanner(DwaParams(dwa=dwa), square).rollout(np.array([[0.1, 0.0, 0.1]]), (0.2, 0.2, 0.0), (0.0, 0.0, 0.0),
-                        np.zeros((4, 4), np.uint8), info)
-    DwaPlanner(DwaParams(), square).legal_poses(np.array([[0.2, 0.2, 0.0]]), np.zeros((4, 4), np.uint8), info)
+        DwaPlanner(DwaParams(dwa=dwa), FootprintCheck(square)).rollout(
+            np.array([[0.1, 0.0, 0.1]]), (0.2, 0.2, 0.0), (0.0, 0.0, 0.0), np.zeros((4, 4), np.uint8), info)
+    warm_up_footprint_check()
     _flood(np.eye(4, dtype=np.bool_), np.ones((4, 4), np.bool_), _MOVES)
     warm_up_movers()

@@ -56,7 +56,8 @@ from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE
 from ...geometry.grid import in_grid, world_to_cell
 from ...geometry.se2 import wrap_angle
 from ...geometry.polygons import densify
-from .dwa import footprint_outline, local_path
+from .dwa import local_path
+from .footprint_check import footprint_outline
 from .params import ElasticBandParams
 
 MIN_INTERVAL = 1e-3     # s: the shortest time interval a new band starts with
@@ -577,7 +578,7 @@ class ElasticBandPlanner:
     """The pure elastic-band core: `compute` is one control cycle; the planner keeps the last band
     to warm-start the next cycle on the same path. `footprint` is the (padded) polygon in the robot
     frame; `check_cost` the centre cost from which the footprint's outline is checked
-    (dwa.footprint_check_cost; 0 checks every pose)."""
+    (footprint_check.footprint_check_cost; 0 checks every pose)."""
 
     def __init__(self, params: ElasticBandParams, footprint: np.ndarray, check_cost: int = 0):
         self.params = params

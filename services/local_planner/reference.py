@@ -1,6 +1,6 @@
 """The DWA rollout and footprint check written the slow, obvious way (a Python loop per trajectory,
 every outline point looked up), the oracle tests/test_dwa.py and `omninav bench local` hold the
-batched kernel in dwa.py to."""
+batched kernels in dwa.py and footprint_check.py to."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,9 +10,11 @@ from ..costmap import layers as costmap_layers
 from ...geometry.footprint import transform
 from ...geometry.grid import in_grid, world_to_cell
 from ...geometry.se2 import integrate
-from .dwa import DwaPlanner, PoseCheck
+from .dwa import DwaPlanner
+from .footprint_check import FootprintCheck, PoseCheck
 
-def reference_pose_cost(planner: DwaPlanner, check: PoseCheck, pose, costs: np.ndarray, info: MapMetaData) -> int:
+def reference_pose_cost(footprint_check: FootprintCheck, check: PoseCheck, pose, costs: np.ndarray,
+                        info: MapMetaData) -> int:
     """The centre cost of the robot at pose, or -1 where illegal, the slow, obvious way: every point of
     the outline looked at."""
     def cost_at(points):
@@ -24,7 +26,7 @@ def reference_pose_cost(planner: DwaPlanner, check: PoseCheck, pose, costs: np.n
     if centre < 0 or centre >= check.centre_limit:
         return -1
     row, col = world_to_cell(info, pose[0], pose[1])
-    if centre >= planner.check_cost or check.near[int(row), int(col)]:
+    if centre >= footprint_check.check_cost or check.near[int(row), int(col)]:
         edge = cost_at(transform(check.outline, pose))
         if np.any((edge < 0) | (edge >= costmap_layers.LETHAL_OBSTACLE)):
             return -1
@@ -36,7 +38,7 @@ def reference_rollout(planner: DwaPlanner, twist, n: int, pose, velocity, costs:
     p = planner.params
     samples = np.asarray(twist, float)[None]
     dt = p.sim_time / n
-    check = planner.check_setup(pose, costs, info)
+    check = planner.footprint_check.setup(pose, costs, info)
     current = np.asarray(velocity, float) if not p.dwa else samples[0]
     step_limit = np.array([p.acc_lim_x, p.acc_lim_y, p.acc_lim_theta]) * dt
     poses, worst = [np.asarray(pose, float)], 0
@@ -44,7 +46,7 @@ def reference_rollout(planner: DwaPlanner, twist, n: int, pose, velocity, costs:
         if not p.dwa:
             current = current + np.clip(samples[0] - current, -step_limit, step_limit)
         poses.append(integrate(poses[-1], current, dt))
-        cost = reference_pose_cost(planner, check, poses[-1], costs, info)
+        cost = reference_pose_cost(planner.footprint_check, check, poses[-1], costs, info)
         if cost < 0:
             return np.array(poses), worst, False
         worst = max(worst, cost)

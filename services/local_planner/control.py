@@ -1,0 +1,281 @@
+"""The local planner's control core: what the robot does on the followed path, tick by tick.
+
+The node (node.py) calls `LocalControl.follow(path, frames)` when a follow_path takes effect and
+`LocalControl.step(inputs)` on every control tick; the returned Control is the LocalCommand's twist,
+ok and reason and the trajectory for local_plan. Nothing here reads a clock or does I/O, so the same
+inputs always give the same commands (a replay reproduces them).
+
+Frames: the controller works in the local costmap's frame (odom for the rolling window), where the
+robot is the latest odometry; the path (map frame) is carried into it by the map→odom transform in
+effect (`RobotFrames`, kept by the node). The final approach runs in the map frame on the odometry
+carried into the map the same way, so the goal is reached where the localization says it is.
+
+One tick, in order:
+- no path (none yet, or an empty follow_path): ok, zero twist, reason "idle"; once arrived: ok,
+  zero twist, "goal_reached"; no costmap yet: a braking twist, not ok, "no_costmap: …".
+- Within final_approach_distance of the path's end (straight-line) the FinalApproach (approach.py)
+  takes over as long as the poses it will pass through are free on the costmap; when they are not,
+  the controller carries on along the path (counted approach_blocked). It reports ok with a zero
+  twist ("goal_reached") once within xy_goal_tolerance and yaw_goal_tolerance; the navigator
+  decides success by its own. It is given up beyond final_approach_distance + APPROACH_HYSTERESIS.
+- The rotation shim (shim.py; on by default with dwa) turns the robot on the spot towards a new path
+  (a new goal_id, or a start more than START_MOVED from the last path's) that lies more than
+  angular_dist_threshold off its heading: reason "rotate_to_heading". Its state is set by `follow`
+  and the ticks alone. It stays out within final_approach_distance of the goal.
+- Else the controller: DWA (scoring the tracker's tracks predicted to the tick, dynamic.py), the
+  elastic band, or the path follower (braking, not ok, "path_blocked: …" when the path ahead is
+  illegal on the costmap).
+Every pose is held to one FootprintCheck (footprint_check.py), the one DWA's rollouts use.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, fields, replace
+
+import numpy as np
+
+from ...schemas.messages import Costmap, Path, Tracks
+from ...geometry.footprint import DEFAULT_FOOTPRINT, STOP_PADDING, make_footprint
+from ...geometry.frames import RobotFrames
+from ...geometry.se2 import compose
+from ..runtime.params import load_params, require_nonnegative
+from .approach import FinalApproach
+from .dwa import DwaPlanner, reachable
+from .dynamic import Movers, movers_at
+from .footprint_check import FootprintCheck, footprint_check_cost
+from .params import DwaParams, FollowerParams
+from .path_ahead import ahead_of
+from .path_follower import PathFollower, segments_from_poses
+from .shim import RotationShim, RotationShimParams
+
+CONTROLLERS = ("dwa", "eband", "follower")
+APPROACH_HYSTERESIS = 0.1             # m beyond final_approach_distance before an approach is given up
+START_MOVED = 0.05    # m: a path from the same goal starting farther from the last one's start is a new path
+
+
+@dataclass(frozen=True)
+class LocalControlParams(DwaParams, RotationShimParams):
+    """DwaParams (TrajectoryPlannerROS / DWAPlannerROS names), RotationShimParams (Nav2's) and the
+    core's own; the tolerances are the final approach's, tighter than ROS's."""
+    xy_goal_tolerance: float = 0.02      # m: the controller stops here (the navigator judges success)
+    yaw_goal_tolerance: float = 0.02     # rad
+    controller: str = "dwa"              # dwa | eband | follower
+    final_approach_distance: float = 0.6  # m from the path's end where the final approach takes over
+    rotation_shim: bool | None = None    # turn towards a new path first (shim.py); None: with the dwa controller
+    path_follower: dict = field(default_factory=dict)   # FollowerParams by name (drive: from holonomic_robot)
+    elastic_band: dict = field(default_factory=dict)    # ElasticBandParams by name; limits default to the above
+    # the robot, spelled as costmap_2d spells it (the local costmap's values)
+    footprint: tuple[tuple[float, float], ...] = tuple(map(tuple, DEFAULT_FOOTPRINT.tolist()))
+    robot_radius: float = 0.46           # m, when footprint is empty
+    footprint_padding: float = 0.01      # m
+    inflation_radius: float = 0.55       # m: with cost_scaling_factor, where the footprint check starts
+    cost_scaling_factor: float = 10.0    # 1/m
+    # m: the collision monitor's stop zone (its default), kept free by DWA's rollouts
+    stop_padding: float = STOP_PADDING
+
+    def __post_init__(self):
+        super().__post_init__()
+        require_nonnegative(self, "xy_goal_tolerance", "yaw_goal_tolerance")
+        if self.controller not in CONTROLLERS:
+            raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
+        require_nonnegative(self, "final_approach_distance", "robot_radius", "footprint_padding",
+                            "inflation_radius", "cost_scaling_factor", "stop_padding")
+        if self.footprint and len(self.footprint) < 3:
+            raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
+        for name in ("path_follower", "elastic_band"):
+            if not isinstance(getattr(self, name), dict):
+                raise ValueError(f"{name} must be a mapping of parameter names to values, got {getattr(self, name)!r}")
+        self.follower_params()
+        self.shim_params()
+
+    def dwa_params(self) -> DwaParams:
+        return DwaParams(**{f.name: getattr(self, f.name) for f in fields(DwaParams)})
+
+    def shim_params(self) -> RotationShimParams:
+        """The shim's parameters, its turn clamped to the controller's max_vel_theta and acc_lim_theta."""
+        values = {f.name: getattr(self, f.name) for f in fields(RotationShimParams)}
+        values["rotate_to_heading_angular_vel"] = min(self.rotate_to_heading_angular_vel, self.max_vel_theta)
+        values["max_angular_accel"] = min(self.max_angular_accel, self.acc_lim_theta)
+        return RotationShimParams(**values)
+
+    def follower_params(self) -> FollowerParams:
+        drive = "holonomic" if self.holonomic_robot else "diff"
+        values = dict(self.path_follower)
+        if values.setdefault("drive", drive) != drive:
+            raise ValueError(f"path_follower: drive {values['drive']!r} contradicts holonomic_robot "
+                             f"{self.holonomic_robot}")
+        return load_params(FollowerParams, values, "path_follower")
+
+
+@dataclass(frozen=True)
+class ControlInputs:
+    """What one tick decides on."""
+    velocity: np.ndarray        # (3,) the robot's body twist (vx, vy, wz), from the tick's odometry
+    frames: RobotFrames         # the robot's latest odometry and the map→odom transform in effect
+    costmap: Costmap | None     # the local costmap in effect; None: none yet
+    tracks: Tracks | None       # the tracker's tracks in effect (moving obstacles); None: none
+    now_s: float                # the tick's time, to which the tracks are predicted
+
+
+@dataclass(frozen=True)
+class Control:
+    """One tick's answer."""
+    twist: np.ndarray
+    ok: bool
+    reason: str
+    trajectory: np.ndarray      # (K, 3) in the costmap frame, for local_plan
+    counted: tuple[str, ...] = ()   # what happened on the way, for the node's Diagnostic counters
+
+
+class LocalControl:
+    """The followed path (`follow`) and the answer of each control tick `dt` seconds apart (`step`)."""
+
+    def __init__(self, params: LocalControlParams, dt: float):
+        p = self.params = params
+        self.dt = dt
+        fp = make_footprint(p.footprint, p.robot_radius, p.footprint_padding)
+        self.footprint_check = FootprintCheck(
+            fp.points, footprint_check_cost(fp.inscribed_radius, fp.circumscribed_radius, p.inflation_radius,
+                                            p.cost_scaling_factor), p.stop_padding, p.footprint_padding)
+        self.dwa_params = p.dwa_params()
+        self.follower_params = p.follower_params()
+        self.controller = self._make_controller()
+        shimmed = p.rotation_shim if p.rotation_shim is not None else p.controller == "dwa"
+        self.shim = RotationShim(p.shim_params(), dt) if shimmed else None
+        self.shim_key: tuple[str, np.ndarray] | None = None   # goal_id and start of the last path the shim saw
+        self.path: Path | None = None            # followed; None: idle
+        self.path_follower: PathFollower | None = None      # controller "follower", on the path in the map frame
+        self.approach: FinalApproach | None = None
+        self.arrived = False
+        self._counted: list[str] = []
+
+    def _make_controller(self):
+        p = self.params
+        if p.controller == "dwa":
+            return DwaPlanner(self.dwa_params, self.footprint_check)
+        if p.controller == "eband":
+            from .eband import ElasticBandPlanner    # numba-compiled: loaded only when chosen
+            from .params import ElasticBandParams
+            # one set of robot limits: the band's default to the node's (TEB spells them alike)
+            shared = ["holonomic_robot", "controller_frequency", "max_vel_x", "max_vel_theta", "acc_lim_x",
+                      "acc_lim_theta", *(["max_vel_y", "acc_lim_y"] if p.holonomic_robot else [])]
+            values = {**{name: getattr(p, name) for name in shared}, **p.elastic_band}
+            return ElasticBandPlanner(load_params(ElasticBandParams, values, "elastic_band"),
+                                      self.footprint_check.footprint, self.footprint_check.check_cost)
+        return None     # follower: built per path
+
+    def follow(self, path: Path, frames: RobotFrames) -> None:
+        """Follow `path` (map or odom frame) from now on; an empty path stops."""
+        self.path = path if len(path.poses) else None
+        self.approach, self.arrived, self.path_follower = None, False, None
+        if self.shim is not None and self.path is not None:
+            start = np.asarray(path.poses, np.float64).reshape(-1, 3)[0, :2]
+            if (self.shim_key is None or self.shim_key[0] != path.goal_id
+                    or math.hypot(*(start - self.shim_key[1])) > START_MOVED):
+                self.shim.new_path()
+            self.shim_key = (path.goal_id, start)
+        if self.path is not None and self.params.controller == "follower":
+            segments = segments_from_poses(frames.carry(path.poses, path.header.frame_id, frames.map_frame))
+            self.path_follower = PathFollower(self.follower_params, segments) if segments else None
+
+    def step(self, inputs: ControlInputs) -> Control:
+        self._counted = []
+        return replace(self._control(inputs), counted=tuple(self._counted))
+
+    def _brake(self, velocity: np.ndarray) -> np.ndarray:
+        low, high = reachable(self.dwa_params, velocity)
+        return np.clip(0.0, low, high)
+
+    def _legal(self, poses: np.ndarray, costmap: Costmap) -> np.ndarray:
+        return self.footprint_check.legal_poses(poses, costmap.data, costmap.info)
+
+    def _control(self, inputs: ControlInputs) -> Control:
+        none = np.zeros((0, 3))
+        if self.path is None:
+            return Control(np.zeros(3), True, "idle", none)
+        if self.arrived:
+            return Control(np.zeros(3), True, "goal_reached", none)
+        velocity, frames, costmap = inputs.velocity, inputs.frames, inputs.costmap
+        if costmap is None:
+            return Control(self._brake(velocity), False, "no_costmap: no local costmap yet", none)
+        frame = costmap.header.frame_id
+        path = frames.carry(self.path.poses, self.path.header.frame_id, frame)
+        robot = frames.robot(frame)
+        approach = self._approach(velocity, frames, costmap)
+        if approach is not None:
+            return approach
+        rotation = self._rotate(velocity, path, robot, costmap)
+        if rotation is not None:
+            return rotation
+        if self.params.controller == "follower":
+            return self._follow_path(velocity, path, robot, frames, costmap)
+        if self.params.controller == "dwa":
+            result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path,
+                                             movers=self._movers(inputs, frame))
+        else:
+            result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path)
+        reason = result.status if result.status in ("ok", "escape") else f"{result.status}: {result.message}"
+        return Control(result.cmd, result.status in ("ok", "escape"), "" if result.status == "ok" else reason,
+                       result.trajectory)
+
+    def _movers(self, inputs: ControlInputs, frame: str) -> Movers | None:
+        """The tracks in effect, predicted to this tick, in the costmap's frame."""
+        if inputs.tracks is None:
+            return None
+        source = inputs.tracks.header.frame_id
+        frame_pose = (0.0, 0.0, 0.0) if source == frame else inputs.frames.carry(np.zeros((1, 3)), source, frame)[0]
+        return movers_at(inputs.tracks, inputs.now_s, frame_pose, self.params.dynamic_min_speed)
+
+    def _approach(self, velocity: np.ndarray, frames: RobotFrames, costmap: Costmap) -> Control | None:
+        """The final approach's answer, or None when the robot is not close to the goal or the
+        approach is blocked."""
+        p = self.params
+        robot = frames.robot(frames.map_frame)
+        goal = frames.carry(self.path.poses[-1:], self.path.header.frame_id, frames.map_frame)[0]
+        distance = math.hypot(*(goal[:2] - robot[:2]))
+        if self.approach is not None and distance > p.final_approach_distance + APPROACH_HYSTERESIS:
+            self.approach = None
+        if self.approach is None:
+            if distance > p.final_approach_distance:
+                return None
+            moving = compose((0.0, 0.0, robot[2]), (*velocity[:2], 0.0))[:2]    # the robot's velocity, map axes
+            along = float(np.dot(moving, goal[:2] - robot[:2]) / max(distance, 1e-9))
+            self.approach = FinalApproach(self.follower_params, goal, robot, along, p.xy_goal_tolerance,
+                                          p.yaw_goal_tolerance)
+        poses = frames.carry(self.approach.planned_poses(robot, costmap.info.resolution / 2), frames.map_frame,
+                             costmap.header.frame_id)
+        if not self._legal(poses, costmap).all():
+            self.approach = None
+            self._counted.append("approach_blocked")
+            return None
+        command = self.approach.step(robot, self.dt)
+        if command.phase == "arrived":
+            self.arrived = True
+            return Control(np.zeros(3), True, "goal_reached", poses[-1:])
+        return Control(command.twist, True, "final_approach", poses)
+
+    def _rotate(self, velocity: np.ndarray, path: np.ndarray, robot: np.ndarray, costmap: Costmap) -> Control | None:
+        """The rotation shim's turn towards a new path, or None when it is off or has handed over;
+        it stays out within final_approach_distance of the goal, where the final approach turns."""
+        if self.shim is None or not self.shim.armed \
+                or math.hypot(*(path[-1, :2] - robot[:2])) <= self.params.final_approach_distance:
+            return None
+        command = self.shim.step(robot, velocity, path, lambda poses: self._legal(poses, costmap))
+        if command.phase != "rotate":
+            self._counted.append(f"shim/{command.phase}")
+            return None
+        return Control(command.twist, True, "rotate_to_heading", command.poses)
+
+    def _follow_path(self, velocity: np.ndarray, path: np.ndarray, robot: np.ndarray, frames: RobotFrames,
+                     costmap: Costmap) -> Control:
+        """The path follower's command, unless the path ahead (as far as the robot gets in sim_time)
+        is blocked on the costmap."""
+        if self.path_follower is None:
+            return Control(self._brake(velocity), False, "no_path: the path has no length", np.zeros((0, 3)))
+        command = self.path_follower.step(frames.robot(frames.map_frame), self.dt)
+        ahead, along = ahead_of(path, robot)
+        ahead = ahead[along <= self.follower_params.cruise_speed * self.params.sim_time]
+        if not self._legal(ahead, costmap).all():
+            return Control(self._brake(velocity), False, "path_blocked: the path ahead collides on the local costmap",
+                           ahead)
+        return Control(command.twist, True, "", ahead)

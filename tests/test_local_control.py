@@ -1,0 +1,184 @@
+"""The local planner's control core (services/local_planner/control.py) without any node: a robot
+facing away from its path turns on the spot, hands over to DWA, then to the final approach and
+arrives; a final approach whose line crosses an obstacle leaves the robot to the controller until
+the line is free; a shim turn that would sweep into a wall is not commanded; no path is idle, no
+costmap brakes, an empty path stops. The node (node.py) publishes exactly the core's commands."""
+import math
+
+import numpy as np
+import pytest
+
+from local_pipeline import KEYS, follow_path, polyline
+from omninav.schemas import decode
+from omninav.schemas.messages import Costmap, Header, LocalCommand, MapMetaData, Odometry, Path, Pose2D, Twist
+from omninav.geometry.frames import RobotFrames
+from omninav.geometry.se2 import integrate
+from omninav.services.local_planner.control import ControlInputs, LocalControl, LocalControlParams
+from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
+from omninav.services.runtime.node import NS_PER_S
+
+DT = 0.05                       # s: the default 20 Hz control period
+TICK_NS = 50_000_000
+INFO = MapMetaData(resolution=0.05, width=160, height=120, origin=Pose2D(-2.0, -3.0))   # x -2..6, y -3..3 m
+LETHAL = 254
+EAST = polyline([(0.0, 0.0), (2.4, 0.0)], 0.6)
+
+
+def costmap(*boxes) -> Costmap:
+    """A local costmap in the odom frame, lethal inside the boxes (x0, y0, x1, y1) and free elsewhere."""
+    data = np.zeros((INFO.height, INFO.width), np.uint8)
+    for x0, y0, x1, y1 in boxes:
+        rows = slice(round((y0 - INFO.origin.y) / INFO.resolution), round((y1 - INFO.origin.y) / INFO.resolution))
+        cols = slice(round((x0 - INFO.origin.x) / INFO.resolution), round((x1 - INFO.origin.x) / INFO.resolution))
+        data[rows, cols] = LETHAL
+    return Costmap(Header(frame_id="odom"), INFO, data)
+
+
+def odometry(k: int, pose, velocity=(0.0, 0.0, 0.0)) -> Odometry:
+    return Odometry(header=Header(stamp_ns=k * TICK_NS, frame_id="odom"), pose=Pose2D(*(float(v) for v in pose)),
+                    twist=Twist(linear_x=float(velocity[0]), linear_y=float(velocity[1]),
+                                angular_z=float(velocity[2])))
+
+
+def drive(core: LocalControl, frames: RobotFrames, pose, grid: Costmap | None, ticks: int = 400):
+    """A kinematic loop (the robot moves as commanded): the core's answers until goal_reached, and the
+    robot's last pose (odom frame)."""
+    pose, velocity, answers = np.array(pose, float), np.zeros(3), []
+    for k in range(ticks):
+        frames.set_odom(odometry(k, pose))
+        answer = core.step(ControlInputs(velocity, frames, grid, None, k * DT))
+        answers.append(answer)
+        if answer.reason == "goal_reached":
+            break
+        velocity = answer.twist
+        pose = integrate(pose, answer.twist, DT)
+    return answers, pose
+
+
+def phases(answers) -> list[str]:
+    """The reasons' statuses, each run of equal ones once."""
+    runs = []
+    for answer in answers:
+        status = answer.reason.split(":")[0]
+        if not runs or runs[-1] != status:
+            runs.append(status)
+    return runs
+
+
+def test_a_robot_facing_away_turns_on_the_spot_then_dwa_drives_then_the_final_approach_lands_it():
+    frames = RobotFrames("map", "odom")
+    core = LocalControl(LocalControlParams(), DT)
+    core.follow(follow_path(EAST), frames)
+    answers, pose = drive(core, frames, (0.0, 0.0, math.pi), costmap())
+    assert phases(answers) == ["rotate_to_heading", "", "final_approach", "goal_reached"]
+    assert all(a.ok for a in answers)
+    turning = [a for a in answers if a.reason == "rotate_to_heading"]
+    assert len(turning) > 10 and all(a.twist[0] == a.twist[1] == 0.0 and a.twist[2] != 0.0 for a in turning)
+    assert [c for a in answers for c in a.counted] == ["shim/aligned"]     # handed over once
+    assert math.hypot(pose[0] - 2.4, pose[1]) <= 0.02 and abs(pose[2] - 0.6) <= 0.02
+    assert np.all(answers[-1].twist == 0.0)
+    # arrived: it stays arrived
+    frames.set_odom(odometry(len(answers), pose))
+    assert core.step(ControlInputs(np.zeros(3), frames, costmap(), None, len(answers) * DT)).reason == "goal_reached"
+
+
+def test_an_aligned_robot_is_not_shimmed_and_the_map_frame_goal_is_reached_through_map_odom():
+    # odometry started 0.5 m east and 0.2 m north of the map's origin, turned 0.3 rad: the path and
+    # goal are in the map frame, the costmap and the odometry in the odom frame
+    start = (0.5, 0.2, 0.3)
+    frames = RobotFrames("map", "odom", start)
+    core = LocalControl(LocalControlParams(), DT)
+    goal = polyline([start[:2], (2.5, 1.0)], 0.0)
+    core.follow(follow_path(goal), frames)
+    heading = math.atan2(1.0 - 0.2, 2.5 - 0.5) - 0.3      # along the path, odom frame
+    answers, _ = drive(core, frames, (0.0, 0.0, heading), costmap())
+    assert phases(answers) == ["", "final_approach", "goal_reached"]
+    x, y, yaw = frames.robot("map")
+    assert math.hypot(x - 2.5, y - 1.0) <= 0.02 and abs(yaw) <= 0.02
+
+
+def test_a_final_approach_across_an_obstacle_leaves_the_robot_to_the_controller_until_the_line_is_free():
+    # the path goes round a box to a goal 1 m east; the straight line to the goal crosses the box
+    around = polyline([(0.0, 0.0), (0.0, 0.8), (1.0, 0.8), (1.0, 0.0)], -math.pi / 2)
+    frames = RobotFrames("map", "odom")
+    core = LocalControl(LocalControlParams(), DT)
+    core.follow(follow_path(around), frames)
+    answers, pose = drive(core, frames, (0.0, 0.0, math.pi / 2), costmap((0.35, -0.5, 0.65, 0.4)))
+    assert phases(answers) == ["", "final_approach", "goal_reached"]
+    blocked = [k for k, a in enumerate(answers) if "approach_blocked" in a.counted]
+    assert blocked and all(answers[k].reason == "" for k in blocked)       # DWA drove those ticks
+    assert blocked[-1] < next(k for k, a in enumerate(answers) if a.reason == "final_approach")
+    assert math.hypot(pose[0] - 1.0, pose[1]) <= 0.02
+
+
+def test_a_shim_turn_that_would_sweep_into_a_wall_is_left_to_the_controller():
+    # the robot (0.83 x 0.64 m) along a wall 0.45 m to its left, its path behind it: turned in place,
+    # its front corner would sweep into the wall (tests/test_shim.py)
+    west = EAST * (-1.0, 1.0, 1.0)
+    frames = RobotFrames("map", "odom")
+    core = LocalControl(LocalControlParams(), DT)
+    core.follow(follow_path(west), frames)
+    frames.set_odom(odometry(0, (0.0, 0.0, 0.0)))
+    answer = core.step(ControlInputs(np.zeros(3), frames, costmap((-2.0, 0.45, 6.0, 3.0)), None, 0.0))
+    assert answer.counted == ("shim/blocked",) and answer.reason != "rotate_to_heading"
+    without_wall = LocalControl(LocalControlParams(), DT)
+    without_wall.follow(follow_path(west), frames)
+    assert without_wall.step(ControlInputs(np.zeros(3), frames, costmap(), None, 0.0)).reason == "rotate_to_heading"
+
+
+def test_no_path_is_idle_no_costmap_brakes_and_an_empty_path_stops():
+    frames = RobotFrames("map", "odom")
+    core = LocalControl(LocalControlParams(), DT)
+    frames.set_odom(odometry(0, (0.0, 0.0, 0.0)))
+    idle = core.step(ControlInputs(np.zeros(3), frames, costmap(), None, 0.0))
+    assert (idle.ok, idle.reason, idle.trajectory.shape) == (True, "idle", (0, 3)) and np.all(idle.twist == 0.0)
+    core.follow(follow_path(EAST), frames)
+    moving = np.array([0.4, 0.0, 0.0])
+    blind = core.step(ControlInputs(moving, frames, None, None, 0.0))
+    assert not blind.ok and blind.reason.startswith("no_costmap:") and 0.0 <= blind.twist[0] < 0.4   # braking
+    answers, pose = drive(core, frames, (0.0, 0.0, 0.0), costmap(), ticks=20)
+    assert answers[-1].reason == "" and answers[-1].twist[0] > 0.3 and core.path is not None     # driving
+    core.follow(Path(header=Header(frame_id="map"), goal_id="g1"), frames)
+    frames.set_odom(odometry(21, pose))
+    stop = core.step(ControlInputs(answers[-1].twist, frames, costmap(), None, 21 * DT))
+    assert core.path is None and (stop.ok, stop.reason) == (True, "idle") and np.all(stop.twist == 0.0)
+
+
+@pytest.mark.parametrize("controller", ["dwa", "follower"])
+def test_the_node_publishes_the_bare_cores_commands(controller):
+    """The same odometry, costmap and path into the node (deferred by request_delay_s) and into the
+    core (followed from the tick the node puts them into effect): the same commands, tick by tick."""
+    start = (0.3, -0.2, 0.1)
+    params = LocalPlannerNodeParams(initial_pose_x=start[0], initial_pose_y=start[1], initial_pose_a=start[2],
+                                    controller=controller)
+    node = LocalPlannerNode(params)
+    published = []
+    node.cmd_pub.sink = lambda pub, payload, stamp: published.append(decode(payload, LocalCommand))
+    index = {key: i for i, key in enumerate(inp.key for inp in node.inputs)}
+    grid, path = costmap((1.2, 0.6, 1.6, 1.0)), follow_path(polyline([start[:2], (2.6, 0.2)], 0.4))
+    sent_ns = 20_000_000
+    grid.header.stamp_ns = path.header.stamp_ns = sent_ns
+    pose, odometries = np.array([0.0, 0.0, 0.0]), []
+    for k in range(1, 200):
+        if k == 1:
+            node.process(index[KEYS.robot("costmap/local")], grid)
+            node.process(index[KEYS.robot("follow_path")], path)
+        velocity = (published[-1].linear_x, published[-1].linear_y, published[-1].angular_z) if published else (0, 0, 0)
+        odometries.append(odometry(k, pose, velocity))
+        node.process(index[KEYS.robot("odom")], odometries[-1])
+        pose = integrate(pose, np.array([published[-1].linear_x, published[-1].linear_y, published[-1].angular_z]), DT)
+    assert [c.header.stamp_ns for c in published] == [o.header.stamp_ns for o in odometries]
+    assert {c.reason for c in published} >= {"idle", "", "final_approach", "goal_reached"}
+
+    core, frames = LocalControl(params, DT), RobotFrames("map", "odom", start)
+    in_effect = None
+    for msg, command in zip(odometries, published):
+        frames.set_odom(msg)
+        if in_effect is None and msg.header.stamp_ns > sent_ns + params.request_delay_s * NS_PER_S:
+            in_effect = grid
+            core.follow(path, frames)
+        velocity = np.array([msg.twist.linear_x, msg.twist.linear_y, msg.twist.angular_z])
+        answer = core.step(ControlInputs(velocity, frames, in_effect, None, msg.header.stamp_ns / NS_PER_S))
+        assert (command.linear_x, command.linear_y, command.angular_z) == tuple(float(v) for v in answer.twist)
+        assert (command.ok, command.reason, command.goal_id) == (answer.ok, answer.reason,
+                                                                 path.goal_id if core.path is not None else "")
