@@ -21,7 +21,7 @@ BENCHES: dict[str, str] = {
     "explore": "omninav.bench.explore",
     "kills": "omninav.experiments.kills",
     "footprint": "omninav.bench.process_footprint",
-    "lockstep": "omninav.bench.lockstep",
+    "lockstep": "omninav.bench.determinism",
 }
 
 

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 
-from omninav.bench.lockstep import messages_by_key
+from omninav.bench.determinism import messages_by_key
 from omninav.cli.main import main as cli_main
 from omninav.cli.navigate import REPO, compose_for, in_containers, map_for
 from omninav.schemas import decode
