@@ -80,7 +80,7 @@ MAPLESS_NAVIGATOR = {"planner_frequency": 2.0}
 SETTLE_S = 1.0          # sim s after the last goal ends: the robot comes to rest before the stop
 CANCEL_WAIT_S = 2.0     # sim s to wait for the navigator to confirm a cancel
 POLL_S = 0.1
-STOP_TIMEOUT_S = 120
+STOP_TIMEOUT_S = 300     # wall s for `up` to stop everything (the recorder may take 120 s on a loaded machine)
 READY_TIMEOUT_S = 300   # wall s for every service to come up (numba warm-ups on a loaded machine)
 # --composed: the containers (compose `process`) of a mission; unnamed services go to the last one.
 # two: the simulated hardware beside the robot's stack, as on a robot whose drivers run apart

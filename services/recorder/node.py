@@ -121,6 +121,9 @@ class SplitWriter:
 
 class RecorderNode(Node):
     service = "recorder"
+    # killed before its footer the recording is unreadable until `omninav recover`: under heavy load
+    # draining its queue and writing the index took more than the default 10 s (a kill experiment)
+    stop_timeout_s = 120.0
     Params = RecorderParams
 
     def setup(self) -> None:

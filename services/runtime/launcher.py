@@ -43,7 +43,7 @@ BACKOFF_FIRST_S = 0.5
 BACKOFF_MAX_S = 10.0
 STABLE_S = 10.0          # a run at least this long resets the backoff
 START_WINDOW_S = 10.0    # a first run that exits with an error sooner than this could not start
-STOP_TIMEOUT_S = 10.0    # after SIGINT, then SIGKILL
+STOP_TIMEOUT_S = 10.0    # after SIGINT, then SIGKILL (a process's own: the longest its services ask for)
 TAIL_LINES = 20          # output lines kept per service, shown when it cannot start
 _POLL_S = 0.1
 SOURCES_WAVE = 2
@@ -91,9 +91,10 @@ class Supervised:
     process, restart bookkeeping and output."""
 
     def __init__(self, spec: ProcessSpec, endpoint: str, params_dir: Path, credentials: Path, out: Output,
-                 wave: int = 1):
+                 wave: int = 1, stop_timeout_s: float = STOP_TIMEOUT_S):
         self.spec, self.name, self.endpoint, self.out = spec, spec.name, endpoint, out
         self.wave = wave        # start order (start_wave): the processes of a wave start together
+        self.stop_timeout_s = stop_timeout_s
         self.credentials = credentials / spec.name
         self.params_file = self._write_params(params_dir)
         self.proc: subprocess.Popen | None = None
@@ -192,7 +193,7 @@ class Supervised:
         self.backoff = min(2 * self.backoff, BACKOFF_MAX_S)
 
     def stop(self) -> None:
-        """SIGINT to its process group, then SIGKILL after STOP_TIMEOUT_S; no restart afterwards."""
+        """SIGINT to its process group, then SIGKILL after stop_timeout_s; no restart afterwards."""
         self.restart_at = None
         self.finished = True
         if self.proc is None:
@@ -200,9 +201,9 @@ class Supervised:
         self.out.say(f"stopping {self.name}")
         self._signal(signal.SIGINT)
         try:
-            self.proc.wait(STOP_TIMEOUT_S)
+            self.proc.wait(self.stop_timeout_s)
         except subprocess.TimeoutExpired:
-            self.out.say(f"{self.name} did not stop within {STOP_TIMEOUT_S:.0f}s; killing it")
+            self.out.say(f"{self.name} did not stop within {self.stop_timeout_s:.0f}s; killing it")
             self._signal(signal.SIGKILL)
             self.proc.wait()
         self.out.say(f"{self.name} stopped ({describe_exit(self._reaped())})")
@@ -308,8 +309,10 @@ def main(args: argparse.Namespace) -> int:
         except OSError as exc:
             out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
             return 1
-        services = [Supervised(spec, endpoint, Path(params_dir), credentials, out,
-                               start_wave([node_class(s.service or s.name, s.module) for s in spec.services]))
+        classes = {spec.name: [node_class(s.service or s.name, s.module) for s in spec.services]
+                   for spec in compose.processes}
+        services = [Supervised(spec, endpoint, Path(params_dir), credentials, out, start_wave(classes[spec.name]),
+                               max(c.stop_timeout_s for c in classes[spec.name]))
                     for spec in compose.processes]
         # the processes that set no pace start now: they import and build their nodes while this
         # process builds them too (for the rights), and connect once the router is open

@@ -110,6 +110,8 @@ class Node:
     state_files: ClassVar[tuple[str, ...]] = ()
     # the source whose ticks the others follow in a lockstep run (lockstep.py): the simulator
     coordinates_lockstep: ClassVar[bool] = False
+    # wall s `up` waits after SIGINT before SIGKILL: what finishes files may need longer on a loaded machine
+    stop_timeout_s: ClassVar[float] = 10.0
 
     def __init__(self, params: Any = None, robot: str = DEFAULT_ROBOT, name: str | None = None):
         self.params = params if params is not None else self.Params()
