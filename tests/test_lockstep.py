@@ -46,6 +46,8 @@ def test_the_first_step_waits_for_the_named_services():
     assert barrier.waiting_on({}) == ["planner (not started)"]
     barrier.update(report("planner", {}, {}, subscribed=(SCAN,)))
     assert barrier.ready({}, {}, SIM_IN)
+    barrier.leave("planner")                    # once under way, one that left is not waited for
+    assert barrier.ready({}, {}, SIM_IN)
 
 
 def test_a_joiner_waits_only_for_what_was_published_after_it_joined():

@@ -48,7 +48,9 @@ def node_grants(node: Node) -> Grants:
     follows = (keys.lockstep_of_all(),) if node.coordinates_lockstep else ()
     return Grants(put=(*node.outputs, node.diagnostics.key, keys.lockstep(node.name)),
                   subscribe=(*node.subscriptions(), *follows), queryable=tuple(node.queryables),
-                  token=(keys.alive(node.name),), watch=(keys.alive_of_all(),) if follows else ())
+                  # watching liveliness is read-only; a rule on the token expression alone did not
+                  # pass a token's deletion to the coordinator (measured: `up --lockstep` waited on)
+                  token=(keys.alive(node.name),), watch=(ALL,) if follows else ())
 
 
 def union(grants: Iterable[Grants]) -> Grants:

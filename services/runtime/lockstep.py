@@ -92,7 +92,7 @@ class _Member:
 @dataclass
 class Barrier:
     """The coordinator's view: the latest report of each participant, and whether the next step may go."""
-    wait_for: tuple[str, ...] = ()
+    wait_for: tuple[str, ...] = ()     # before the first step only: later, one that left is not waited for
     members: dict[str, _Member] = field(default_factory=dict)
     pending: dict[str, Report] = field(default_factory=dict)     # reported but not yet admitted
     _match_cache: dict[tuple[str, str], bool] = field(default_factory=dict)
@@ -134,7 +134,10 @@ class Barrier:
             if self._caught_up(report.subscribed, report.received, published, None):
                 del self.pending[name]
                 self.members[name] = _Member(report, published)
-        return all(name in self.members for name in self.wait_for)
+        if not all(name in self.members for name in self.wait_for):
+            return False
+        self.wait_for = ()
+        return True
 
     def waiting_on(self, own_published: Mapping[str, int]) -> list[str]:
         """Who holds the next step up (for a log line when it takes long)."""
