@@ -19,7 +19,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 @exits_2_on_user_error("export")
 def main(args: argparse.Namespace) -> int:
-    from ..services.view.export import export_foxglove     # foxglove-sdk only when exporting
+    from ..services.view.mcap_export import export_foxglove     # foxglove-sdk only when exporting
     try:
         counts = export_foxglove(args.input, args.output, args.robot)
     except (RecordingError, FileExistsError) as exc:
