@@ -30,7 +30,8 @@ import yaml
 from conftest import REPO, SHARED_DATA, wait_until
 from omninav.schemas.messages import Goal, Header, LaserScan, OccupancyGrid, MapMetaData, Odometry, Path, Pose2D
 from omninav.schemas.messages import PoseWithCovariance, Transform, Twist
-from omninav.services.ros2_bridge.bridge import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, typestore
+from omninav.services.ros2_bridge.bridge import (INPUTS, OUTPUTS, Bridge, Mounting, Ros2BridgeParams,
+                                                 laser_mounting, typestore)
 from omninav.services.ros2_bridge.rmw import (ATTACHMENT_SIZE, PUBLISHER, SUBSCRIPTION, NodeIdentity, Qos,
                                               dds_type_name, entity_gid, pack_attachment, topic_key,
                                               unpack_attachment)
@@ -267,6 +268,33 @@ def test_the_laser_mounting_on_tf_is_checked_against_the_stacks():
     assert "x=0.5850 y=0.0500 yaw=1.5708" in bridge.problems[0] and "laser_x=0.385" in bridge.problems[0]
 
 
+
+def test_the_laser_mounting_is_the_chain_from_the_scans_frame_to_base_link(store):
+    mounting = Mounting()
+    with pytest.raises(LookupError, match=r"no /scan seen"):
+        laser_mounting(None, mounting, "base_link")
+    # two hops, the first on /tf_static, the second on /tf: base_link -> mount -> laser
+    mounting.update(store.deserialize_cdr(tf_cdr(store, [("base_link", "mount", 0.2, 0.0, math.pi / 2)]),
+                                          "tf2_msgs/msg/TFMessage"), "/tf_static")
+    with pytest.raises(LookupError, match=r"no chain of transforms from frame 'laser' to 'base_link' on /tf or "
+                                          r"/tf_static \(frames seen: base_link, mount\)"):
+        laser_mounting("laser", mounting, "base_link")
+    mounting.update(store.deserialize_cdr(tf_cdr(store, [("mount", "laser", 0.1, 0.0, -math.pi / 2)]),
+                                          "tf2_msgs/msg/TFMessage"), "/tf")
+    (x, y, yaw), how = laser_mounting("/laser", mounting, "base_link")
+    assert (x, y, yaw) == pytest.approx((0.2, 0.1, 0.0))
+    assert how == "/tf and /tf_static: base_link -> mount -> laser"
+    # a missing link: without base_link -> mount, laser -> mount stops short of base_link
+    del mounting.edges["mount"]
+    with pytest.raises(LookupError, match=r"\(frames seen: laser, mount\)$"):
+        laser_mounting("laser", mounting, "base_link")
+    # a cycle is no chain
+    mounting.update(store.deserialize_cdr(tf_cdr(store, [("laser", "mount", 0.0, 0.0, 0.0)]),
+                                          "tf2_msgs/msg/TFMessage"))
+    assert mounting.chain("laser", "base_link") is None
+    # scans taken in base_link itself
+    assert laser_mounting("base_link", mounting, "base_link") == ((0.0, 0.0, 0.0), "/scan: base_link")
+
 def test_the_node_counts_a_bad_sample_and_carries_on():
     node = build_node("ros2_bridge")
     published = []
@@ -297,7 +325,8 @@ def test_the_node_refuses_a_robot_router_off_loopback():
 
 def stack_args(**values):
     defaults = dict(middleware="ros2", domain=None, router=None, map=None, laser=None, initial_pose=None,
-                    compose=str(REPO / "compose" / "ros2_robot.yaml"), duration=None, credentials=None)
+                    tf_timeout=10.0, compose=str(REPO / "compose" / "ros2_robot.yaml"), duration=None,
+                    credentials=None)
     return argparse.Namespace(**{**defaults, **values})
 
 
