@@ -349,19 +349,39 @@ def test_bridge_ros2_sets_the_robots_values_in_every_service():
 
 # ---------------------------------------------------------------- loopback: a fake robot and the stack
 
+def start_fake_robot(procs, router_endpoint, tmp_path, goal, *options):
+    """tests/fake_ros2_robot.py on the robot's router, stopped with procs' processes whatever happens;
+    returned once it stands at its start (its /tf_static sent, its first scan repeated)."""
+    if not BAG.exists() or not MAP.exists():
+        pytest.skip("the racecar bag and the basement map are in ../shared/data")
+    log = tmp_path / "fake_robot.log"
+    robot = subprocess.Popen([sys.executable, str(REPO / "tests" / "fake_ros2_robot.py"), router_endpoint,
+                              str(BAG), *(str(v) for v in goal), *options], stdout=open(log, "wb"),
+                             stderr=subprocess.STDOUT, start_new_session=True, cwd=REPO)
+    procs.started.append((robot, log))
+    wait_until(lambda: "standing at the start" in log.read_text() or robot.poll() is not None, 120,
+               what="the fake robot standing at its start")
+    assert robot.poll() is None, log.read_text(errors="replace")[-3000:]
+    return robot, log
+
+
 def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoint, router_endpoint, tmp_path, store):
     """The robot's router is router_endpoint (plain Zenoh, as rmw_zenohd); omninav's is up's. The bag's
     scans and odometry go in through the bridge, a goal 10 m down the corridor on /goal_pose, and the
-    stack's command comes out on the robot's /cmd_vel key, with rmw_zenoh's attachment."""
-    if not BAG.exists() or not MAP.exists():
-        pytest.skip("the racecar bag and the basement map are in ../shared/data")
+    stack's command comes out on the robot's /cmd_vel key, with rmw_zenoh's attachment. The laser's
+    mounting is not given: `bridge ros2` finds it on the robot first."""
     import zenoh
-    from omninav.cli.bridge import stack
+    from omninav.cli.bridge import mount_laser_from_tf, stack
     from omninav.services.runtime.zenoh_config import foreign_client_config
 
     start = (0.749, -0.273, 1.274)      # the bag's start in this map (docs/localize_eval.md)
     goal = (start[0] + 10 * math.cos(start[2]), start[1] + 10 * math.sin(start[2]), start[2])
-    data = stack(stack_args(router=router_endpoint, map=str(MAP), laser=[0.285, 0.0, 0.0], initial_pose=list(start)))
+    robot, log = start_fake_robot(up.procs, router_endpoint, tmp_path, goal)
+    data = stack(stack_args(router=router_endpoint, map=str(MAP), initial_pose=list(start)))
+    # no --laser: found on the robot, the fake robot's /tf_static (sent before anyone listened) and its /scan
+    assert mount_laser_from_tf(data, 120) == "laser mounting from /tf_static: base_link -> laser x=0.2850 y=0.0000 yaw=0.0000"
+    mounted = [s["params"] for s in data["services"] if "laser_x" in s.get("params", {})]
+    assert len(mounted) == 4 and all((m["laser_x"], m["laser_y"], m["laser_yaw"]) == (0.285, 0.0, 0.0) for m in mounted)
     twist_key = topic_key(0, "/cmd_vel", "geometry_msgs/msg/Twist", JAZZY_HASHES["geometry_msgs/msg/Twist"])
     moving, seen = threading.Event(), []
 
@@ -383,11 +403,6 @@ def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoi
         subscriber = robot_side.declare_subscriber(twist_key, on_cmd_vel)
         tf_subscriber = robot_side.declare_subscriber(tf_key, on_tf)
         launcher = up(yaml.safe_dump(data, sort_keys=False))
-        log = tmp_path / "fake_robot.log"
-        robot = subprocess.Popen([sys.executable, str(REPO / "tests" / "fake_ros2_robot.py"), router_endpoint,
-                                  str(BAG), *(str(v) for v in goal)], stdout=open(log, "wb"),
-                                 stderr=subprocess.STDOUT, start_new_session=True, cwd=REPO)
-        up.procs.started.append((robot, log))      # stopped with the rest, whatever happens
         wait_until(lambda: moving.is_set() or launcher.poll() is not None or robot.poll() is not None, 400,
                    interval=0.5, what="a moving command on the robot's /cmd_vel")
         assert launcher.poll() is None and robot.poll() is None, log.read_text(errors="replace")[-3000:]
@@ -419,6 +434,27 @@ def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoi
     assert sequence == list(range(sequence[0], sequence[0] + len(sequence)))     # numbered, none lost
     assert all(gid == entity_gid(cmd_vel_token) for (_, _, gid), _ in seen)
     assert "goal sent" in log.read_text()
+
+
+def test_bridge_ros2_without_tf_static_exits_2_naming_the_frames_it_saw(processes, router_endpoint, tmp_path, capsys):
+    """The fake robot's scans are in 'laser' and its /tf has odom -> base_link, but nothing mounts the laser."""
+    from omninav.cli.bridge import main
+    start_fake_robot(processes, router_endpoint, tmp_path, (0.0, 0.0, 0.0), "--no-tf-static")
+    assert main(stack_args(router=router_endpoint, tf_timeout=5.0)) == 2
+    assert capsys.readouterr().err == (
+        "error: no chain of transforms from frame 'laser' to 'base_link' on /tf or /tf_static (frames seen: "
+        "base_link, odom) within 5 s; give the laser's mounting by hand: --laser X Y YAW\n")
+
+
+def test_bridge_ros2_without_a_robot_router_exits_2(capsys):
+    from omninav.cli.bridge import main
+    from conftest import free_port
+    router = f"tcp/127.0.0.1:{free_port()}"
+    assert main(stack_args(router=router, tf_timeout=1.0)) == 2
+    assert capsys.readouterr().err == (f"error: the robot's router at {router} does not answer (is rmw_zenohd "
+                                       "running?) within 1 s; give the laser's mounting by hand: --laser X Y YAW\n")
+    assert main(stack_args(tf_timeout=0.0)) == 2
+    assert "--tf-timeout 0: wall seconds > 0" in capsys.readouterr().err
 
 
 def test_the_bridge_waits_for_the_robots_router_and_stops_when_asked(processes, router_endpoint):
