@@ -15,9 +15,10 @@ key, and on a real robot there is no simulator, so the bridge publishes a Clock 
 stamp of the robot's scans and odometry, before the message that carries it (ROS time: wall time on
 a robot, the simulator's with use_sim_time).
 
-The laser mounting: the stack's services take it as parameters (laser_x, laser_y, laser_yaw); the
-bridge is given the same values and checks them against the chain of transforms from the scan's
-frame to base_link on /tf and /tf_static. A scan whose mounting there differs is not passed on (the
+The laser mounting: the stack's services take it as parameters (laser_x, laser_y, laser_yaw), which
+`omninav bridge ros2` finds before it starts them (laser_mounting, on what the robot sent: the chain
+of transforms from its scans' frame to base_link) unless given --laser. The bridge is given the same
+values and checks them against that chain on /tf and /tf_static as the robot goes on. A scan whose mounting there differs is not passed on (the
 collision monitor then stops the robot, as without scans) and the mismatch is reported with the
 values found; a scan whose frame /tf does not connect to base_link is passed on, counted.
 """
