@@ -132,7 +132,10 @@ def find_laser(params: Ros2BridgeParams, timeout_s: float) -> tuple[tuple[float,
                     topic, payload = inbox.get(timeout=max(0.0, deadline - time.monotonic()))
                 except queue.Empty:
                     continue
-                msg = store.deserialize_cdr(payload, topic.msgtype)
+                try:
+                    msg = store.deserialize_cdr(payload, topic.msgtype)
+                except Exception:   # rosbags raises several kinds; the bridge node counts such samples
+                    continue
                 if topic.name == "/scan":
                     scan_frame = msg.header.frame_id.lstrip("/")
                 else:
