@@ -3,17 +3,26 @@
 Runs compose/ros2_robot.yaml (localizer, costmap, planners, navigator, the command chain and the
 ros2_bridge service; no simulator, chassis or lidar) with what differs per robot set from the
 command line: the robot's domain and router, the map, the laser's mounting and the start pose.
-README "Drive a ROS 2 robot" walks through the robot's side.
+Without --laser the mounting is found on the robot before the stack starts: the chain of transforms
+from its scans' frame to base_link on /tf and /tf_static (robot_state_publisher's), read as the
+ros2_bridge reads them. README "Drive a ROS 2 robot" walks through the robot's side.
 """
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import queue
 import sys
 import tempfile
+import time
 from pathlib import Path
 
 import yaml
+import zenoh
 
+from ..services.ros2_bridge.bridge import INPUTS, Mounting, Ros2BridgeParams, laser_mounting, typestore
+from ..services.ros2_bridge.node import declare_ros_subscription, ros_session_config
+from ..services.ros2_bridge.rmw import NodeIdentity
 from ..services.runtime import launcher
 from ..services.runtime.params import ParamError, read_yaml
 from ..services.runtime.zenoh_config import check_loopback
@@ -31,7 +40,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                          "file's, tcp/127.0.0.1:7447)")
     parser.add_argument("--map", help="the robot's map, a map_server YAML (default: the compose file's)")
     parser.add_argument("--laser", nargs=3, type=float, metavar=("X", "Y", "YAW"),
-                        help="the laser on base_link: metres, metres, radians (as the robot's /tf says)")
+                        help="the laser on base_link: metres, metres, radians (default: found on the robot's "
+                             "/tf_static and /tf, from its /scan's frame)")
+    parser.add_argument("--tf-timeout", type=float, default=10.0, metavar="S",
+                        help="wall seconds to wait for the robot's /scan and transforms without --laser (default 10)")
     parser.add_argument("--initial-pose", nargs=3, type=float, metavar=("X", "Y", "YAW"),
                         help="where the robot starts in the map: metres, metres, radians (or RViz's 2D Pose "
                              "Estimate later)")
@@ -46,7 +58,7 @@ def stack(args: argparse.Namespace) -> dict:
     naming what is wrong)."""
     source = Path(args.compose)
     data = read_yaml(source)
-    services = {entry.get("name"): entry for entry in data.get("services", []) if isinstance(entry, dict)}
+    services = _services(data)
     if BRIDGE not in services:
         raise ValueError(f"{source}: has no service named {BRIDGE}")
     for entry in services.values():
@@ -64,21 +76,103 @@ def stack(args: argparse.Namespace) -> dict:
         if not map_file.is_file():
             raise ValueError(f"--map {args.map}: no such file")
         services["map_server"].setdefault("params", {})["yaml_filename"] = str(map_file)
-    for names, values in ((LASER, args.laser), (START, args.initial_pose)):
-        for entry in services.values():
-            params = entry.get("params") or {}
-            for name, value in zip(names, values or ()):
-                if name in params:
-                    params[name] = value
+    set_params(services, LASER, args.laser)
+    set_params(services, START, args.initial_pose)
     return data
+
+
+def _services(data: dict) -> dict[str, dict]:
+    return {entry.get("name"): entry for entry in data.get("services", []) if isinstance(entry, dict)}
+
+
+def set_params(services: dict[str, dict], names: tuple[str, ...], values) -> None:
+    """names[i] = values[i] in every service that has that parameter (nothing where values is None)."""
+    for entry in services.values():
+        params = entry.get("params") or {}
+        for name, value in zip(names, values or ()):
+            if name in params:
+                params[name] = value
+
+
+def mount_laser_from_tf(data: dict, timeout_s: float) -> str:
+    """Find the laser's mounting on the robot (find_laser) and set it where --laser would; what was found,
+    as a line to print (LookupError naming what is missing)."""
+    services = _services(data)
+    given = services[BRIDGE].get("params") or {}
+    params = Ros2BridgeParams(**{f.name: given[f.name] for f in dataclasses.fields(Ros2BridgeParams) if f.name in given})
+    (x, y, yaw), how = find_laser(params, timeout_s)
+    set_params(services, LASER, (x, y, yaw))
+    return f"laser mounting from {how} x={x:.4f} y={y:.4f} yaw={yaw:.4f}"
+
+
+def find_laser(params: Ros2BridgeParams, timeout_s: float) -> tuple[tuple[float, float, float], str]:
+    """The laser on params.base_frame and how it was found (bridge.laser_mounting), from the robot's /scan,
+    /tf and /tf_static, subscribed to as the ros2_bridge node does (/tf_static from the publishers'
+    caches: robot_state_publisher sent it once, long ago). Waits at most timeout_s of wall time (there is
+    no clock yet), then raises laser_mounting's LookupError."""
+    store, inbox = typestore(), queue.SimpleQueue()
+    scan_frame, mounting = None, Mounting()
+    deadline = time.monotonic() + timeout_s
+    ros = _open_robot_session(params.ros_router, deadline)
+    with ros:
+        me = NodeIdentity(params.domain, str(ros.info.zid()), f"{params.node_name}_setup", params.namespace)
+        handles = [ros.liveliness().declare_token(me.node_token())]
+        listened = [topic for topic in INPUTS if topic.name in ("/scan", "/tf", "/tf_static")]
+        for entity_id, topic in enumerate(listened, start=me.nid + 1):
+            handles += declare_ros_subscription(ros, me, entity_id, topic, store.hash_rihs01(topic.msgtype),
+                                                lambda payload, _, t=topic: inbox.put((t, payload)))
+        try:
+            while True:
+                try:
+                    return laser_mounting(scan_frame, mounting, params.base_frame)
+                except LookupError:
+                    if time.monotonic() >= deadline:
+                        raise
+                try:
+                    topic, payload = inbox.get(timeout=max(0.0, deadline - time.monotonic()))
+                except queue.Empty:
+                    continue
+                try:
+                    msg = store.deserialize_cdr(payload, topic.msgtype)
+                except Exception:   # rosbags raises several kinds; the bridge node counts such samples
+                    continue
+                if topic.name == "/scan":
+                    scan_frame = msg.header.frame_id.lstrip("/")
+                else:
+                    mounting.update(msg, topic.name)
+        finally:
+            for handle in handles:
+                handle.undeclare()
+
+
+def _open_robot_session(router: str, deadline: float) -> zenoh.Session:
+    """A session with the robot's router, tried until the deadline (LookupError if it never answers)."""
+    while True:
+        try:
+            return zenoh.open(ros_session_config(router))
+        except zenoh.ZError:
+            if time.monotonic() >= deadline:
+                raise LookupError(f"the robot's router at {router} does not answer (is rmw_zenohd running?)") from None
 
 
 def main(args: argparse.Namespace) -> int:
     try:
+        if args.tf_timeout <= 0:
+            raise ValueError(f"--tf-timeout {args.tf_timeout:g}: wall seconds > 0")
         data = stack(args)
     except (ValueError, ParamError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    if args.laser is None:
+        try:
+            print(mount_laser_from_tf(data, args.tf_timeout), flush=True)
+        except ValueError as exc:       # the compose file's ros_router off loopback
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        except LookupError as exc:
+            print(f"error: {exc} within {args.tf_timeout:g} s; give the laser's mounting by hand: --laser X Y YAW",
+                  file=sys.stderr)
+            return 2
     with tempfile.TemporaryDirectory(prefix="omninav-bridge-") as folder:
         compose = Path(folder) / "ros2_robot.yaml"
         compose.write_text(yaml.safe_dump(data, sort_keys=False))

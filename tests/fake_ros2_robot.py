@@ -1,13 +1,15 @@
 """A stand-in for a ROS 2 robot running rmw_zenoh, for tests/test_ros2_bridge.py: no ROS needed.
 
-    python tests/fake_ros2_robot.py ROUTER BAG GOAL_X GOAL_Y GOAL_YAW
+    python tests/fake_ros2_robot.py ROUTER BAG GOAL_X GOAL_Y GOAL_YAW [--no-tf-static]
 
 Publishes as rmw_zenoh does (rmw.py: keys, 33-byte attachments; CDR by rosbags, ROS 2 Jazzy types)
 the racecar bag's /scan and its /vesc/odom as /odom, in stamp order at the bag's pace, once omninav's
 bridge has subscribed to both (its liveliness tokens: then the stack behind it is up, as `up` starts
 the bridge last); /tf_static with the racecar's laser mounting at its start, transient local as
-robot_state_publisher's (before the bridge exists: it must ask the publisher's cache), and
-/goal_pose after the tenth scan. When the bag ends the robot stands: the last scan and odometry go on with advancing stamps,
+robot_state_publisher's (before the bridge exists: it must ask the publisher's cache; not with
+--no-tf-static), and /goal_pose after the tenth scan. Until the bridge is there the robot stands at
+its start, as a robot does: the bag's first scan and its first odometry's odom -> base_link on /tf,
+every STAND_PERIOD_NS (what `omninav bridge ros2` looks at to find the laser's mounting). When the bag ends the robot stands: the last scan and odometry go on with advancing stamps,
 until the process is stopped.
 """
 from __future__ import annotations
@@ -30,7 +32,7 @@ LASER_X = 0.285        # the MIT racecar's base_link -> laser (docs/localize_eva
 STAND_PERIOD_NS = 50_000_000
 
 
-def main(router: str, bag: str, goal: tuple[float, float, float]) -> None:
+def main(router: str, bag: str, goal: tuple[float, float, float], tf_static: bool) -> None:
     store = typestore()
     t = store.types
     with zenoh.open(ros_session_config(router)) as session:
@@ -39,6 +41,7 @@ def main(router: str, bag: str, goal: tuple[float, float, float]) -> None:
         for number, (topic, msgtype) in enumerate((("/scan", "sensor_msgs/msg/LaserScan"),
                                                    ("/odom", "nav_msgs/msg/Odometry"),
                                                    ("/tf_static", "tf2_msgs/msg/TFMessage"),
+                                                   ("/tf", "tf2_msgs/msg/TFMessage"),
                                                    ("/goal_pose", "geometry_msgs/msg/PoseStamped")), start=1):
             type_hash = store.hash_rihs01(msgtype)
             latched = topic == "/tf_static"     # robot_state_publisher's: transient local, kept for late joiners
@@ -63,17 +66,22 @@ def main(router: str, bag: str, goal: tuple[float, float, float]) -> None:
         messages.sort(key=lambda item: _ns(item[1].header.stamp))
         first = _ns(messages[0][1].header.stamp)
         # at once, as robot_state_publisher at its start: the bridge, not there yet, gets it from the cache
-        mount = t["geometry_msgs/msg/TransformStamped"](
-            header=t["std_msgs/msg/Header"](stamp=_time(t, first), frame_id="base_link"), child_frame_id="laser",
-            transform=t["geometry_msgs/msg/Transform"](
-                translation=t["geometry_msgs/msg/Vector3"](x=LASER_X, y=0.0, z=0.0),
-                rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=0.0, w=1.0)))
-        publish("/tf_static", t["tf2_msgs/msg/TFMessage"](transforms=[mount]), first)
+        if tf_static:
+            publish("/tf_static", t["tf2_msgs/msg/TFMessage"](transforms=[
+                _transform(t, first, "base_link", "laser", LASER_X, 0.0, 0.0, 1.0)]), first)
+        scan = next(msg for topic, msg in messages if topic == "/scan")
+        odom = next(msg for topic, msg in messages if topic == "/vesc/odom")
+        p, q = odom.pose.pose.position, odom.pose.pose.orientation
+        odom_base = t["tf2_msgs/msg/TFMessage"](transforms=[
+            _transform(t, _ns(odom.header.stamp), "odom", "base_link", p.x, p.y, q.z, q.w)])
+        print("standing at the start", flush=True)
         wanted = ("%scan/sensor_msgs", "%odom/nav_msgs")
         while not all(any("/MS/" in str(r.ok.key_expr) and w in str(r.ok.key_expr)
                           for r in session.liveliness().get("@ros2_lv/0/**", timeout=1.0) if r.ok is not None)
                       for w in wanted):
-            time.sleep(0.2)
+            publish("/scan", scan, _ns(scan.header.stamp))
+            publish("/tf", odom_base, _ns(odom.header.stamp))
+            time.sleep(STAND_PERIOD_NS / 1e9)
         print("bridge subscribed", flush=True)
 
 
@@ -106,10 +114,21 @@ def _ns(time_msg) -> int:
     return int(time_msg.sec) * 1_000_000_000 + int(time_msg.nanosec)
 
 
+def _transform(types, stamp_ns: int, parent: str, child: str, x: float, y: float, qz: float, qw: float):
+    """A planar TransformStamped: parent -> child at (x, y), turned by the quaternion (0, 0, qz, qw)."""
+    t = types
+    return t["geometry_msgs/msg/TransformStamped"](
+        header=t["std_msgs/msg/Header"](stamp=_time(t, stamp_ns), frame_id=parent), child_frame_id=child,
+        transform=t["geometry_msgs/msg/Transform"](
+            translation=t["geometry_msgs/msg/Vector3"](x=float(x), y=float(y), z=0.0),
+            rotation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=float(qz), w=float(qw))))
+
+
 def _time(types, stamp_ns: int):
     sec, nanosec = divmod(stamp_ns, 1_000_000_000)
     return types["builtin_interfaces/msg/Time"](sec=sec, nanosec=nanosec)
 
 
 if __name__ == "__main__":
-    main(sys.argv[1], sys.argv[2], (float(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])))
+    main(sys.argv[1], sys.argv[2], (float(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])),
+         tf_static="--no-tf-static" not in sys.argv[6:])

@@ -30,7 +30,8 @@ import yaml
 from conftest import REPO, SHARED_DATA, wait_until
 from omninav.schemas.messages import Goal, Header, LaserScan, OccupancyGrid, MapMetaData, Odometry, Path, Pose2D
 from omninav.schemas.messages import PoseWithCovariance, Transform, Twist
-from omninav.services.ros2_bridge.bridge import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, typestore
+from omninav.services.ros2_bridge.bridge import (INPUTS, OUTPUTS, Bridge, Mounting, Ros2BridgeParams,
+                                                 laser_mounting, typestore)
 from omninav.services.ros2_bridge.rmw import (ATTACHMENT_SIZE, PUBLISHER, SUBSCRIPTION, NodeIdentity, Qos,
                                               dds_type_name, entity_gid, pack_attachment, topic_key,
                                               unpack_attachment)
@@ -267,6 +268,33 @@ def test_the_laser_mounting_on_tf_is_checked_against_the_stacks():
     assert "x=0.5850 y=0.0500 yaw=1.5708" in bridge.problems[0] and "laser_x=0.385" in bridge.problems[0]
 
 
+
+def test_the_laser_mounting_is_the_chain_from_the_scans_frame_to_base_link(store):
+    mounting = Mounting()
+    with pytest.raises(LookupError, match=r"no /scan seen"):
+        laser_mounting(None, mounting, "base_link")
+    # two hops, the first on /tf_static, the second on /tf: base_link -> mount -> laser
+    mounting.update(store.deserialize_cdr(tf_cdr(store, [("base_link", "mount", 0.2, 0.0, math.pi / 2)]),
+                                          "tf2_msgs/msg/TFMessage"), "/tf_static")
+    with pytest.raises(LookupError, match=r"no chain of transforms from frame 'laser' to 'base_link' on /tf or "
+                                          r"/tf_static \(frames seen: base_link, mount\)"):
+        laser_mounting("laser", mounting, "base_link")
+    mounting.update(store.deserialize_cdr(tf_cdr(store, [("mount", "laser", 0.1, 0.0, -math.pi / 2)]),
+                                          "tf2_msgs/msg/TFMessage"), "/tf")
+    (x, y, yaw), how = laser_mounting("/laser", mounting, "base_link")
+    assert (x, y, yaw) == pytest.approx((0.2, 0.1, 0.0))
+    assert how == "/tf and /tf_static: base_link -> mount -> laser"
+    # a missing link: without base_link -> mount, laser -> mount stops short of base_link
+    del mounting.edges["mount"]
+    with pytest.raises(LookupError, match=r"\(frames seen: laser, mount\)$"):
+        laser_mounting("laser", mounting, "base_link")
+    # a cycle is no chain
+    mounting.update(store.deserialize_cdr(tf_cdr(store, [("laser", "mount", 0.0, 0.0, 0.0)]),
+                                          "tf2_msgs/msg/TFMessage"))
+    assert mounting.chain("laser", "base_link") is None
+    # scans taken in base_link itself
+    assert laser_mounting("base_link", mounting, "base_link") == ((0.0, 0.0, 0.0), "/scan: base_link")
+
 def test_the_node_counts_a_bad_sample_and_carries_on():
     node = build_node("ros2_bridge")
     published = []
@@ -297,7 +325,8 @@ def test_the_node_refuses_a_robot_router_off_loopback():
 
 def stack_args(**values):
     defaults = dict(middleware="ros2", domain=None, router=None, map=None, laser=None, initial_pose=None,
-                    compose=str(REPO / "compose" / "ros2_robot.yaml"), duration=None, credentials=None)
+                    tf_timeout=10.0, compose=str(REPO / "compose" / "ros2_robot.yaml"), duration=None,
+                    credentials=None)
     return argparse.Namespace(**{**defaults, **values})
 
 
@@ -320,19 +349,39 @@ def test_bridge_ros2_sets_the_robots_values_in_every_service():
 
 # ---------------------------------------------------------------- loopback: a fake robot and the stack
 
+def start_fake_robot(procs, router_endpoint, tmp_path, goal, *options):
+    """tests/fake_ros2_robot.py on the robot's router, stopped with procs' processes whatever happens;
+    returned once it stands at its start (its /tf_static sent, its first scan repeated)."""
+    if not BAG.exists() or not MAP.exists():
+        pytest.skip("the racecar bag and the basement map are in ../shared/data")
+    log = tmp_path / "fake_robot.log"
+    robot = subprocess.Popen([sys.executable, str(REPO / "tests" / "fake_ros2_robot.py"), router_endpoint,
+                              str(BAG), *(str(v) for v in goal), *options], stdout=open(log, "wb"),
+                             stderr=subprocess.STDOUT, start_new_session=True, cwd=REPO)
+    procs.started.append((robot, log))
+    wait_until(lambda: "standing at the start" in log.read_text() or robot.poll() is not None, 120,
+               what="the fake robot standing at its start")
+    assert robot.poll() is None, log.read_text(errors="replace")[-3000:]
+    return robot, log
+
+
 def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoint, router_endpoint, tmp_path, store):
     """The robot's router is router_endpoint (plain Zenoh, as rmw_zenohd); omninav's is up's. The bag's
     scans and odometry go in through the bridge, a goal 10 m down the corridor on /goal_pose, and the
-    stack's command comes out on the robot's /cmd_vel key, with rmw_zenoh's attachment."""
-    if not BAG.exists() or not MAP.exists():
-        pytest.skip("the racecar bag and the basement map are in ../shared/data")
+    stack's command comes out on the robot's /cmd_vel key, with rmw_zenoh's attachment. The laser's
+    mounting is not given: `bridge ros2` finds it on the robot first."""
     import zenoh
-    from omninav.cli.bridge import stack
+    from omninav.cli.bridge import mount_laser_from_tf, stack
     from omninav.services.runtime.zenoh_config import foreign_client_config
 
     start = (0.749, -0.273, 1.274)      # the bag's start in this map (docs/localize_eval.md)
     goal = (start[0] + 10 * math.cos(start[2]), start[1] + 10 * math.sin(start[2]), start[2])
-    data = stack(stack_args(router=router_endpoint, map=str(MAP), laser=[0.285, 0.0, 0.0], initial_pose=list(start)))
+    robot, log = start_fake_robot(up.procs, router_endpoint, tmp_path, goal)
+    data = stack(stack_args(router=router_endpoint, map=str(MAP), initial_pose=list(start)))
+    # no --laser: found on the robot, the fake robot's /tf_static (sent before anyone listened) and its /scan
+    assert mount_laser_from_tf(data, 120) == "laser mounting from /tf_static: base_link -> laser x=0.2850 y=0.0000 yaw=0.0000"
+    mounted = [s["params"] for s in data["services"] if "laser_x" in s.get("params", {})]
+    assert len(mounted) == 4 and all((m["laser_x"], m["laser_y"], m["laser_yaw"]) == (0.285, 0.0, 0.0) for m in mounted)
     twist_key = topic_key(0, "/cmd_vel", "geometry_msgs/msg/Twist", JAZZY_HASHES["geometry_msgs/msg/Twist"])
     moving, seen = threading.Event(), []
 
@@ -354,11 +403,6 @@ def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoi
         subscriber = robot_side.declare_subscriber(twist_key, on_cmd_vel)
         tf_subscriber = robot_side.declare_subscriber(tf_key, on_tf)
         launcher = up(yaml.safe_dump(data, sort_keys=False))
-        log = tmp_path / "fake_robot.log"
-        robot = subprocess.Popen([sys.executable, str(REPO / "tests" / "fake_ros2_robot.py"), router_endpoint,
-                                  str(BAG), *(str(v) for v in goal)], stdout=open(log, "wb"),
-                                 stderr=subprocess.STDOUT, start_new_session=True, cwd=REPO)
-        up.procs.started.append((robot, log))      # stopped with the rest, whatever happens
         wait_until(lambda: moving.is_set() or launcher.poll() is not None or robot.poll() is not None, 400,
                    interval=0.5, what="a moving command on the robot's /cmd_vel")
         assert launcher.poll() is None and robot.poll() is None, log.read_text(errors="replace")[-3000:]
@@ -390,6 +434,27 @@ def test_the_stack_drives_a_fake_rmw_zenoh_robot_from_the_racecar_bag(up, endpoi
     assert sequence == list(range(sequence[0], sequence[0] + len(sequence)))     # numbered, none lost
     assert all(gid == entity_gid(cmd_vel_token) for (_, _, gid), _ in seen)
     assert "goal sent" in log.read_text()
+
+
+def test_bridge_ros2_without_tf_static_exits_2_naming_the_frames_it_saw(processes, router_endpoint, tmp_path, capsys):
+    """The fake robot's scans are in 'laser' and its /tf has odom -> base_link, but nothing mounts the laser."""
+    from omninav.cli.bridge import main
+    start_fake_robot(processes, router_endpoint, tmp_path, (0.0, 0.0, 0.0), "--no-tf-static")
+    assert main(stack_args(router=router_endpoint, tf_timeout=5.0)) == 2
+    assert capsys.readouterr().err == (
+        "error: no chain of transforms from frame 'laser' to 'base_link' on /tf or /tf_static (frames seen: "
+        "base_link, odom) within 5 s; give the laser's mounting by hand: --laser X Y YAW\n")
+
+
+def test_bridge_ros2_without_a_robot_router_exits_2(capsys):
+    from omninav.cli.bridge import main
+    from conftest import free_port
+    router = f"tcp/127.0.0.1:{free_port()}"
+    assert main(stack_args(router=router, tf_timeout=1.0)) == 2
+    assert capsys.readouterr().err == (f"error: the robot's router at {router} does not answer (is rmw_zenohd "
+                                       "running?) within 1 s; give the laser's mounting by hand: --laser X Y YAW\n")
+    assert main(stack_args(tf_timeout=0.0)) == 2
+    assert "--tf-timeout 0: wall seconds > 0" in capsys.readouterr().err
 
 
 def test_the_bridge_waits_for_the_robots_router_and_stops_when_asked(processes, router_endpoint):

@@ -15,9 +15,10 @@ key, and on a real robot there is no simulator, so the bridge publishes a Clock 
 stamp of the robot's scans and odometry, before the message that carries it (ROS time: wall time on
 a robot, the simulator's with use_sim_time).
 
-The laser mounting: the stack's services take it as parameters (laser_x, laser_y, laser_yaw); the
-bridge is given the same values and checks them against the chain of transforms from the scan's
-frame to base_link on /tf and /tf_static. A scan whose mounting there differs is not passed on (the
+The laser mounting: the stack's services take it as parameters (laser_x, laser_y, laser_yaw), which
+`omninav bridge ros2` finds before it starts them (laser_mounting, on what the robot sent: the chain
+of transforms from its scans' frame to base_link) unless given --laser. The bridge is given the same
+values and checks them against that chain on /tf and /tf_static as the robot goes on. A scan whose mounting there differs is not passed on (the
 collision monitor then stops the robot, as without scans) and the mismatch is reported with the
 values found; a scan whose frame /tf does not connect to base_link is passed on, counted.
 """
@@ -85,26 +86,54 @@ def planar_pose(pose) -> Pose2D:
 
 @dataclass
 class Mounting:
-    """The transforms seen on /tf and /tf_static, 2-D: child frame -> (parent frame, x, y, yaw)."""
+    """The transforms seen on /tf and /tf_static, 2-D: child frame -> (parent frame, x, y, yaw), and the
+    topic each came on."""
     edges: dict[str, tuple[str, tuple[float, float, float]]] = field(default_factory=dict)
+    topics: dict[str, str] = field(default_factory=dict)
 
-    def update(self, tf_message) -> None:
+    def update(self, tf_message, topic: str = "/tf") -> None:
         for t in tf_message.transforms:
             v, q = t.transform.translation, t.transform.rotation
-            self.edges[t.child_frame_id.lstrip("/")] = (t.header.frame_id.lstrip("/"),
-                                                        (float(v.x), float(v.y), yaw_of(q.x, q.y, q.z, q.w)))
+            child = t.child_frame_id.lstrip("/")
+            self.edges[child] = (t.header.frame_id.lstrip("/"), (float(v.x), float(v.y), yaw_of(q.x, q.y, q.z, q.w)))
+            self.topics[child] = topic
+
+    def frames(self) -> list[str]:
+        return sorted({*self.edges, *(parent for parent, _ in self.edges.values())})
+
+    def chain(self, frame: str, base: str) -> list[str] | None:
+        """The frames from `frame` up its parents to `base`, or None if they do not get there."""
+        frames = [frame.lstrip("/")]
+        while frames[-1] != base:
+            if frames[-1] not in self.edges or len(frames) > len(self.edges):    # a gap, or a cycle
+                return None
+            frames.append(self.edges[frames[-1]][0])
+        return frames
 
     def in_frame(self, frame: str, base: str) -> tuple[float, float, float] | None:
         """The pose of `frame` in `base` by the chain of transforms, or None if it does not connect."""
-        pose, frame = np.zeros(3), frame.lstrip("/")
-        for _ in range(len(self.edges) + 1):
-            if frame == base:
-                return float(pose[0]), float(pose[1]), float(pose[2])
-            if frame not in self.edges:
-                return None
-            frame, edge = self.edges[frame]
-            pose = compose(np.asarray(edge), pose)
-        return None     # a cycle
+        frames = self.chain(frame, base)
+        if frames is None:
+            return None
+        pose = np.zeros(3)
+        for child in frames[:-1]:
+            pose = compose(np.asarray(self.edges[child][1]), pose)
+        return float(pose[0]), float(pose[1]), float(pose[2])
+
+
+def laser_mounting(scan_frame: str | None, mounting: Mounting, base: str) -> tuple[tuple[float, float, float], str]:
+    """The laser's pose on `base` from what the robot has sent so far (the frame of its scans, None before
+    the first, and its transforms), with how it was found ("/tf_static: base_link -> laser");
+    LookupError naming what is still missing."""
+    if scan_frame is None:
+        raise LookupError("no /scan seen (its frame_id names the laser's frame)")
+    frames = mounting.chain(scan_frame, base)
+    if frames is None:
+        seen = ", ".join(mounting.frames()) or "none"
+        raise LookupError(f"no chain of transforms from frame {scan_frame!r} to {base!r} on /tf or /tf_static "
+                          f"(frames seen: {seen})")
+    topics = " and ".join(sorted({mounting.topics[child] for child in frames[:-1]})) or "/scan"
+    return mounting.in_frame(scan_frame, base), f"{topics}: {' -> '.join(reversed(frames))}"
 
 
 @dataclass(frozen=True)
@@ -143,7 +172,7 @@ class Bridge:
         self.problems = []
         msg = self.store.deserialize_cdr(payload, topic.msgtype)
         if topic.msgtype == "tf2_msgs/msg/TFMessage":
-            self.mounting.update(msg)
+            self.mounting.update(msg, topic.name)
             return []
         if topic.omninav == "goal":
             return self._goal(msg)

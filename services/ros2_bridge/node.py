@@ -47,6 +47,23 @@ def _bytes(attachment: zenoh.ZBytes | None) -> bytes:
     return b"" if attachment is None else attachment.to_bytes()
 
 
+def declare_ros_subscription(ros: zenoh.Session, me: NodeIdentity, entity_id: int, topic: RosTopic, type_hash: str,
+                             on_sample: Callable[[bytes, bytes], None]) -> list:
+    """A subscription of node `me`, as rmw_zenoh's: its subscriber on the topic's data key, calling
+    on_sample(CDR payload, attachment or b"") on Zenoh's thread for the robot's samples only (not what
+    this process itself puts on /tf), and its liveliness token. Returns both, to undeclare."""
+    latched = topic.qos.durability == TRANSIENT_LOCAL
+    # as rmw_zenoh's transient-local subscriptions: ask late-detected publishers' caches for what they
+    # sent before (robot_state_publisher's /tf_static, sent once at its start)
+    history = HistoryConfig(detect_late_publishers=True, max_samples=topic.qos.depth) if latched else None
+    subscriber = declare_advanced_subscriber(
+        ros, topic_key(me.domain, topic.name, topic.msgtype, type_hash),
+        lambda sample: on_sample(sample.payload.to_bytes(), _bytes(sample.attachment)),
+        allowed_origin=zenoh.Locality.REMOTE, history=history, subscriber_detection=latched)
+    token = me.entity_token(entity_id, SUBSCRIPTION, topic.name, topic.msgtype, type_hash, topic.qos)
+    return [subscriber, ros.liveliness().declare_token(token)]
+
+
 class Ros2BridgeNode(Node):
     service = "ros2_bridge"
     Params = Ros2BridgeParams
@@ -161,26 +178,20 @@ class Ros2BridgeNode(Node):
         publishers = {}
         for entity_id, topic in enumerate((*INPUTS, *OUTPUTS), start=me.nid + 1):
             type_hash = self.bridge.store.hash_rihs01(topic.msgtype)
-            key = topic_key(p.domain, topic.name, topic.msgtype, type_hash)
-            kind = SUBSCRIPTION if topic in INPUTS else PUBLISHER
-            token = me.entity_token(entity_id, kind, topic.name, topic.msgtype, type_hash, topic.qos)
+            if topic in INPUTS:
+                handles += declare_ros_subscription(
+                    ros, me, entity_id, topic, type_hash,
+                    lambda payload, attachment, t=topic: self.inbox.put((t, payload, attachment)))
+                continue
+            token = me.entity_token(entity_id, PUBLISHER, topic.name, topic.msgtype, type_hash, topic.qos)
+            # a transient-local topic (/map) keeps its last samples for subscribers that come later
             latched = topic.qos.durability == TRANSIENT_LOCAL
-            if kind == SUBSCRIPTION:
-                # as rmw_zenoh's transient-local subscriptions: ask late-detected publishers' caches for
-                # what they sent before (robot_state_publisher's /tf_static, sent once at its start)
-                history = HistoryConfig(detect_late_publishers=True, max_samples=topic.qos.depth) if latched else None
-                # only the robot's samples: not what the bridge itself puts on /tf
-                handles.append(declare_advanced_subscriber(
-                    ros, key, lambda sample, t=topic: self.inbox.put((t, sample.payload.to_bytes(), _bytes(sample.attachment))),
-                    allowed_origin=zenoh.Locality.REMOTE, history=history, subscriber_detection=latched))
-            else:
-                # a transient-local topic (/map) keeps its last samples for subscribers that come later
-                publishers[topic.name] = (declare_advanced_publisher(
-                    ros, key, congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE,
-                    cache=CacheConfig(max_samples=topic.qos.depth) if latched else None,
-                    publisher_detection=latched), entity_gid(token), [0])
-                handles.append(publishers[topic.name][0])
-            handles.append(ros.liveliness().declare_token(token))
+            publishers[topic.name] = (declare_advanced_publisher(
+                ros, topic_key(p.domain, topic.name, topic.msgtype, type_hash),
+                congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE,
+                cache=CacheConfig(max_samples=topic.qos.depth) if latched else None,
+                publisher_detection=latched), entity_gid(token), [0])
+            handles += [publishers[topic.name][0], ros.liveliness().declare_token(token)]
 
         def sink(topic: RosTopic, payload: bytes, stamp_ns: int) -> None:
             publisher, gid, seq = publishers[topic.name]
