@@ -20,7 +20,7 @@ from pathlib import Path
 import yaml
 import zenoh
 
-from ..services.ros2_bridge.bridge import INPUTS, Mounting, Ros2BridgeParams, laser_mounting, typestore
+from ..services.ros2_bridge.translate import INPUTS, Mounting, Ros2BridgeParams, laser_mounting, typestore
 from ..services.ros2_bridge.node import declare_ros_subscription, ros_session_config
 from ..services.ros2_bridge.rmw import NodeIdentity
 from ..services.runtime import launcher

@@ -23,7 +23,7 @@ import zenoh
 from rosbags.highlevel import AnyReader
 from zenoh.ext import CacheConfig, declare_advanced_publisher
 
-from omninav.services.ros2_bridge.bridge import typestore
+from omninav.services.ros2_bridge.translate import typestore
 from omninav.services.ros2_bridge.node import ros_session_config
 from omninav.services.ros2_bridge.rmw import (PUBLISHER, TRANSIENT_LOCAL, NodeIdentity, Qos, entity_gid,
                                               pack_attachment, topic_key)

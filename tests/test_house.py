@@ -123,7 +123,7 @@ def test_no_two_modules_share_a_name_for_different_things():
     other module name is used once, so a name says which thing it is."""
     roles = {"__init__.py", "node.py", "params.py", "reference.py", "cli.py"}
     seen: dict[str, list[str]] = {}
-    for top in ("schemas", "geometry", "services", "sim", "experiments", "bench"):
+    for top in ("schemas", "geometry", "services", "sim", "experiments", "bench", "cli"):
         for path in (REPO / top).rglob("*.py"):
             if path.name not in roles:
                 seen.setdefault(path.name, []).append(str(path.relative_to(REPO)))

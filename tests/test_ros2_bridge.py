@@ -30,7 +30,7 @@ import yaml
 from conftest import REPO, SHARED_DATA, wait_until
 from omninav.schemas.messages import Goal, Header, LaserScan, OccupancyGrid, MapMetaData, Odometry, Path, Pose2D
 from omninav.schemas.messages import PoseWithCovariance, Transform, Twist
-from omninav.services.ros2_bridge.bridge import (INPUTS, OUTPUTS, Bridge, Mounting, Ros2BridgeParams,
+from omninav.services.ros2_bridge.translate import (INPUTS, OUTPUTS, Bridge, Mounting, Ros2BridgeParams,
                                                  laser_mounting, typestore)
 from omninav.services.ros2_bridge.rmw import (ATTACHMENT_SIZE, PUBLISHER, SUBSCRIPTION, NodeIdentity, Qos,
                                               dds_type_name, entity_gid, pack_attachment, topic_key,

@@ -25,7 +25,7 @@ from zenoh.ext import CacheConfig, HistoryConfig, declare_advanced_publisher, de
 from ..runtime.live import LiveRunner
 from ..runtime.node import Node
 from ..runtime.zenoh_config import check_loopback, foreign_client_config
-from .bridge import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, RosTopic
+from .translate import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, RosTopic
 from .rmw import (PUBLISHER, SUBSCRIPTION, TRANSIENT_LOCAL, NodeIdentity, entity_gid, pack_attachment, topic_key,
                   unpack_attachment)
 
