@@ -18,11 +18,13 @@ import tempfile
 import time
 from pathlib import Path
 
+from ..schemas.keys import KeyLayout
 from ..services.recorder.mcap_io import read_records
 
 REPO = Path(__file__).resolve().parents[1]
 GOAL = ("3.2", "0.9", "30")
 RUN_TIMEOUT_S = 1800
+CLOCK_KEY = KeyLayout.sim("clock")
 
 
 def add_arguments(parser) -> None:
@@ -33,10 +35,14 @@ def add_arguments(parser) -> None:
 
 
 def messages_by_key(recording: Path) -> dict[str, list[bytes]]:
-    """Every message but the diagnostics (they count wall-time events), per key in seq order."""
+    """Every message but the diagnostics (they count wall-time events), per key in seq order, up to
+    the run's last step: what a service still held for that step (a scan waiting for the next
+    odometry) comes out only when it is stopped, and whether the services downstream are still
+    there to take it depends on the order they are stopped in (in one process they all are)."""
+    last_step = max(rec.stamp_ns for rec in read_records(recording, [CLOCK_KEY]))
     by_key: dict[str, list[tuple[int, bytes]]] = {}
     for rec in read_records(recording):
-        if "/diagnostics/" not in rec.key:
+        if "/diagnostics/" not in rec.key and rec.stamp_ns < last_step:
             by_key.setdefault(rec.key, []).append((rec.seq, rec.payload))
     return {key: [payload for _, payload in sorted(items)] for key, items in by_key.items()}
 

@@ -509,7 +509,8 @@ def main(args: argparse.Namespace) -> int:
     if state_dir is not None:
         shutil.rmtree(state_dir, ignore_errors=True)           # a previous run's state is not this run's to resume
         state_dir.mkdir()
-    rate = args.rate if args.rate is not None else 0.0 if args.lockstep else 1.0     # 0: as fast as it may
+    # 0: as fast as it may (the Clock says so; in one process the pace does not apply anyway)
+    rate = args.rate if args.rate is not None else 0.0 if args.lockstep or args.in_process else 1.0
     compose = compose_for(world, world_file, map_file, drive, args.localization, recording, args.seed,
                           rate, args.robot, profile, state_dir=state_dir)
     if args.composed:

@@ -75,7 +75,9 @@ def test_a_restarted_participant_is_admitted_afresh_and_a_gone_one_is_not_waited
 def test_a_participant_that_holds_stops_the_run():
     barrier = barrier_with(report("navigate", {CLOCK: 5}, {}, hold=True))
     assert not barrier.ready(SIM_OUT, {}, SIM_IN)
-    assert barrier.waiting_on(SIM_OUT) == ["navigate (holds the run)"]
+    assert barrier.waiting_on(SIM_OUT) == ["navigate (held the run: it is over)"]
+    barrier.leave("navigate")                   # it stopped before the sim did: the run stays over
+    assert not barrier.ready(SIM_OUT, {}, SIM_IN)
 
 
 def test_wildcard_subscriptions_match_like_zenoh_key_expressions():

@@ -95,6 +95,9 @@ class Barrier:
     wait_for: tuple[str, ...] = ()     # before the first step only: later, one that left is not waited for
     members: dict[str, _Member] = field(default_factory=dict)
     pending: dict[str, Report] = field(default_factory=dict)     # reported but not yet admitted
+    # who held the run: it is over for good, also once the holder has left the bus (navigate stops
+    # its own session before `up` has stopped the sim)
+    held_by: str = ""
     _match_cache: dict[tuple[str, str], bool] = field(default_factory=dict)
 
     def update(self, report: Report) -> None:
@@ -122,7 +125,8 @@ class Barrier:
         """Whether every participant (and the coordinator itself) has everything that was published
         to it; admits those that reported meanwhile when they are caught up. False until everyone
         in wait_for has been admitted."""
-        if any(r.hold for r in self._reports()):
+        self.held_by = self.held_by or next((r.name for r in self._reports() if r.hold), "")
+        if self.held_by:
             return False
         published = self.published(own_published)
         if not self._caught_up(tuple(own_subscribed), own_received, published, {}):
@@ -142,7 +146,7 @@ class Barrier:
     def waiting_on(self, own_published: Mapping[str, int]) -> list[str]:
         """Who holds the next step up (for a log line when it takes long)."""
         published = self.published(own_published)
-        held = [f"{r.name} (holds the run)" for r in self._reports() if r.hold]
+        held = [f"{self.held_by} (held the run: it is over)"] if self.held_by else []
         behind = held + [m.report.name for m in self.members.values()
                   if not self._caught_up(m.report.subscribed, m.report.received, published, m.baseline)]
         return behind + [f"{n} (not started)" for n in self.wait_for if n not in self.members]
