@@ -138,7 +138,6 @@ class MissionNode(Node):
         self.outbox.put(msg)
 
 
-
 # ---------------------------------------------------------------- the compose file
 
 def map_for(world: World, name: str, folder: Path) -> Path:
@@ -341,16 +340,14 @@ class Mission:
                  log: Path, say, lockstep: Lockstep | None = None):
         self.names, self.up, self.log, self.say = names, up, log, say
         self.node = node
-        robot = node.keys.robot_name
         self.runner = LiveRunner(self.node, router, lockstep=lockstep)
         self.worker = threading.Thread(target=self.runner.run, name="navigate-bus", daemon=True)
         self.session = open_client(router)
-        self.prefix = KeyLayout(robot).alive("x")[:-1]
         self.down: dict[str, float] = {}        # service -> when (monotonic) its token went away
-        self.watch = self.session.liveliness().declare_subscriber(self.prefix + "*", self._on_token)
+        self.watch = self.session.liveliness().declare_subscriber(node.keys.alive_of_all(), self._on_token)
 
     def _on_token(self, sample) -> None:
-        name = str(sample.key_expr)[len(self.prefix):]
+        name = KeyLayout.service_of_alive(str(sample.key_expr))
         if name not in self.names:
             return
         if sample.kind == zenoh.SampleKind.DELETE:
@@ -447,7 +444,7 @@ def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot:
     ready: set[str] = set()
     with open_client(router) as session:
         while time.monotonic() < deadline and up.poll() is None:
-            alive = {key.rpartition("/")[2] for key in tokens_present(session, [keys.alive(n) for n in names])}
+            alive = {keys.service_of_alive(key) for key in tokens_present(session, [keys.alive(n) for n in names])}
             if len(alive) > len(ready):
                 waiting = [n for n in names if n not in alive]
                 say(f"{len(alive)}/{len(names)} services up" + (f"; waiting for {', '.join(waiting)}" if waiting else ""))

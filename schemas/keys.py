@@ -112,6 +112,11 @@ class KeyLayout:
         """The key expression of every service's liveliness token (one query sees who is ready)."""
         return f"{ROOT}/{self.robot_name}/alive/*"
 
+    @staticmethod
+    def service_of_alive(key: str) -> str:
+        """The service whose liveliness token (alive) this key is."""
+        return key.rpartition("/")[2]
+
     def resolve(self, name: str) -> str:
         """A topic as services name it: 'scan', 'sim/clock', 'sim/truth' or a full key."""
         if name.startswith(f"{ROOT}/"):

@@ -34,7 +34,7 @@ from .params import ParamError
 from .service_registry import UnknownService, node_class
 from .node import Node
 from .live import tokens_present
-from .lockstep import LOCKSTEP_ENV, Lockstep
+from .lockstep import LOCKSTEP_ENV, Lockstep, service_names
 from .run import build_node
 from .zenoh_config import ROUTER_ENV, open_router, router_endpoint
 
@@ -294,7 +294,7 @@ def main(args: argparse.Namespace) -> int:
         endpoint = router_endpoint(args.router or compose.router)
         users = identity_names(compose)
         if args.lockstep is not None:
-            also = tuple(n for n in args.lockstep.split(",") if n)
+            also = service_names(args.lockstep)
             os.environ[LOCKSTEP_ENV] = Lockstep((*lockstep_participants(compose), *also)).env_value()
     except (ComposeError, UnknownService, ValueError) as exc:
         out.say(f"error: {exc}", sys.stderr)

@@ -118,12 +118,12 @@ class LiveRunner:
         for key in self.node.queryables:
             handles.append(session.declare_queryable(key, lambda q: self._inbox.put(("query", q))))
         if self.lockstep is not None:
-            handles += self._declare_lockstep(session, destination)
+            handles += self._declare_lockstep(session)
         # last: `omninav up` starts the next service only once this one can hear and speak
         handles.append(session.liveliness().declare_token(self.node.keys.alive(self.node.name)))
         return handles
 
-    def _declare_lockstep(self, session: zenoh.Session, destination) -> list:
+    def _declare_lockstep(self, session: zenoh.Session) -> list:
         keys = self.node.keys
         self._report_pub = Publisher(keys.lockstep(self.node.name), Diagnostic)
         self._zpubs[self._report_pub.key] = session.declare_publisher(
@@ -132,11 +132,9 @@ class LiveRunner:
         self._report_pub.sink = self._sink
         if self.barrier is None:
             return []
-        prefix = keys.alive("x")[:-1]
-
         def on_token(sample) -> None:
             if sample.kind == zenoh.SampleKind.DELETE:
-                self._inbox.put(("left", str(sample.key_expr)[len(prefix):]))
+                self._inbox.put(("left", keys.service_of_alive(str(sample.key_expr))))
 
         return [session.declare_subscriber(keys.lockstep_of_all(),
                                            lambda s: self._inbox.put(("report", s.payload.to_bytes()))),
@@ -199,17 +197,19 @@ class LiveRunner:
         next_tick = time.monotonic()
         next_diag = next_tick + self.diagnostics_period_s
         stalled_since = next_tick
+        ready = False       # the barrier's answer after the last inputs: then only the pace is waited for
         while not self.stop_event.is_set():
-            ready = self.barrier is not None and self._may_step()
             self._take_inbox(max(0.0, min(_POLL_S, next_tick - time.monotonic())) if ready else _POLL_S)
             self._release()
             now = time.monotonic()
             if self.barrier is not None:
-                if now >= next_tick and self._may_step():
+                ready = self._may_step()
+                if ready and now >= next_tick:
                     self.node.tick()
+                    ready = False       # the step's messages are on their way
                     next_tick = max(next_tick + pacer, now - 10 * pacer)
                     stalled_since = now
-                elif now - stalled_since > _STALL_LOG_S:
+                elif not ready and now - stalled_since > _STALL_LOG_S:
                     self.node.log.info("lockstep: waiting for %s", ", ".join(self._waiting_on()) or "inputs")
                     stalled_since = now
             elif self.node.now_ns and (next_tick_ns is None or self.node.now_ns >= next_tick_ns):
@@ -233,15 +233,15 @@ class LiveRunner:
         """A participant's progress, when it changed (lockstep.py); only after its work is done."""
         if self.lockstep is None or self.barrier is not None:
             return
-        hold = self.node.holds_lockstep()
-        state = (tuple(self._received.items()), tuple(self._published().items()), hold)
+        hold, published = self.node.holds_lockstep(), self._published()
+        state = (tuple(self._received.items()), tuple(published.items()), hold)
         now = time.monotonic()
         # again now and then while idle: a coordinator that subscribed late missed the last one
         if state == self._reported and now < self._report_again:
             return
         self._reported, self._report_again = state, now + _REPORT_AGAIN_S
         report = Report(self.node.name, self.started_ns, tuple(self.node.subscriptions()), dict(self._received),
-                        self._published(), hold)
+                        published, hold)
         self._report_pub.publish(report.to_message(self.node.now_ns))
 
     def _handle(self, item: tuple) -> None:

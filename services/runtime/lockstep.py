@@ -40,9 +40,7 @@ class Lockstep:
     @classmethod
     def from_env(cls, environ: Mapping[str, str] = os.environ) -> "Lockstep | None":
         value = environ.get(LOCKSTEP_ENV)
-        if value is None:
-            return None
-        return cls(tuple(n for n in value.split(",") if n and n != NOBODY))
+        return None if value is None else cls(service_names(value))
 
     def env_value(self) -> str:
         return ",".join(self.wait_for) or NOBODY
@@ -73,6 +71,11 @@ class Report:
                    received={k[len(_IN):]: int(v) for k, v in values.items() if k.startswith(_IN)},
                    published={k[len(_OUT):]: int(v) for k, v in values.items() if k.startswith(_OUT)},
                    hold=bool(values.get(_HOLD, 0)))
+
+
+def service_names(text: str) -> tuple[str, ...]:
+    """The service names of a comma-separated list (as OMNINAV_LOCKSTEP and --lockstep give them)."""
+    return tuple(n for n in text.split(",") if n and n != NOBODY)
 
 
 def matches(expr: str, key: str) -> bool:
@@ -116,8 +119,7 @@ class Barrier:
     def published(self, own: Mapping[str, int]) -> dict[str, int]:
         out = dict(own)
         for member in self.members.values():
-            for key, seq in member.report.published.items():
-                out[key] = seq
+            out.update(member.report.published)
         return out
 
     def ready(self, own_published: Mapping[str, int], own_received: Mapping[str, int],
@@ -147,9 +149,9 @@ class Barrier:
         """Who holds the next step up (for a log line when it takes long)."""
         published = self.published(own_published)
         held = [f"{self.held_by} (held the run: it is over)"] if self.held_by else []
-        behind = held + [m.report.name for m in self.members.values()
+        behind = [m.report.name for m in self.members.values()
                   if not self._caught_up(m.report.subscribed, m.report.received, published, m.baseline)]
-        return behind + [f"{n} (not started)" for n in self.wait_for if n not in self.members]
+        return held + behind + [f"{n} (not started)" for n in self.wait_for if n not in self.members]
 
     def _reports(self) -> list[Report]:
         return [*(m.report for m in self.members.values()), *self.pending.values()]

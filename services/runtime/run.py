@@ -7,7 +7,7 @@ import signal
 import sys
 
 from .live import LiveRunner
-from .lockstep import Lockstep
+from .lockstep import Lockstep, service_names
 from .params import ParamError, load_node_params, parse_overrides, read_params_mapping
 from .service_registry import UnknownService, node_class
 
@@ -56,7 +56,7 @@ def add_lockstep_argument(parser: argparse.ArgumentParser) -> None:
 def lockstep_of(args: argparse.Namespace) -> Lockstep | None:
     if args.lockstep is None:
         return None         # LiveRunner then follows $OMNINAV_LOCKSTEP
-    return Lockstep(tuple(n for n in args.lockstep.split(",") if n))
+    return Lockstep(service_names(args.lockstep))
 
 
 def main(args: argparse.Namespace) -> int:
