@@ -74,6 +74,10 @@ NAVIGATOR = {"xy_goal_tolerance": 0.03, "yaw_goal_tolerance": 0.03, "trans_stopp
 # where a mission's localizer departs from ROS amcl (docs/localizer.md): it keeps converging while
 # the robot stands (a shove or a late correction is not left standing), and its recovery keeps its
 # weight averages and draws half its random poses near the estimate (a shove moves the robot a little)
+# the world's robot (the mecanum paper's) has follower wheels and a gyro: odometry from them rolls
+# with the ground, so a person who shoves the robot moves its odometry too, and AMCL stays on the
+# robot instead of being left where the wheels say it stood (a profile's robot keeps its own)
+FOLLOWER_ODOMETRY = {"odom_source": "followers"}
 LOCALIZER_BEYOND_ROS = {"temporal_update": 0.2, "recovery_reset_after_injection": False, "recovery_local_share": 0.5}
 # without a map the plan was made through unknown space: replan as the scans fill it in
 MAPLESS_NAVIGATOR = {"planner_frequency": 2.0}
@@ -206,7 +210,7 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "recorder", "service": "recorder", "params": {"output": str(recording)}},
         {"name": "sim", "service": "sim", "params": {"world": str(world_file), "drive": drive, "seed": seed,
                                                      "rate": rate, **({"dt": sim_dt} if sim_dt else {})}},
-        {"name": "chassis", "service": "chassis", "params": {"drive": drive}},
+        {"name": "chassis", "service": "chassis", "params": {"drive": drive, **(FOLLOWER_ODOMETRY if profile is None else {})}},
         {"name": "lidar", "service": "lidar", "params": {"world": str(world_file)}},
     ]
     if localization in ("amcl", "truth"):      # slam serves its own map; odom has none

@@ -180,12 +180,45 @@ def test_a_chassis_without_followers_publishes_no_follower_odometry():
     assert len(of(out, "omninav/r1/odom")) == len(states) and not node.counters[f"malformed/{WHEEL_STATE}"]
 
 
+def pushed(params, shove=(0.3, 0.1, 0.2), steps=100):
+    """WheelStates of a robot standing on its wheels while something pushes it by `shove` (body
+    frame) over `steps`: the driven wheels' encoders stand still, the followers and the gyro see it."""
+    per_step = np.asarray(shove) / steps
+    states, followers = [], np.zeros(2)
+    for k in range(steps + 1):
+        states.append(WheelState(header=Header(stamp_ns=k * STEP_NS, seq=k + 1), drive=params.drive,
+                                 positions=np.zeros(4), velocities=np.zeros(4),
+                                 follower_positions=followers.copy(), gyro_z=0.0 if k == 0 else per_step[2] / DT))
+        followers = followers + follower_readings(params, per_step)
+    return states
+
+
+@pytest.mark.parametrize("source", ["wheels", "followers"])
+def test_odom_source_decides_whether_odom_sees_a_push(source):
+    params = ChassisNodeParams(odom_source=source)
+    node = ChassisNode(params)
+    out = capture(node)
+    in_stamp_order(node, pushed(params))
+    odom, follower, tf = (of(out, f"omninav/r1/{k}")[-1] for k in ("odom", "odom_follower", "tf/odom_base"))
+    moved = np.hypot(odom.pose.x, odom.pose.y)
+    assert np.hypot(follower.pose.x, follower.pose.y) == pytest.approx(np.hypot(0.3, 0.1), rel=0.05)
+    if source == "followers":
+        assert encode(odom) == encode(follower) and moved > 0.3
+    else:
+        assert moved == 0.0 and odom.pose.theta == 0.0
+    assert (tf.transform.x, tf.transform.y, tf.transform.theta) == (odom.pose.x, odom.pose.y, odom.pose.theta)
+
+
 def test_parameters_are_validated():
     with pytest.raises(ParamError, match="cmd_vel_delay_s"):
         load_params(ChassisNodeParams, {"cmd_vel_delay_s": 1.0, "cmd_vel_timeout_s": 0.5})
     with pytest.raises(ParamError, match="drive must be one of"):
         load_params(ChassisNodeParams, {"drive": "tank"})
     assert load_params(ChassisNodeParams, {"drive": "omni3", "follower_odometry": False}).drive == "omni3"
+    with pytest.raises(ParamError, match="odom_source 'gps'"):
+        load_params(ChassisNodeParams, {"odom_source": "gps"})
+    with pytest.raises(ParamError, match="needs follower_odometry"):
+        load_params(ChassisNodeParams, {"odom_source": "followers", "follower_odometry": False})
 
 
 # ---------------------------------------------------------------- determinism

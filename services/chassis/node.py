@@ -30,6 +30,7 @@ from .kinematics import ChassisParams, Kinematics
 from .odometry import OdomEstimate, wheel_odometry
 
 N_FOLLOWERS = 2
+ODOM_SOURCES = ("wheels", "followers")
 
 
 @dataclass(frozen=True)
@@ -40,6 +41,9 @@ class ChassisNodeParams(ChassisParams):
     odom_frame_id: str = "odom"
     base_frame_id: str = "base_link"
     follower_odometry: bool = True     # also publish odom_follower (needs two follower encoders)
+    # what odom and tf/odom_base carry: the driven wheels' encoders, or the follower wheels and gyro,
+    # which roll with the ground and so also measure slip and a robot pushed by someone
+    odom_source: str = "wheels"        # wheels | followers
     odom_file: str = ""                # where save_odom_rate keeps the odometry's state; "": nowhere
     save_odom_rate: float = 10.0       # Hz of sim time
 
@@ -52,6 +56,10 @@ class ChassisNodeParams(ChassisParams):
         for name in ("odom_frame_id", "base_frame_id"):
             if not getattr(self, name):
                 raise ValueError(f"{name} must not be empty")
+        if self.odom_source not in ODOM_SOURCES:
+            raise ValueError(f"odom_source {self.odom_source!r}: one of {' | '.join(ODOM_SOURCES)}")
+        if self.odom_source == "followers" and not self.follower_odometry:
+            raise ValueError("odom_source followers needs follower_odometry: true")
 
 
 @dataclass(frozen=True)
@@ -133,14 +141,17 @@ class ChassisNode(Node):
         t = msg.header.stamp_ns
         dt = 0.0 if self.last_stamp is None else (t - self.last_stamp) / NS_PER_S
         self.last_stamp = t
-        odom = self.wheel_odom.update(t, msg.positions, msg.gyro_z)
-        self.last_odom = self._odometry(odom)
+        wheels = self._odometry(self.wheel_odom.update(t, msg.positions, msg.gyro_z))
+        followers = None
+        if self.follower_odom is not None:
+            followers = self._odometry(self.follower_odom.update(t, msg.follower_positions, msg.gyro_z))
+        self.last_odom = followers if self.params.odom_source == "followers" else wheels
         self.odom_pub.publish(self.last_odom)
         self.tf_pub.publish(Transform(header=Header(stamp_ns=t, frame_id=self.params.odom_frame_id),
                                       child_frame_id=self.params.base_frame_id,
                                       transform=self.last_odom.pose))
-        if self.follower_odom is not None:
-            self.follower_pub.publish(self._odometry(self.follower_odom.update(t, msg.follower_positions, msg.gyro_z)))
+        if followers is not None:
+            self.follower_pub.publish(followers)
         self._save(t)
         self._command(t, dt)
 
