@@ -20,6 +20,7 @@ import yaml
 from omninav.bench.determinism import messages_by_key
 from omninav.cli.main import main as cli_main
 from omninav.cli.navigate import REPO, compose_for, in_containers, map_for
+from omninav.cli.profile import load_profile
 from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Clock, Goal, Header, NavStatus, Odometry, Pose2D, Twist
@@ -343,6 +344,21 @@ def test_mission_compose_restarts_every_service_but_the_sim_and_the_recorder(loc
     path.write_text(yaml.safe_dump(composed))
     policies = {(s.process, s.restart) for s in load_compose(path).services}
     assert policies == {("simulator", "no"), ("robot", "on-failure")}
+
+
+def test_the_worlds_robot_drives_on_its_followers_and_a_profiles_robot_on_its_own_odometry(tmp_path):
+    world = load_world(world_path("room"))
+    def services(profile):
+        compose = compose_for(world, Path(world.source), map_for(world, "room", tmp_path), "mecanum", "amcl",
+                              tmp_path / "run.mcap", seed=0, rate=1.0, robot="r1", profile=profile)
+        path = tmp_path / "compose.yaml"
+        path.write_text(yaml.safe_dump(compose))
+        load_compose(path)                                  # every parameter is valid
+        return {s["name"]: s.get("params", {}) for s in compose["services"]}
+    own, jackal = services(None), services(load_profile("jackal"))
+    assert own["chassis"]["odom_source"] == "followers"
+    assert (own["localizer"]["recovery_alpha_slow"], own["localizer"]["recovery_alpha_fast"]) == (0.001, 0.1)
+    assert "odom_source" not in jackal["chassis"] and "recovery_alpha_fast" not in jackal["localizer"]
 
 
 def test_the_room_uses_its_shipped_map(tmp_path):
