@@ -138,3 +138,19 @@ def test_a_misspelt_compose_key_names_the_closest_known_one(tmp_path):
     path.write_text("services:\n  - {service: chassis, params: {drvie: diff}}\n")
     with pytest.raises(ComposeError, match=r"unknown parameter 'drvie' \(did you mean 'drive'\?\)"):
         load_compose(path)
+
+
+def test_up_imports_each_node_class_once_while_loading_the_file(tmp_path, monkeypatch):
+    """The loaded file carries each service's Node class; what `up` does next builds from it."""
+    from omninav.services.demo.talker import Talker
+    from omninav.services.runtime import launcher, run
+
+    compose = load_compose(write(tmp_path, "services: [{service: talker}, {name: mine, module: "
+                                           "'omninav.services.demo.talker:Talker'}]\n"))
+    assert [s.node_type for s in compose.services] == [Talker, Talker]
+
+    def no_second_import(*args):
+        raise AssertionError(f"node class resolved again: {args}")
+    monkeypatch.setattr(run, "node_class", no_second_import)
+    assert launcher.lockstep_participants(compose) == ["talker", "mine"]
+    assert all(isinstance(node, Talker) for node in launcher.build_nodes(compose).values())

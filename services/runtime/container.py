@@ -101,7 +101,7 @@ def main(args: argparse.Namespace) -> int:
     log = logging.getLogger("omninav.container")
     try:
         compose = load_compose(args.compose)
-        nodes = [build_node(s.service or s.name, overrides=s.params, robot=s.robot, name=s.name, spec=s.module)
+        nodes = [build_node(s.service or s.name, overrides=s.params, robot=s.robot, name=s.name, node_type=s.node_type)
                  for s in compose.services]
     except (ComposeError, UnknownService, ParamError, ValueError) as exc:
         log.error("%s", exc)
