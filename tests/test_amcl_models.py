@@ -11,7 +11,9 @@ from omninav.services.localizer.reference import likelihood_field_numpy
 from omninav.services.localizer.params import AmclParams
 from omninav.services.localizer.sensor import LaserModel, prepare_scan
 from omninav.geometry.grid import cell_to_world
-from omninav.services.runtime.params import ParamError, load_params, load_params_file
+from omninav.services.runtime.params import load_params_file
+from omninav.parameters.declare import ParamError
+from omninav.parameters.from_mapping import load_params
 from omninav.geometry.se2 import compose, wrap_angle
 from omninav.sim.lidar import LidarParams, scan
 from omninav.sim.world import load_world, world_path
@@ -82,7 +84,7 @@ def test_every_parameter_has_the_ros1_name_and_default():
 
 
 def _check_mecanum(params: AmclParams):
-    assert params.odom_model_type == "omni-corrected" and params.odom_alphas == (0.005, 0.005, 0.01, 0.005, 0.003)
+    assert params.odom_model_type == "omni-corrected" and params.motion_params().alphas == (0.005, 0.005, 0.01, 0.005, 0.003)
     assert params.laser_max_beams == 60 and params.max_particles == 3000 and params.use_map_topic is True
     assert params.recovery_alpha_fast == 0.1 and params.base_frame_id == "base_footprint"
     assert params.laser_z_short == 0.1    # not in the file: ROS default

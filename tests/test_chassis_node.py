@@ -14,7 +14,8 @@ from omninav.services.recorder.mcap_io import Record
 from omninav.services.replay.into import replay_into
 from omninav.services.runtime.live import LiveRunner
 from omninav.services.runtime.node import NS_PER_S
-from omninav.services.runtime.params import ParamError, load_params
+from omninav.parameters.declare import ParamError
+from omninav.parameters.from_mapping import load_params
 from omninav.geometry.se2 import integrate, wrap_angle
 
 DT = 0.01

@@ -13,8 +13,9 @@ from typing import Any
 
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout
 from .node import Node
-from .params import (ParamError, load_node_params, read_params_mapping, read_yaml,
-                     unknown_names)
+from ...parameters.declare import ParamError
+from ...parameters.from_mapping import unknown_names
+from .params import load_node_params, read_params_mapping, read_yaml
 from .service_registry import UnknownService, node_class
 from .zenoh_config import check_loopback
 

@@ -24,7 +24,7 @@ import time
 from .compose import ComposeError, load_compose
 from .live import LiveRunner, tokens_present
 from .node import Node
-from .params import ParamError
+from ...parameters.declare import ParamError
 from .service_registry import UnknownService
 from .run import build_node
 from .zenoh_config import open_client

@@ -30,7 +30,7 @@ from ...schemas.keys import KeyLayout
 from .acl import (CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, union, write_passwords,
                   write_puts)
 from .compose import Compose, ComposeError, ProcessSpec, load_compose
-from .params import ParamError
+from ...parameters.declare import ParamError
 from .service_registry import UnknownService
 from .node import Node
 from .live import tokens_present

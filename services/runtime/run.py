@@ -8,7 +8,8 @@ import sys
 
 from .live import LiveRunner
 from .lockstep import Lockstep, service_names
-from .params import ParamError, load_node_params, parse_overrides, read_params_mapping
+from ...parameters.declare import ParamError
+from .params import load_node_params, parse_overrides, read_params_mapping
 from .service_registry import UnknownService, node_class
 
 
