@@ -1,12 +1,12 @@
 """One way to declare parameters and their allowed values.
 
 A parameter class is a frozen dataclass deriving from Parameters. Each field states what it allows
-beside its default — `max_vel_x: float = param(0.5, gt=0, unit="m/s")` — and a relation between
-fields is a Rule in the class's `rules`. Building the object (directly, or from a mapping by
-from_mapping.load_params) checks every field, then every rule of the class and of its bases, and stops
-at the first violation with one line naming the parameter, what it allows and the value given:
-"parameter max_vel_x must be > 0 m/s, got -1.0". A subclass adds fields and rules; it never
-redeclares an inherited field (tests/test_house.py).
+beside its default — `max_vel_x: float = param(0.5, gt=0)   # m/s`, the unit and meaning in the
+comment — and a relation between fields is a Rule in the class's `rules`. Building the object
+(directly, or from a mapping by from_mapping.load_params) checks every field, then every rule of
+the class and of its bases, and stops at the first violation with one line naming the parameter,
+what it allows and the value given: "parameter max_vel_x must be > 0, got -1.0". A subclass adds
+fields and rules; it never redeclares an inherited field (tests/test_house.py).
 """
 from __future__ import annotations
 
@@ -37,10 +37,9 @@ class Allowed:
     items: int | None = None        # a sequence of exactly this many items
     min_items: int = 0              # a sequence of at least this many items ...
     or_empty: bool = False          # ... or of none (a footprint left empty: robot_radius instead)
-    unit: str = ""                  # named in the message after a bound
 
     def problem(self, value: Any) -> str:
-        """'' when `value` is allowed, else what is allowed ("> 0 m/s", "one of 'a', 'b')."""
+        """'' when `value` is allowed, else what is allowed ("> 0", "one of 'a', 'b'")."""
         if value is None:
             return ""
         if self.nonempty and not value:
@@ -75,14 +74,12 @@ class Allowed:
         low = f"[{self.ge}" if self.ge is not None else f"({self.gt}" if self.gt is not None else None
         high = f"{self.le}]" if self.le is not None else f"{self.lt})" if self.lt is not None else None
         if low and high:
-            text = f"in {low}, {high}"
-        elif low:
-            text = f"≥ {self.ge}" if self.ge is not None else f"> {self.gt}"
-        elif high:
-            text = f"≤ {self.le}" if self.le is not None else f"< {self.lt}"
-        else:
-            return "a finite number"
-        return f"{text} {self.unit}".rstrip()
+            return f"in {low}, {high}"
+        if low:
+            return f"≥ {self.ge}" if self.ge is not None else f"> {self.gt}"
+        if high:
+            return f"≤ {self.le}" if self.le is not None else f"< {self.lt}"
+        return "a finite number"
 
 
 def param(default: Any = dataclasses.MISSING, *, default_factory: Any = dataclasses.MISSING, **allowed: Any) -> Any:

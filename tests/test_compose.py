@@ -72,7 +72,7 @@ def test_defaults(tmp_path):
      ["services[0] (listener).params_file", "typo.yaml", "unknown parameter 'gian' (did you mean 'gain'?)"]),
     ("- {service: listener, params: {gian: 2}}", ["services[0] (listener).params", "unknown parameter 'gian' (did you mean 'gain'?)"]),
     ("- {service: listener, params: {gain: fast}}", ["services[0] (listener).params", "'gain' must be a number"]),
-    ("- {service: talker, params: {rate: -1}}", ["services[0] (talker).params", "must be positive"]),
+    ("- {service: talker, params: {rate: -1}}", ["services[0] (talker).params", "parameter rate must be > 0, got -1.0"]),
     ("- {service: listener, params: [gain]}", ["services[0] (listener).params", "must be a mapping"]),
     ("- service: talker\n- service: listener\n- service: talker", ["services[2]", "duplicate name 'talker'"]),
     ("- {service: talker, parmas: {rate: 2}}", ["services[0]", "unknown key 'parmas' (did you mean 'params'?)"]),

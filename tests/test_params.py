@@ -68,7 +68,7 @@ def test_overrides():
 
 @dataclass(frozen=True)
 class Ranged(Parameters):
-    delay_s: float = param(0.0, ge=0, unit="s")
+    delay_s: float = param(0.0, ge=0)
     rate_hz: float = param(1.0, gt=0)
     samples: int = param(1, ge=1)
     share: float = param(0.5, ge=0, le=1)
@@ -91,7 +91,7 @@ class MoreRanged(Ranged):
 
 
 @pytest.mark.parametrize("values,needle", [
-    ({"delay_s": -0.1}, "parameter delay_s must be ≥ 0 s, got -0.1"),
+    ({"delay_s": -0.1}, "parameter delay_s must be ≥ 0, got -0.1"),
     ({"rate_hz": 0.0}, "parameter rate_hz must be > 0, got 0.0"),
     ({"samples": 0}, "parameter samples must be ≥ 1, got 0"),
     ({"share": 1.5}, "parameter share must be in [0, 1], got 1.5"),
