@@ -117,7 +117,7 @@ def main(args: argparse.Namespace) -> int:
                 mismatches += int(ref_ok != ok[k] or ref_cost != max_cost[k])
             reference_ms.append((time.perf_counter() - begin) * 1e3 * len(result.samples) / REFERENCE_SAMPLES)
 
-    band = eband.ElasticBandPlanner(EBAND_PARAMS, fp.points, planner.footprint_check.check_cost)
+    band = eband.ElasticBandPlanner(EBAND_PARAMS, planner.footprint_check)
     band_ms, band_cold_ms, band_poses, band_statuses = [], [], [], {}
     for pose, local_costs, local_info in windows:
         band.reset()

@@ -24,7 +24,8 @@ from ..services.ros2_bridge.translate import INPUTS, Mounting, Ros2BridgeParams,
 from ..services.ros2_bridge.node import declare_ros_subscription, ros_session_config
 from ..services.ros2_bridge.rmw import NodeIdentity
 from ..services.runtime import launcher
-from ..services.runtime.params import ParamError, read_yaml
+from ..services.runtime.params import read_yaml
+from ..parameters.declare import ParamError
 from ..services.runtime.zenoh_config import check_loopback
 
 COMPOSE = Path(__file__).resolve().parents[1] / "compose" / "ros2_robot.yaml"

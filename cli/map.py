@@ -28,7 +28,8 @@ from ..services.map_server.mapio import (MODES, UNKNOWN_GREY, MapError, load_map
                                           save_map)
 from ..services.chassis.kinematics import DRIVES
 from ..experiments.localize_eval import parse_waypoints
-from ..services.runtime.params import ParamError, parse_overrides
+from ..services.runtime.params import parse_overrides
+from ..parameters.declare import ParamError
 from ..experiments.mapping import (MAPPING_ROUTES, build_map, compare_with_truth, explored_share,
                                      slam_params_for)
 from ..sim.node import open_world

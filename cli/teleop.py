@@ -33,6 +33,7 @@ from ..services.runtime.live import LiveRunner
 from ..services.runtime.run import add_lockstep_argument, lockstep_of
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.zenoh_config import router_endpoint
+from ..parameters.declare import Parameters
 
 ZERO = (0.0, 0.0, 0.0)
 KEY_AXES = {"w": (0, 1.0), "s": (0, -1.0), "a": (1, 1.0), "d": (1, -1.0), "q": (2, 1.0), "e": (2, -1.0)}
@@ -133,7 +134,7 @@ def script_command(steps: tuple[ScriptStep, ...], elapsed_s: float) -> tuple[flo
 # ---------------------------------------------------------------- the node
 
 @dataclass(frozen=True)
-class TeleopParams:
+class TeleopParams(Parameters):
     rate_hz: float = PUBLISH_HZ
 
 

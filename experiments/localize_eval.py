@@ -40,11 +40,14 @@ from ..services.chassis.node import ChassisNode, ChassisNodeParams
 from ..services.lidar.node import LidarNode, LidarNodeParams
 from ..services.runtime.inprocess import InProcessRunner
 from ..services.runtime.node import NS_PER_S, Node
-from ..services.runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
+from ..services.runtime.params import parse_overrides, read_params_mapping
+from ..parameters.declare import ParamError
+from ..parameters.from_mapping import load_params
 from ..services.runtime.run import configure_logging
 from ..geometry.se2 import compose, wrap_angle
 from . import localize_realdata as realdata
 from ..services.localizer.node import LocalizerNode, LocalizerParams
+from ..parameters.declare import Parameters
 
 MODES = ("track", "global", "kidnap")
 PARAMS_FILE = Path(__file__).resolve().parents[1] / "compose" / "params" / "amcl_paper.yaml"
@@ -124,7 +127,7 @@ def route_command(pose, target, holonomic: bool, speed: float, turn: float) -> t
 # ---------------------------------------------------------------- the harness node
 
 @dataclass(frozen=True)
-class HarnessParams:
+class HarnessParams(Parameters):
     route: Route = Route(((0.0, 0.0),))
     holonomic: bool = True
     speed: float = 0.4          # m/s

@@ -54,7 +54,9 @@ from ..geometry.grid import cell_to_world
 from ..services.recorder.mcap_io import Record, RecordingError, read_records
 from ..services.replay.into import replay_into
 from ..services.runtime.node import NS_PER_S
-from ..services.runtime.params import ParamError, load_params, parse_overrides, read_params_mapping
+from ..services.runtime.params import parse_overrides, read_params_mapping
+from ..parameters.declare import ParamError
+from ..parameters.from_mapping import load_params
 from ..geometry.se2 import compose, relative, wrap_angle
 from ..services.localizer.node import LocalizerNode, LocalizerParams
 from ..geometry.odometry_history import OdomHistory

@@ -42,7 +42,7 @@ from ..geometry.grid import cell_to_world, in_grid, world_to_cell
 from ..services.navigator.node import NavigatorNode, NavigatorNodeParams
 from ..services.runtime.inprocess import InProcessRunner
 from ..services.runtime.node import Node
-from ..services.runtime.params import load_params
+from ..parameters.from_mapping import load_params
 from ..services.tracker.node import TrackerNode, TrackerNodeParams
 from ..services.explore.frontiers import Failure
 from ..services.explore.node import ExploreNode, ExploreNodeParams

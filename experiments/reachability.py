@@ -23,6 +23,7 @@ from ..geometry.footprint import cells_inside, pad, radii, transform
 from ..services.global_planner.astar import GlobalPlanner
 from ..services.global_planner.params import GlobalPlannerParams
 from ..geometry.grid import in_grid, world_to_cell
+from ..parameters.declare import Parameters, param
 
 LETHAL = 254
 PATH_SEARCH = GlobalPlannerParams(use_dijkstra=False, use_grid_path=True, allow_unknown=False,
@@ -30,18 +31,12 @@ PATH_SEARCH = GlobalPlannerParams(use_dijkstra=False, use_grid_path=True, allow_
 
 
 @dataclass(frozen=True)
-class ReachabilityParams:
+class ReachabilityParams(Parameters):
     # the footprint grown by this keeps off every blocked cell; a rasterised obstacle may already
     # reach up to a cell beyond the real one, so 0 still keeps the footprint off the obstacle
-    clearance_m: float = 0.0
-    occupied_threshold: int = 50    # cells above are obstacles (map_server's trinary occupied: 100)
-    unknown_is_free: bool = False   # unknown cells (-1) block, as the static costmap treats them
-
-    def __post_init__(self) -> None:
-        if not (math.isfinite(self.clearance_m) and self.clearance_m >= 0):
-            raise ValueError(f"clearance_m must be a number >= 0, got {self.clearance_m}")
-        if not 0 <= self.occupied_threshold <= 100:
-            raise ValueError(f"occupied_threshold must be in 0..100, got {self.occupied_threshold}")
+    clearance_m: float = param(0.0, ge=0)
+    occupied_threshold: int = param(50, ge=0, le=100)  # cells above are obstacles (map_server's trinary occupied: 100)
+    unknown_is_free: bool = False                      # unknown cells (-1) block, as the static costmap treats them
 
 
 def blocked_cells(grid: OccupancyGrid, params: ReachabilityParams) -> np.ndarray:

@@ -22,7 +22,9 @@ from pathlib import Path
 import numpy as np
 
 from ..services.importers.carmen import CarmenError, read_log
-from ..services.runtime.params import ParamError, load_params, parse_overrides, read_yaml, unwrap_ros
+from ..services.runtime.params import parse_overrides, read_yaml, unwrap_ros
+from ..parameters.declare import ParamError
+from ..parameters.from_mapping import load_params
 from ..geometry.se2 import compose, relative
 from ..services.slam.params import MODES, SlamParams
 from ..services.slam.rbpf import Rbpf

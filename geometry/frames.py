@@ -13,6 +13,7 @@ import numpy as np
 
 from ..schemas.messages import Header, LaserScan, Odometry, Pose2D, PoseWithCovariance, Transform, Twist
 from .se2 import compose, inverse
+from ..parameters.declare import Parameters, param
 
 
 # (x, y, yaw) of the laser in base_link (m, m, rad): the simulated lidar's mount, and the default of
@@ -81,11 +82,11 @@ class RobotFrames:
 
 
 @dataclass(frozen=True)
-class FrameParams:
+class FrameParams(Parameters):
     """The frame parameters of a node that places the robot with RobotFrames (a mixin of its Params)."""
-    initial_pose_x: float = 0.0   # the odom frame's pose in the map (where odometry started) until tf/map_odom
-    initial_pose_y: float = 0.0
-    initial_pose_a: float = 0.0
+    initial_pose_x: float = param(0.0, finite=True)  # the odom frame's pose in the map (where odometry started) until tf/map_odom
+    initial_pose_y: float = param(0.0, finite=True)
+    initial_pose_a: float = param(0.0, finite=True)
     map_frame: str = "map"
     odom_frame: str = "odom"
 

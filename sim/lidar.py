@@ -19,43 +19,35 @@ from ..geometry.frames import LASER_MOUNT
 from ..geometry.grid import grid_coords
 from ..geometry.raycast import cast_grid, cast_shapes
 from .world import World
+from ..parameters.declare import Parameters, Rule, param
 
 FULL_CIRCLE = 2.0 * math.pi
 
 
 @dataclass(frozen=True)
-class LidarParams:
+class LidarParams(Parameters):
     """A scanner like an RPLIDAR-class 2-D lidar. angle_min None means a centred field of view
     (−fov/2). A full-circle scan spaces its beams fov/beams apart (no beam twice at ±π); a partial
     one fov/(beams − 1), so its last beam lies at angle_min + fov."""
 
-    beams: int = 360
-    fov: float = FULL_CIRCLE          # rad
-    angle_min: float | None = None    # rad, laser frame
-    range_min: float = 0.15           # m
-    range_max: float = 12.0           # m
-    noise_std: float = 0.01           # m, Gaussian range noise
-    dropout_prob: float = 0.0         # chance that a beam returns nothing
-    mount_x: float = LASER_MOUNT[0]   # laser pose in the robot frame (m, m, rad)
+    beams: int = param(360, ge=1)
+    fov: float = param(FULL_CIRCLE, gt=0, le=FULL_CIRCLE + 1e-9)  # rad
+    angle_min: float | None = None                              # rad, laser frame
+    range_min: float = param(0.15, ge=0)                        # m
+    range_max: float = param(12.0, finite=True)                 # m
+    noise_std: float = param(0.01, ge=0)                        # m, Gaussian range noise
+    dropout_prob: float = param(0.0, ge=0, le=1)                # chance that a beam returns nothing
+    mount_x: float = LASER_MOUNT[0]                             # laser pose in the robot frame (m, m, rad)
     mount_y: float = LASER_MOUNT[1]
     mount_yaw: float = LASER_MOUNT[2]
-    rate_hz: float = 10.0
+    rate_hz: float = param(10.0, gt=0)
 
     def __post_init__(self):
-        if self.beams < 1:
-            raise ValueError(f"beams must be at least 1, got {self.beams}")
-        if not 0 < self.fov <= FULL_CIRCLE + 1e-9:
-            raise ValueError(f"fov must be in (0, 2π], got {self.fov}")
-        if not 0 <= self.range_min < self.range_max:
-            raise ValueError(f"need 0 ≤ range_min < range_max, got {self.range_min}, {self.range_max}")
-        if self.noise_std < 0:
-            raise ValueError(f"noise_std must be ≥ 0, got {self.noise_std}")
-        if not 0 <= self.dropout_prob <= 1:
-            raise ValueError(f"dropout_prob must be in [0, 1], got {self.dropout_prob}")
-        if self.rate_hz <= 0:
-            raise ValueError(f"rate_hz must be positive, got {self.rate_hz}")
+        super().__post_init__()
         if self.angle_min is None:
             object.__setattr__(self, "angle_min", -self.fov / 2)
+
+    rules = (Rule("range_max", lambda p: p.range_max > p.range_min, "> range_min ({p.range_min})"),)
 
     @property
     def angle_increment(self) -> float:

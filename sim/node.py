@@ -10,7 +10,6 @@ not by the command's stamp: a chassis lagging behind on a loaded machine still d
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -18,35 +17,28 @@ import numpy as np
 from ..schemas.messages import Clock, Diagnostic, Obstacles, Odometry, Pose2D, Twist, WheelCommand, WheelState
 from ..services.chassis.kinematics import ChassisParams
 from ..services.runtime.node import NS_PER_S, Node
-from ..services.runtime.params import load_params
+from ..parameters.from_mapping import load_params
 from .physics import Readings, SimParams, Simulation
 from .world import World, WorldError, load_world, shipped_worlds, world_path
 from ..geometry.polygons import polygon_area
+from ..parameters.declare import Rule, param
 
 
 @dataclass(frozen=True)
 class SimNodeParams(SimParams):
-    world: str = "room"           # a shipped world's name or a world file's path
-    rate: float = 1.0             # sim seconds per wall second; 0: as fast as it may (in lockstep: as the services compute)
-    footprint: tuple[tuple[float, float], ...] = ()   # m, robot frame (a robot profile's); () = the world's
-    chassis: dict = field(default_factory=dict)       # ChassisParams by name: the wheels the chassis drives
-    wheel_cmd_timeout_s: float = 0.5   # sim s of steps without a wheel command that stop the wheels; 0: never
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if not (math.isfinite(self.rate) and self.rate >= 0):
-            raise ValueError(f"rate must be positive, or 0 for as fast as it may, got {self.rate}")
-        if not (math.isfinite(self.wheel_cmd_timeout_s) and self.wheel_cmd_timeout_s >= 0):
-            raise ValueError(f"wheel_cmd_timeout_s must be zero (no watchdog) or positive, got {self.wheel_cmd_timeout_s}")
-        if self.footprint and (len(self.footprint) < 3 or abs(polygon_area(np.array(self.footprint))) < 1e-6):
-            raise ValueError(f"footprint must be a polygon of at least 3 points enclosing an area, got {self.footprint}")
-        self.chassis_params()
+    world: str = "room"                                         # a shipped world's name or a world file's path
+    rate: float = param(1.0, ge=0)                              # sim seconds per wall second; 0: as fast as it may (in lockstep: as the services compute)
+    footprint: tuple[tuple[float, float], ...] = param((), min_items=3, or_empty=True)  # m, robot frame (a robot profile's); () = the world's
+    chassis: dict = field(default_factory=dict)                 # ChassisParams by name: the wheels the chassis drives
+    wheel_cmd_timeout_s: float = param(0.5, ge=0)               # sim s of steps without a wheel command that stop the wheels; 0: never
 
     def chassis_params(self) -> ChassisParams:
         """The simulated wheels (geometry, speed limit): the chassis service's parameters."""
-        if not isinstance(self.chassis, dict):
-            raise ValueError(f"chassis must be a mapping of chassis parameter names to values, got {self.chassis!r}")
         return load_params(ChassisParams, self.chassis, "sim.chassis")
+
+    rules = (Rule("footprint", lambda p: not p.footprint or abs(polygon_area(np.array(p.footprint))) >= 1e-6,
+                  "a polygon enclosing an area"),
+             Rule("chassis", lambda p: bool(p.chassis_params()), "ChassisParams by name"))
 
     def robot_world(self, world: World) -> World:
         """The world with this robot's footprint (counter-clockwise) in place of the world file's."""

@@ -50,6 +50,7 @@ from ..geometry.grid import cell_to_world
 from ..geometry.se2 import relative, se2_exp, wrap_angle
 from .world import World
 from ..geometry.polygons import polygon_area, transform_points
+from ..parameters.declare import Parameters, Rule, param
 
 ROBOT_MASS = 40.0            # kg; with pymunk's moment it only decides how a contact splits turn and push
 CONTACT_SLOP = 1e-3          # m of overlap pymunk tolerates before pushing bodies apart
@@ -58,48 +59,30 @@ STATIC = -1                          # what a contact touched when it is no move
 
 
 @dataclass(frozen=True)
-class SimParams:
+class SimParams(Parameters):
     """The simulator's step and its models of motors, slip and sensors.
 
     Noise defaults are modest, for a well-built indoor robot: 2 % per-wheel speed error each step
     (slip), encoders with 4096 ticks per revolution and a 0.5 mrad per-step random walk, a MEMS-class
     gyro (2 mrad/s noise on each step's mean rate, 1 mrad/s bias). `without_noise()` switches all off.
     """
-    dt: float = 0.01                      # s, fixed step
-    drive: str = ""                       # "" = the world's robot.drive; else mecanum | omni3 | diff
-    wheel_slip_std: float = 0.02          # relative per-wheel speed error, drawn each step
-    encoder_noise_std: float = 0.0005     # rad per step, random walk of each encoder (wheels, followers)
-    encoder_ticks_per_rev: int = 4096     # quantisation of every encoder; 0 = none
-    gyro_noise_std: float = 0.002         # rad/s, noise on each step's mean yaw rate
-    gyro_bias: float = 0.001              # rad/s
+    dt: float = param(0.01, ge=1e-4, le=0.1)        # s, fixed step
+    drive: str = param("", choices=("",) + DRIVES)  # "" = the world's robot.drive; else mecanum | omni3 | diff
+    wheel_slip_std: float = param(0.02, ge=0)       # relative per-wheel speed error, drawn each step
+    encoder_noise_std: float = param(0.0005, ge=0)  # rad per step, random walk of each encoder (wheels, followers)
+    encoder_ticks_per_rev: int = param(4096, ge=0)  # quantisation of every encoder; 0 = none
+    gyro_noise_std: float = param(0.002, ge=0)      # rad/s, noise on each step's mean yaw rate
+    gyro_bias: float = param(0.001, finite=True)    # rad/s
     # above what any one wheel needs for the chassis's default per-axis acceleration limits
     # (2.5 m/s^2 → 33 rad/s^2, 3.2 rad/s^2 → 23 rad/s^2), so limited commands are tracked
-    wheel_acc_limit: float = 60.0         # rad/s^2, motor response
-    contact_friction: float = 0.3         # friction between the robot and whatever it touches
+    wheel_acc_limit: float = param(60.0, gt=0)      # rad/s^2, motor response
+    contact_friction: float = param(0.3, ge=0)      # friction between the robot and whatever it touches
     # a contact is the robot's fault when its contact point moved towards what it touched faster
     # than this (any static contact is); slower, a mover drove into a robot standing or leaving
-    fault_speed: float = 0.02             # m/s
-    seed: int = 0
+    fault_speed: float = param(0.02, ge=0)          # m/s
+    seed: int = param(0, ge=0)
 
-    def __post_init__(self) -> None:
-        ns = self.dt * 1e9
-        if not (1e-4 <= self.dt <= 0.1) or abs(ns - round(ns)) > 1e-3:
-            raise ValueError(f"dt must be a whole number of nanoseconds in [1e-4, 0.1] s, got {self.dt}")
-        if self.drive not in ("",) + DRIVES:
-            raise ValueError(f"drive must be '' (the world's) or one of {DRIVES}, got {self.drive!r}")
-        for name in ("wheel_slip_std", "encoder_noise_std", "gyro_noise_std", "contact_friction", "fault_speed"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a number >= 0, got {value}")
-        if not (math.isfinite(self.wheel_acc_limit) and self.wheel_acc_limit > 0):
-            raise ValueError(f"wheel_acc_limit must be positive, got {self.wheel_acc_limit}")
-        if not math.isfinite(self.gyro_bias):
-            raise ValueError(f"gyro_bias must be finite, got {self.gyro_bias}")
-        if self.encoder_ticks_per_rev < 0:
-            raise ValueError(f"encoder_ticks_per_rev must be >= 0 (0: no quantisation), got "
-                             f"{self.encoder_ticks_per_rev}")
-        if self.seed < 0:
-            raise ValueError(f"seed must be >= 0, got {self.seed}")
+    rules = (Rule("dt", lambda p: abs(p.dt * 1e9 - round(p.dt * 1e9)) <= 1e-3, "a whole number of nanoseconds"),)
 
     def without_noise(self) -> SimParams:
         """The same simulator with exact wheels and sensors."""

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from ..schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
-from ..services.runtime.params import unknown_names
+from ..parameters.from_mapping import unknown_names
 from ..services.map_server.mapio import MapError, load_map, read_yaml
 from ..geometry.footprint import DEFAULT_FOOTPRINT
 from ..geometry.polygons import (point_segment_distance, points_in_polygons, polygon_area, segment_distance,

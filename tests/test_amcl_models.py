@@ -8,10 +8,13 @@ import pytest
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.localizer import motion
 from omninav.services.localizer.reference import likelihood_field_numpy
-from omninav.services.localizer.params import AmclParams
+from omninav.services.localizer.params import (AmclParams, BeamModelParams, DiffMotionParams, LikelihoodFieldParams,
+                                              OmniMotionParams)
 from omninav.services.localizer.sensor import LaserModel, prepare_scan
 from omninav.geometry.grid import cell_to_world
-from omninav.services.runtime.params import ParamError, load_params, load_params_file
+from omninav.services.runtime.params import load_params_file
+from omninav.parameters.declare import ParamError
+from omninav.parameters.from_mapping import load_params
 from omninav.geometry.se2 import compose, wrap_angle
 from omninav.sim.lidar import LidarParams, scan
 from omninav.sim.world import load_world, world_path
@@ -82,7 +85,7 @@ def test_every_parameter_has_the_ros1_name_and_default():
 
 
 def _check_mecanum(params: AmclParams):
-    assert params.odom_model_type == "omni-corrected" and params.odom_alphas == (0.005, 0.005, 0.01, 0.005, 0.003)
+    assert params.odom_model_type == "omni-corrected" and params.motion_params().alphas == (0.005, 0.005, 0.01, 0.005, 0.003)
     assert params.laser_max_beams == 60 and params.max_particles == 3000 and params.use_map_topic is True
     assert params.recovery_alpha_fast == 0.1 and params.base_frame_id == "base_footprint"
     assert params.laser_z_short == 0.1    # not in the file: ROS default
@@ -355,3 +358,17 @@ def test_beam_skipping_drops_the_beams_that_disagree_with_the_map(room):
     all_beams = np.ones(300)
     plain_laser.weigh(lost, 300, beams, all_beams)
     assert np.allclose(lost_weights, all_beams, rtol=1e-9)
+
+
+def test_each_model_gets_its_own_group_of_the_flat_ros_names():
+    """ROS amcl's flat names load as they are; the laser and motion models in use each get their group."""
+    params = load_params(AmclParams, {"laser_model_type": "beam", "laser_z_hit": 0.8, "laser_z_short": 0.2,
+                                      "odom_model_type": "omni", "odom_alpha5": 0.3, "odom_alpha1": 0.1})
+    assert params.laser_params() == BeamModelParams(laser_z_hit=0.8, laser_z_short=0.2)
+    assert params.motion_params() == OmniMotionParams(odom_alpha1=0.1, odom_alpha5=0.3)
+    likelihood = dataclasses.replace(params, laser_model_type="likelihood_field", odom_model_type="diff-corrected")
+    assert type(likelihood.laser_params()) is LikelihoodFieldParams
+    assert likelihood.motion_params() == DiffMotionParams(odom_alpha1=0.1)
+    assert likelihood.motion_params().alphas == (0.1, 0.2, 0.2, 0.2, 0.0)    # no strafe noise on a diff drive
+    with pytest.raises(ParamError, match="parameter laser_z_short must be ≥ 0, got -0.1"):
+        load_params(AmclParams, {"laser_z_short": -0.1})

@@ -14,7 +14,8 @@ from omninav.services.recorder.mcap_io import Record
 from omninav.services.replay.into import replay_into
 from omninav.services.runtime.live import LiveRunner
 from omninav.services.runtime.node import NS_PER_S
-from omninav.services.runtime.params import ParamError, load_params
+from omninav.parameters.declare import ParamError
+from omninav.parameters.from_mapping import load_params
 from omninav.geometry.se2 import integrate, wrap_angle
 
 DT = 0.01
@@ -215,9 +216,9 @@ def test_parameters_are_validated():
     with pytest.raises(ParamError, match="drive must be one of"):
         load_params(ChassisNodeParams, {"drive": "tank"})
     assert load_params(ChassisNodeParams, {"drive": "omni3", "follower_odometry": False}).drive == "omni3"
-    with pytest.raises(ParamError, match="odom_source 'gps'"):
+    with pytest.raises(ParamError, match="odom_source must be one of 'wheels', 'followers', got 'gps'"):
         load_params(ChassisNodeParams, {"odom_source": "gps"})
-    with pytest.raises(ParamError, match="needs follower_odometry"):
+    with pytest.raises(ParamError, match="unless follower_odometry is true"):
         load_params(ChassisNodeParams, {"odom_source": "followers", "follower_odometry": False})
 
 

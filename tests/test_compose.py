@@ -72,7 +72,7 @@ def test_defaults(tmp_path):
      ["services[0] (listener).params_file", "typo.yaml", "unknown parameter 'gian' (did you mean 'gain'?)"]),
     ("- {service: listener, params: {gian: 2}}", ["services[0] (listener).params", "unknown parameter 'gian' (did you mean 'gain'?)"]),
     ("- {service: listener, params: {gain: fast}}", ["services[0] (listener).params", "'gain' must be a number"]),
-    ("- {service: talker, params: {rate: -1}}", ["services[0] (talker).params", "must be positive"]),
+    ("- {service: talker, params: {rate: -1}}", ["services[0] (talker).params", "parameter rate must be > 0, got -1.0"]),
     ("- {service: listener, params: [gain]}", ["services[0] (listener).params", "must be a mapping"]),
     ("- service: talker\n- service: listener\n- service: talker", ["services[2]", "duplicate name 'talker'"]),
     ("- {service: talker, parmas: {rate: 2}}", ["services[0]", "unknown key 'parmas' (did you mean 'params'?)"]),
@@ -138,3 +138,19 @@ def test_a_misspelt_compose_key_names_the_closest_known_one(tmp_path):
     path.write_text("services:\n  - {service: chassis, params: {drvie: diff}}\n")
     with pytest.raises(ComposeError, match=r"unknown parameter 'drvie' \(did you mean 'drive'\?\)"):
         load_compose(path)
+
+
+def test_up_imports_each_node_class_once_while_loading_the_file(tmp_path, monkeypatch):
+    """The loaded file carries each service's Node class; what `up` does next builds from it."""
+    from omninav.services.demo.talker import Talker
+    from omninav.services.runtime import launcher, run
+
+    compose = load_compose(write(tmp_path, "services: [{service: talker}, {name: mine, module: "
+                                           "'omninav.services.demo.talker:Talker'}]\n"))
+    assert [s.node_type for s in compose.services] == [Talker, Talker]
+
+    def no_second_import(*args):
+        raise AssertionError(f"node class resolved again: {args}")
+    monkeypatch.setattr(run, "node_class", no_second_import)
+    assert launcher.lockstep_participants(compose) == ["talker", "mine"]
+    assert all(isinstance(node, Talker) for node in launcher.build_nodes(compose).values())

@@ -14,7 +14,7 @@ from omninav.services.costmap.params import (CostmapParams, InflationLayerParams
                                              load_costmap_params)
 from omninav.services.map_server.mapio import load_map
 from omninav.geometry.grid import cell_to_world
-from omninav.services.runtime.params import ParamError
+from omninav.parameters.declare import ParamError
 
 from conftest import REPO, SHARED_DATA
 
@@ -124,10 +124,10 @@ local_costmap:
     ("global_costmap: {update_frequency: fast}", "'update_frequency' must be a number"),
     ("global_costmap: {plugins: [{name: x, type: 'costmap_2d::FancyLayer'}]}",
      "'costmap_2d::FancyLayer' is not supported"),
-    ("observation_sources: s\ns: {data_type: PointCloud2}", "data_type 'PointCloud2' is not supported"),
+    ("observation_sources: s\ns: {data_type: PointCloud2}", "data_type must be one of 'LaserScan', got 'PointCloud2'"),
     ("observation_sources: s\n", "observation source 's' has no section"),
     ("inflation_radius: -1", "inflation_radius must be ≥ 0"),
-    ("footprint: [[0, 0], [1, 0]]", "footprint needs at least 3 points"),
+    ("footprint: [[0, 0], [1, 0]]", "footprint must be empty or at least 3 items"),
 ])
 def test_bad_files_name_the_key_and_the_file(tmp_path, text, needle):
     path = tmp_path / "costmap_common_params.yaml"

@@ -30,7 +30,7 @@ from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.merge import order_key
 from omninav.services.runtime.node import NS_PER_S, QueryError
-from omninav.services.runtime.params import ParamError
+from omninav.parameters.declare import ParamError
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client
 from omninav.sim.node import SimNode, SimNodeParams

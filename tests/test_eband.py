@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from scipy.optimize import least_squares
 
-from omninav.services.local_planner.footprint_check import footprint_outline
+from omninav.services.local_planner.footprint_check import FootprintCheck, footprint_outline
 from omninav.services.local_planner.eband import (BandProblem, ElasticBandPlanner, clearance_field, covering_circles,
                                                   initial_band, local_goal, span_path)
 from omninav.services.local_planner.params import ElasticBandParams
@@ -60,7 +60,7 @@ def drive(planner, costs, info, path, pose, cycles, goal_tolerance=0.03):
 @BOTH
 def test_a_straight_free_path_gives_a_forward_command_and_a_band_on_the_path(params):
     costs, info, check = costmap()
-    planner = ElasticBandPlanner(params, FOOTPRINT.points, check)
+    planner = ElasticBandPlanner(params, FootprintCheck(FOOTPRINT.points, check))
     result = planner.compute((-2.0, 0.0, 0.0), (0.2, 0.0, 0.0), costs, info, straight(-2.5, 0.0, 2.5, 0.0, n=101))
     assert result.status == "ok", result.message
     assert result.cmd[0] > 0.2 and abs(result.cmd[1]) < 1e-3 and abs(result.cmd[2]) < 1e-3
@@ -79,7 +79,7 @@ def test_an_obstacle_beside_the_path_pushes_the_band_to_min_obstacle_dist(params
     costs, info, check = costmap(boxes=[box])
     path = straight(-2.5, 0.0, 2.5, 0.0, n=101)
     assert min(distance_to_box(p, box) for p in path) < 0.1       # the path itself passes too close
-    planner = ElasticBandPlanner(params, FOOTPRINT.points, check)
+    planner = ElasticBandPlanner(params, FootprintCheck(FOOTPRINT.points, check))
     for _ in range(3):   # a few control cycles refine the warm-started band
         result = planner.compute((-1.5, 0.0, 0.0), (0.0, 0.0, 0.0), costs, info, path)
     assert result.status == "ok", result.message
@@ -92,7 +92,7 @@ def test_an_obstacle_beside_the_path_pushes_the_band_to_min_obstacle_dist(params
 @BOTH
 def test_the_band_keeps_the_velocity_and_acceleration_limits(params):
     costs, info, check = costmap(boxes=[(0.0, 0.5, 0.4, 0.9)])
-    planner = ElasticBandPlanner(params, FOOTPRINT.points, check)
+    planner = ElasticBandPlanner(params, FootprintCheck(FOOTPRINT.points, check))
     path = corner_path()
     start = np.array([-0.5, 0.0, 0.0])
     for velocity in ((0.0, 0.0, 0.0), (0.35, 0.0, 0.2)):
@@ -120,7 +120,7 @@ def test_the_band_keeps_the_velocity_and_acceleration_limits(params):
 
 def test_diff_mode_commands_no_vy_and_keeps_the_band_on_arcs():
     costs, info, check = costmap(boxes=[(0.0, 0.5, 0.4, 0.9)])
-    planner = ElasticBandPlanner(DIFF, FOOTPRINT.points, check)
+    planner = ElasticBandPlanner(DIFF, FootprintCheck(FOOTPRINT.points, check))
     path = corner_path()
     for pose, velocity in (((-0.5, 0.0, 0.0), (0.3, 0.0, 0.0)), ((-0.2, -0.1, 0.3), (0.2, 0.0, 0.2))):
         result = planner.compute(pose, velocity, costs, info, path)
@@ -139,7 +139,7 @@ def test_diff_mode_commands_no_vy_and_keeps_the_band_on_arcs():
 
 def test_holonomic_mode_may_strafe():
     costs, info, check = costmap()
-    planner = ElasticBandPlanner(HOLO, FOOTPRINT.points, check)
+    planner = ElasticBandPlanner(HOLO, FootprintCheck(FOOTPRINT.points, check))
     result = planner.compute((0.0, 0.0, 0.0), (0.0, 0.2, 0.0), costs, info, straight(0.0, 0.0, 0.0, 2.0))
     assert result.status == "ok" and result.cmd[1] > 0.2
 
@@ -147,7 +147,7 @@ def test_holonomic_mode_may_strafe():
 @BOTH
 def test_a_blocked_path_brakes_with_no_valid_trajectory(params):
     costs, info, check = costmap(boxes=[(0.3, -3.0, 0.5, 3.0)])   # a wall across the whole map, just ahead
-    planner = ElasticBandPlanner(params, FOOTPRINT.points, check)
+    planner = ElasticBandPlanner(params, FootprintCheck(FOOTPRINT.points, check))
     result = planner.compute((0.0, 0.0, 0.0), (0.3, 0.0, 0.2), costs, info, straight(-1.0, 0.0, 2.5, 0.0))
     assert result.status == "no_valid_trajectory"
     assert "braking" in result.message
@@ -157,7 +157,7 @@ def test_a_blocked_path_brakes_with_no_valid_trajectory(params):
 
 def test_no_path_on_the_costmap_is_no_path():
     costs, info, check = costmap()
-    result = ElasticBandPlanner(DIFF, FOOTPRINT.points, check).compute(
+    result = ElasticBandPlanner(DIFF, FootprintCheck(FOOTPRINT.points, check)).compute(
         (0.0, 0.0, 0.0), (0.1, 0.0, 0.0), costs, info, straight(10.0, 10.0, 12.0, 10.0))
     assert result.status == "no_path"
     assert np.allclose(result.cmd, [0.1 - DIFF.acc_lim_x / 20, 0.0, 0.0])
@@ -169,7 +169,7 @@ def test_closed_loop_along_an_l_shaped_path_past_an_obstacle(params):
     box = (-0.6, -0.1, -0.2, 0.3)   # just inside the corner, next to both legs
     costs, info, check = costmap(boxes=[box])
     path = np.concatenate([straight(-2.5, -0.5, 0.0, -0.5, n=51), straight(0.0, -0.5, 0.0, 2.5, n=61)[1:]])
-    planner = ElasticBandPlanner(params, FOOTPRINT.points, check)
+    planner = ElasticBandPlanner(params, FootprintCheck(FOOTPRINT.points, check))
     trace, results = drive(planner, costs, info, path, (-2.5, -0.5, 0.0), 1500)
     assert all(r.status == "ok" for r in results), {r.message for r in results}
     assert math.hypot(*(trace[-1, :2] - path[-1, :2])) < 0.03           # reached the end
@@ -180,7 +180,7 @@ def test_closed_loop_along_an_l_shaped_path_past_an_obstacle(params):
 
 def test_warm_start_only_on_the_same_path():
     costs, info, check = costmap()
-    planner = ElasticBandPlanner(DIFF, FOOTPRINT.points, check)
+    planner = ElasticBandPlanner(DIFF, FootprintCheck(FOOTPRINT.points, check))
     path = straight(-2.5, 0.0, 2.5, 0.0, n=101)
     assert not planner.compute((-2.0, 0.0, 0.0), (0.0, 0.0, 0.0), costs, info, path).warm_started
     assert planner.compute((-1.98, 0.0, 0.0), (0.1, 0.0, 0.0), costs, info, path).warm_started
@@ -192,7 +192,7 @@ def test_warm_start_only_on_the_same_path():
 def test_the_banded_solver_reaches_scipy_least_squares_cost(params):
     box = (-0.2, 0.25, 0.2, 0.8)
     costs, info, check = costmap(boxes=[box])
-    planner = ElasticBandPlanner(params, FOOTPRINT.points, check)
+    planner = ElasticBandPlanner(params, FootprintCheck(FOOTPRINT.points, check))
     span, final = span_path(straight(-2.5, 0.0, 2.5, 0.0, n=101), (-1.5, 0.0, 0.0), info, 3.0)
     poses, intervals = initial_band(span, np.array([-1.5, 0.0, 0.0]), local_goal(span, final), params)
     poses[1:-1] += np.random.default_rng(5).normal(0.0, 0.02, poses[1:-1].shape)

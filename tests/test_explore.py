@@ -194,7 +194,7 @@ def test_goals_keep_the_robot_turned_any_way_clear_while_paths_need_only_its_ins
 
 def test_bad_parameters_are_named():
     with pytest.raises(ValueError, match="progress_timeout"):
-        ExploreParams(progress_timeout=0.0)
+        ExploreNodeParams(progress_timeout=0.0)
     with pytest.raises(ValueError, match="status_delay_s"):
         ExploreNodeParams(status_delay_s=-1.0)
     with pytest.raises(ValueError, match="gain_scale"):

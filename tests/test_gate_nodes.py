@@ -15,7 +15,7 @@ from omninav.services.cmd_vel_mux.node import CmdVelMuxNode
 from omninav.services.velocity_smoother.node import VelocitySmootherNode, VelocitySmootherNodeParams
 from omninav.services.collision_monitor.node import CollisionMonitorNode, CollisionMonitorNodeParams
 from omninav.services.runtime.node import NS_PER_S
-from omninav.services.runtime.params import ParamError
+from omninav.parameters.declare import ParamError
 from omninav.services.runtime.run import build_node
 
 MS = 1_000_000
@@ -73,9 +73,9 @@ def test_the_smoother_keeps_its_nav2_names_and_refuses_bad_values():
     p = build_node("velocity_smoother", overrides={"max_velocity": [0.3, 0.0, 1.0], "min_velocity": [-0.3, 0.0, -1.0],
                                                   "deadband_velocity": [0.01, 0.0, 0.01]}).params
     assert p.max_velocity == (0.3, 0.0, 1.0) and p.command_delay_s == 0.04
-    with pytest.raises(ParamError, match="command_delay_s must be zero or positive"):
+    with pytest.raises(ParamError, match="command_delay_s must be ≥ 0, got -0.1"):
         build_node("velocity_smoother", overrides={"command_delay_s": -0.1})
-    with pytest.raises(ParamError, match="source_timeout must exceed scan_delay_s"):
+    with pytest.raises(ParamError, match=r"source_timeout must be more than scan_delay_s \(0.05\), got 0.01"):
         build_node("collision_monitor", overrides={"source_timeout": 0.01})
 
 

@@ -5,23 +5,31 @@ from __future__ import annotations
 import ast
 import dataclasses
 import importlib
+import inspect
 import pkgutil
+import re
 import subprocess
 import sys
+import textwrap
+
+import pytest
 
 from conftest import REPO
 
 # What each room may import besides itself. A room is a top-level package, or one folder of
 # services/ (one process each). Every service may also import schemas, geometry and services/runtime
 # (SERVICE_BASE); the few arrows between services are core reuse, each named here with its reason.
-SERVICE_BASE = {"schemas", "geometry", "services/runtime"}
-LIBRARY = {"schemas", "geometry", "sim"} | {f"services/{p.name}" for p in (REPO / "services").iterdir()
+# parameters (how a parameter class declares and checks its fields) is neutral like geometry: every
+# core, node and geometry's frame mixin declare their parameters with it, and it imports nothing of ours.
+SERVICE_BASE = {"schemas", "geometry", "parameters", "services/runtime"}
+LIBRARY = {"schemas", "geometry", "parameters", "sim"} | {f"services/{p.name}" for p in (REPO / "services").iterdir()
                                             if (p / "__init__.py").is_file()}
 ROOMS: dict[str, set[str]] = {
     "schemas": set(),                                       # the wire contract
-    "geometry": {"schemas"},                                # numpy/numba and message types only
-    "services/runtime": {"schemas"},
-    "sim": {"schemas", "geometry", "services/runtime",
+    "parameters": set(),                                    # the standard library only
+    "geometry": {"schemas", "parameters"},                  # numpy/numba, message types, FrameParams' declaration
+    "services/runtime": {"schemas", "parameters"},
+    "sim": {"schemas", "geometry", "parameters", "services/runtime",
             "services/chassis",                             # the sim drives the chassis's kinematics
             "services/map_server"},                         # worlds may load a map file
     "services/lidar": SERVICE_BASE | {"sim"},               # the simulated lidar casts into the sim's world
@@ -86,7 +94,7 @@ def test_the_allow_list_names_only_rooms_that_exist():
 
 def test_imports_point_the_way_the_house_is_drawn():
     wrong = []
-    for top in ("schemas", "geometry", "services", "sim", "cli", "experiments", "bench"):
+    for top in ("schemas", "geometry", "parameters", "services", "sim", "cli", "experiments", "bench"):
         for path in (REPO / top).rglob("*.py"):
             room = _room(path.relative_to(REPO).parts)
             allowed = ROOMS.get(room, SERVICE_BASE)
@@ -98,7 +106,7 @@ def test_imports_point_the_way_the_house_is_drawn():
 
 def test_nothing_imports_another_modules_private_names():
     wrong = []
-    for top in ("schemas", "geometry", "services", "sim", "cli", "experiments", "bench"):
+    for top in ("schemas", "geometry", "parameters", "services", "sim", "cli", "experiments", "bench"):
         for path in (REPO / top).rglob("*.py"):
             for _, names, line in _imports(path):
                 wrong += [f"{path.relative_to(REPO)}:{line}: {name}" for name in names
@@ -123,7 +131,7 @@ def test_no_two_modules_share_a_name_for_different_things():
     other module name is used once, so a name says which thing it is."""
     roles = {"__init__.py", "node.py", "params.py", "reference.py", "cli.py"}
     seen: dict[str, list[str]] = {}
-    for top in ("schemas", "geometry", "services", "sim", "experiments", "bench", "cli"):
+    for top in ("schemas", "geometry", "parameters", "services", "sim", "experiments", "bench", "cli"):
         for path in (REPO / top).rglob("*.py"):
             if path.name not in roles:
                 seen.setdefault(path.name, []).append(str(path.relative_to(REPO)))
@@ -131,19 +139,79 @@ def test_no_two_modules_share_a_name_for_different_things():
     assert not twice, twice
 
 
-def test_no_parameter_class_redefines_a_field_it_inherits():
-    """A node's parameters extend its core's: a field declared again would silently give the node another
-    default than the core documents."""
-    redefined = []
+def _library_dataclasses():
+    """(module, class) of every dataclass the library defines."""
     for top in ("geometry", "services", "sim"):
         package = importlib.import_module(f"omninav.{top}")
         for info in pkgutil.walk_packages(package.__path__, f"omninav.{top}."):
             module = importlib.import_module(info.name)
             for cls in vars(module).values():
-                if not (isinstance(cls, type) and dataclasses.is_dataclass(cls) and cls.__module__ == info.name):
-                    continue
-                own = cls.__dict__.get("__annotations__", {})
-                redefined += [f"{cls.__qualname__}.{f.name} (from {base.__qualname__})"
-                              for base in cls.__mro__[1:] if dataclasses.is_dataclass(base)
-                              for f in dataclasses.fields(base) if f.name in own]
+                if isinstance(cls, type) and dataclasses.is_dataclass(cls) and cls.__module__ == info.name:
+                    yield module, cls
+
+
+def test_no_parameter_class_redefines_a_field_it_inherits():
+    """A node's parameters extend its core's: a field declared again would silently give the node another
+    default than the core documents."""
+    redefined = []
+    for _, cls in _library_dataclasses():
+        own = cls.__dict__.get("__annotations__", {})
+        redefined += [f"{cls.__qualname__}.{f.name} (from {base.__qualname__})"
+                      for base in cls.__mro__[1:] if dataclasses.is_dataclass(base)
+                      for f in dataclasses.fields(base) if f.name in own]
     assert not redefined, redefined
+
+
+def test_every_parameter_class_declares_and_checks_the_one_way():
+    """Every class a Node takes as Params, and every class named *Params, derives from Parameters
+    (omninav.parameters): its fields say what they allow; no __post_init__ of its own raises."""
+    from omninav.parameters.declare import Parameters
+    from omninav.services.runtime.node import Node
+
+    classes = {cls for _, cls in _library_dataclasses() if cls.__name__.endswith("Params")}
+    classes |= {cls.Params for module, _ in _library_dataclasses() for cls in vars(module).values()
+                if isinstance(cls, type) and issubclass(cls, Node) and cls is not Node}
+    other_ways = [cls.__qualname__ for cls in classes if not issubclass(cls, Parameters)]
+    for cls in classes:
+        post_init = cls.__dict__.get("__post_init__")
+        if post_init is not None:
+            tree = ast.parse(textwrap.dedent(inspect.getsource(post_init)))
+            other_ways += [f"{cls.__qualname__}.__post_init__ raises" for node in ast.walk(tree)
+                           if isinstance(node, ast.Raise)]
+    assert not other_ways, other_ways
+
+
+# A core's parameter class and the modules of the core that read it: a field none of them reads
+# is a parameter that does nothing (or belongs to the node around the core).
+CORE_READERS = {
+    "services.local_planner.params:DwaParams": ["services/local_planner/dwa.py", "services/local_planner/dynamic.py",
+                                                "services/local_planner/control.py"],
+    "services.local_planner.params:FollowerParams": ["services/local_planner/path_follower.py",
+                                                     "services/local_planner/approach.py"],
+    "services.local_planner.params:ElasticBandParams": ["services/local_planner/eband.py"],
+    "services.local_planner.shim:RotationShimParams": ["services/local_planner/shim.py"],
+    "services.global_planner.params:GlobalPlannerParams": ["services/global_planner/astar.py",
+                                                           "services/global_planner/path_smoother.py"],
+    "services.slam.params:SlamParams": ["services/slam/rbpf.py", "services/slam/scanmatch.py",
+                                        "services/slam/particle_grids.py", "services/slam/relations.py"],
+    "services.localizer.params:DiffMotionParams": ["services/localizer/params.py"],
+    "services.localizer.params:OmniMotionParams": ["services/localizer/params.py"],
+    "services.localizer.params:BeamModelParams": ["services/localizer/sensor.py"],
+    "services.localizer.params:LikelihoodFieldProbParams": ["services/localizer/sensor.py"],
+    "services.tracker.tracker:TrackerParams": ["services/tracker/tracker.py"],
+    "services.velocity_smoother.smoother:VelocitySmootherParams": ["services/velocity_smoother/smoother.py"],
+    "services.collision_monitor.collision:CollisionMonitorParams": ["services/collision_monitor/collision.py"],
+    "services.explore.frontiers:ExploreParams": ["services/explore/frontiers.py"],
+}
+
+
+@pytest.mark.parametrize("target", sorted(CORE_READERS))
+def test_no_core_parameter_class_declares_a_field_its_core_never_reads(target):
+    module, name = target.split(":")
+    cls = getattr(importlib.import_module(f"omninav.{module}"), name)
+    own = {f.name for f in dataclasses.fields(cls)} - set().union(
+        *({f.name for f in dataclasses.fields(base)} for base in cls.__mro__[1:] if dataclasses.is_dataclass(base)))
+    code = "\n".join((REPO / path).read_text() for path in CORE_READERS[target])
+    # read as an attribute, or taken by a core function under its own name
+    unread = sorted(field for field in own if not re.search(rf"\.{field}\b|\b{field}: ", code))
+    assert not unread, f"{name} declares what {', '.join(CORE_READERS[target])} never read: {unread}"

@@ -7,7 +7,8 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from omninav.services.chassis.kinematics import DRIVES, ChassisParams, Kinematics, limit_acceleration
-from omninav.services.runtime.params import ParamError, load_params
+from omninav.parameters.declare import ParamError
+from omninav.parameters.from_mapping import load_params
 
 MECANUM = ChassisParams(drive="mecanum")
 speed = st.floats(-3.0, 3.0, allow_nan=False)

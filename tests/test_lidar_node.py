@@ -9,7 +9,7 @@ from omninav.schemas import decode
 from omninav.schemas.messages import Header, Obstacles, Odometry, Pose2D
 from omninav.services.lidar.node import LidarNode, LidarNodeParams
 from omninav.services.runtime.node import NS_PER_S
-from omninav.services.runtime.params import load_params
+from omninav.parameters.from_mapping import load_params
 from omninav.services.runtime.run import build_node
 from omninav.sim.lidar import LidarParams, scan
 from omninav.sim.world import WorldError, load_world, world_path

@@ -21,7 +21,7 @@ from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNo
 from omninav.services.local_planner.params import FollowerParams
 from omninav.services.recorder.mcap_io import RecordingWriter, read_records
 from omninav.services.runtime.node import NS_PER_S
-from omninav.services.runtime.params import ParamError
+from omninav.parameters.declare import ParamError
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client
 from omninav.geometry.se2 import integrate

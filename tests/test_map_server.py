@@ -19,7 +19,7 @@ from omninav.services.map_server.mapio import MapError, load_map, save_map
 from omninav.geometry.grid import cell_to_world
 from omninav.services.map_server.node import MapServerNode, MapServerParams
 from omninav.services.runtime.inprocess import InProcessRunner
-from omninav.services.runtime.params import ParamError
+from omninav.parameters.declare import ParamError
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client
 
@@ -106,9 +106,9 @@ def test_a_missing_or_broken_map_is_refused_naming_the_file(tmp_path):
     no_image.with_suffix(".pgm").unlink()
     with pytest.raises(MapError, match=r"small\.pgm: no such file"):
         build_node("map_server", overrides={"yaml_filename": str(no_image)})
-    with pytest.raises(ParamError, match="yaml_filename is required"):
+    with pytest.raises(ParamError, match="yaml_filename must be non-empty"):
         build_node("map_server")
-    with pytest.raises(ParamError, match="publish_period_s must be 0"):
+    with pytest.raises(ParamError, match="publish_period_s must be ≥ 0, got -1.0"):
         build_node("map_server", overrides={"yaml_filename": str(no_image), "publish_period_s": -1.0})
 
 

@@ -9,7 +9,8 @@ import pytest
 
 from omninav.services.costmap.params import InflationLayerParams, ObstacleLayerParams, load_costmap_params
 from omninav.services.runtime.compose import ComposeError, load_compose
-from omninav.services.runtime.params import ParamError, load_node_params, read_params_mapping
+from omninav.services.runtime.params import load_node_params, read_params_mapping
+from omninav.parameters.declare import ParamError
 from omninav.services.runtime.service_registry import node_class
 
 
@@ -230,7 +231,7 @@ def ignored_in(caplog) -> str:
 def test_amcl_takes_nav2s_names_from_the_whole_file(nav2_file, caplog):
     with caplog.at_level(logging.WARNING):
         params = build_params("localizer", nav2_file, "amcl")
-    assert params.odom_alphas == (0.2, 0.2, 0.2, 0.2, 0.2)
+    assert [getattr(params, f"odom_alpha{k}") for k in range(1, 6)] == [0.2] * 5
     assert params.odom_model_type == "diff-corrected"           # Nav2's models are ROS 1's corrected ones
     assert (params.laser_max_beams, params.min_particles, params.max_particles) == (60, 500, 2000)
     assert (params.kld_err, params.kld_z, params.laser_sigma_hit, params.laser_lambda_short) == (0.05, 0.99, 0.2, 0.1)

@@ -10,7 +10,7 @@ from omninav.services.navigator.core import (WAITING_FOR_CONFIDENT_POSE, Control
                                              PlanResult, State)
 from omninav.services.navigator.params import NavigatorParams
 from omninav.services.navigator.recovery import back_up, behaviour, clear_costmaps, rotate, wait
-from omninav.services.runtime.params import ParamError
+from omninav.parameters.declare import ParamError
 from omninav.geometry.se2 import integrate, relative, wrap_angle
 
 DT = 0.05  # 20 Hz, controller_frequency's default

@@ -17,7 +17,7 @@ from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.merge import StampMerger
 from omninav.services.runtime.node import NS_PER_S, Node, QueryError
-from omninav.services.runtime.params import ParamError
+from omninav.parameters.declare import ParamError
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client
 from omninav.geometry.se2 import integrate, relative, wrap_angle
@@ -342,7 +342,7 @@ move_base:
     with pytest.raises(ParamError, match=r"type 'move_slow_and_clear/MoveSlowAndClear' has no equivalent"):
         build_node("navigator", overrides={"recovery_behaviors": [
             {"name": "slow", "type": "move_slow_and_clear/MoveSlowAndClear"}]})
-    with pytest.raises(ParamError, match="request_delay_s must be zero or positive"):
+    with pytest.raises(ParamError, match="request_delay_s must be ≥ 0, got -0.1"):
         build_node("navigator", overrides={"request_delay_s": -0.1})
 
 

@@ -1,9 +1,11 @@
+import re
 from dataclasses import dataclass
 
 import pytest
 
-from omninav.services.runtime.params import (ParamError, load_params, load_params_file, parse_overrides, require_at_least,
-                                             require_nonnegative, require_positive)
+from omninav.services.runtime.params import load_params_file, parse_overrides
+from omninav.parameters.declare import Parameters, ParamError, Rule, group, param
+from omninav.parameters.from_mapping import load_params
 
 
 @dataclass(frozen=True)
@@ -65,23 +67,64 @@ def test_overrides():
 
 
 @dataclass(frozen=True)
-class Ranged:
-    delay_s: float = 0.0
-    rate_hz: float = 1.0
-    samples: int = 1
+class Ranged(Parameters):
+    delay_s: float = param(0.0, ge=0)
+    rate_hz: float = param(1.0, gt=0)
+    samples: int = param(1, ge=1)
+    share: float = param(0.5, ge=0, le=1)
+    mode: str = param("a", choices=("a", "b"))
+    frame: str = param("map", nonempty=True)
+    offset: tuple[float, ...] = param((0.0, 0.0), items=2, finite=True)
+    outline: tuple[tuple[float, float], ...] = param((), min_items=3, or_empty=True)
+    gains: tuple[float, ...] = param((1.0,), ge=0)
+    limit: float | None = param(None, gt=0)
+    low: float = 0.0
 
-    def __post_init__(self):
-        require_nonnegative(self, "delay_s")
-        require_positive(self, "rate_hz")
-        require_at_least(self, 1, "samples")
+    rules = (Rule("low", lambda p: p.low <= p.rate_hz, "≤ rate_hz ({p.rate_hz})"),)
+
+
+@dataclass(frozen=True)
+class MoreRanged(Ranged):
+    high: float = param(2.0, finite=True)
+
+    rules = (Rule("high", lambda p: p.high >= p.low, "≥ low ({p.low})"),)
 
 
 @pytest.mark.parametrize("values,needle", [
-    ({"delay_s": -0.1}, "delay_s must be zero or positive, got -0.1"),
-    ({"rate_hz": 0}, "rate_hz must be positive, got 0.0"),
-    ({"samples": 0}, "samples must be ≥ 1, got 0"),
+    ({"delay_s": -0.1}, "parameter delay_s must be ≥ 0, got -0.1"),
+    ({"rate_hz": 0.0}, "parameter rate_hz must be > 0, got 0.0"),
+    ({"samples": 0}, "parameter samples must be ≥ 1, got 0"),
+    ({"share": 1.5}, "parameter share must be in [0, 1], got 1.5"),
+    ({"mode": "c"}, "parameter mode must be one of 'a', 'b', got 'c'"),
+    ({"frame": ""}, "parameter frame must be non-empty, got ''"),
+    ({"offset": [1.0]}, "parameter offset must be 2 items, got (1.0,)"),
+    ({"outline": [[0, 0], [1, 0]]}, "parameter outline must be empty or at least 3 items"),
+    ({"gains": [1.0, -1.0]}, "parameter gains must be a list of numbers each ≥ 0, got (1.0, -1.0)"),
+    ({"limit": 0.0}, "parameter limit must be > 0, got 0.0"),
+    ({"low": 2.0}, "parameter low must be ≤ rate_hz (1.0), got 2.0"),
+    ({"high": -1.0}, "parameter high must be ≥ low (0.0), got -1.0"),
 ])
-def test_range_checks_name_the_parameter_and_its_value(values, needle):
-    assert load_params(Ranged, {}) == Ranged()
-    with pytest.raises(ParamError, match=f"^ranged: {needle}$"):
-        load_params(Ranged, values, "ranged")
+def test_each_declared_constraint_is_one_line_naming_the_parameter_the_allowed_and_the_value(values, needle):
+    assert load_params(MoreRanged, {}) == MoreRanged()
+    with pytest.raises(ParamError, match="^" + re.escape(f"ranged: {needle}")):
+        load_params(MoreRanged, values, "ranged")
+    with pytest.raises(ParamError, match="^" + re.escape(needle)):     # built in code: the same check
+        MoreRanged(**{k: tuple(map(tuple, v)) if k == "outline" else tuple(v) if isinstance(v, list) else v
+                      for k, v in values.items()})
+
+
+def test_what_a_field_allows_passes():
+    p = load_params(MoreRanged, {"outline": [[0, 0], [1, 0], [0, 1]], "limit": 3, "share": 1, "mode": "b",
+                                 "gains": [], "low": 1.0, "high": 1.0})
+    assert p.outline == ((0.0, 0.0), (1.0, 0.0), (0.0, 1.0)) and p.limit == 3.0
+
+
+def test_an_unknown_name_is_refused_naming_it_and_the_known_ones():
+    with pytest.raises(ParamError, match=r"^ranged: MoreRanged: unknown parameter 'rate_h' \(did you mean 'rate_hz'\?\); "
+                                         r"known: delay_s, frame, gains, high, limit, low, mode, offset, outline, "
+                                         r"rate_hz, samples, share$"):
+        load_params(MoreRanged, {"rate_h": 2}, "ranged")
+
+
+def test_a_group_is_built_from_the_larger_class_that_includes_it():
+    assert group(MoreRanged(rate_hz=3.0, high=4.0), Ranged) == Ranged(rate_hz=3.0)

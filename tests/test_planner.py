@@ -16,7 +16,7 @@ from omninav.services.global_planner.params import GlobalPlannerParams
 from omninav.services.global_planner.path_smoother import segment_max_cost, smooth
 from omninav.services.map_server.mapio import load_map
 from omninav.geometry.grid import cell_to_world, grid_coords
-from omninav.services.runtime.params import ParamError
+from omninav.parameters.declare import ParamError
 from omninav.sim.world import WorldError, load_world, shipped_worlds, world_path
 
 from conftest import SHARED_DATA

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..runtime.params import require_nonnegative, require_positive
+from ...parameters.declare import Parameters, Rule, param
+
 
 DRIVES = ("mecanum", "omni3", "diff")
 
@@ -26,7 +27,7 @@ WHEEL_NAMES = {
 
 
 @dataclass(frozen=True)
-class ChassisParams:
+class ChassisParams(Parameters):
     """Everything the chassis service needs, flat as a ROS parameter file.
 
     Geometry defaults fit the mecanum paper's robot (footprint 0.832 x 0.636 m): 152 mm wheels
@@ -34,55 +35,38 @@ class ChassisParams:
     length) and y = +-0.25 m (a 5 cm wide wheel ends 2 cm inside the 0.318 m half width).
     Mecanum kinematics only depend on l1 + l2; diff uses l2 alone.
     """
-    drive: str = "mecanum"                 # mecanum | omni3 | diff
-    wheel_radius: float = 0.076            # m
-    l1: float = 0.30                       # m, half wheelbase: wheel contact x (mecanum)
-    l2: float = 0.25                       # m, half track: wheel contact |y| (mecanum and diff)
-    omni_wheel_distance: float = 0.28      # m, centre to each omni3 wheel's contact point
-    omni_main_direction: float = math.pi / 3   # rad, direction of omni3 wheel 1 from the centre
-    max_wheel_speed: float = 13.0          # rad/s (about 124 rpm, 0.99 m/s at the rim)
-    acc_lim_x: float = 2.5                 # m/s^2 (ROS base_local_planner default)
-    acc_lim_y: float = 2.5                 # m/s^2
-    acc_lim_theta: float = 3.2             # rad/s^2
+    drive: str = param("mecanum", choices=DRIVES)               # mecanum | omni3 | diff
+    wheel_radius: float = param(0.076, gt=0)                    # m
+    l1: float = param(0.30, gt=0)                               # m, half wheelbase: wheel contact x (mecanum)
+    l2: float = param(0.25, gt=0)                               # m, half track: wheel contact |y| (mecanum and diff)
+    omni_wheel_distance: float = param(0.28, gt=0)              # m, centre to each omni3 wheel's contact point
+    omni_main_direction: float = param(math.pi / 3, finite=True)  # rad, direction of omni3 wheel 1 from the centre
+    max_wheel_speed: float = param(13.0, gt=0)                  # rad/s (about 124 rpm, 0.99 m/s at the rim)
+    acc_lim_x: float = param(2.5, gt=0)                         # m/s^2 (ROS base_local_planner default)
+    acc_lim_y: float = param(2.5, gt=0)                         # m/s^2
+    acc_lim_theta: float = param(3.2, gt=0)                     # rad/s^2
     # odometry (odometry.py): heading source and how the covariance grows
-    odom_gyro_weight: float = 0.0          # 0: heading from the wheels, 1: from the gyro
-    odom_trans_var_per_m: float = 1e-4     # m^2 of x and y variance per m driven
-    odom_rot_var_per_rad: float = 3e-4     # rad^2 of heading variance per rad turned
-    odom_rot_var_per_m: float = 1e-4       # rad^2 of heading variance per m driven
-    odom_encoder_rate_std: float = 0.05    # rad/s, noise of a wheel or follower encoder rate
-    odom_gyro_std: float = 0.01            # rad/s, noise of the gyro rate
+    odom_gyro_weight: float = param(0.0, ge=0.0, le=1.0)        # 0: heading from the wheels, 1: from the gyro
+    odom_trans_var_per_m: float = param(1e-4, ge=0)             # m^2 of x and y variance per m driven
+    odom_rot_var_per_rad: float = param(3e-4, ge=0)             # rad^2 of heading variance per rad turned
+    odom_rot_var_per_m: float = param(1e-4, ge=0)               # rad^2 of heading variance per m driven
+    odom_encoder_rate_std: float = param(0.05, ge=0)            # rad/s, noise of a wheel or follower encoder rate
+    odom_gyro_std: float = param(0.01, ge=0)                    # rad/s, noise of the gyro rate
     # passive follower wheels (follower.py): rolling direction, scale, contact point
-    follower_alpha: float = 0.0            # rad, rolling direction of follower A in the robot frame
-    follower_beta: float = math.pi / 2     # rad, rolling direction of follower B
-    follower_ka: float = 0.025             # m per encoder unit (rad) of follower A
-    follower_kb: float = 0.025             # m per encoder unit (rad) of follower B
-    follower_a_offset: tuple[float, float] = (0.10, 0.0)   # m, contact point of A
-    follower_b_offset: tuple[float, float] = (0.0, 0.10)   # m, contact point of B
-
-    def __post_init__(self) -> None:
-        if self.drive not in DRIVES:
-            raise ValueError(f"drive must be one of {DRIVES}, got {self.drive!r}")
-        require_positive(self, "wheel_radius", "l1", "l2", "omni_wheel_distance", "max_wheel_speed", "acc_lim_x",
-                         "acc_lim_y", "acc_lim_theta", "follower_ka", "follower_kb")
-        require_nonnegative(self, "odom_trans_var_per_m", "odom_rot_var_per_rad", "odom_rot_var_per_m",
-                            "odom_encoder_rate_std", "odom_gyro_std")
-        if not 0.0 <= self.odom_gyro_weight <= 1.0:
-            raise ValueError(f"odom_gyro_weight must be within [0, 1], got {self.odom_gyro_weight}")
-        for name in ("omni_main_direction", "follower_alpha", "follower_beta"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"{name} must be finite, got {getattr(self, name)}")
-        for name in ("follower_a_offset", "follower_b_offset"):
-            offset = getattr(self, name)
-            if len(offset) != 2 or not all(math.isfinite(v) for v in offset):
-                raise ValueError(f"{name} must be two finite numbers [x, y], got {offset}")
-        # parallel followers measure one direction twice and the other not at all
-        if abs(math.sin(self.follower_beta - self.follower_alpha)) < 0.1:
-            raise ValueError("follower_alpha and follower_beta must differ by more than about 6 degrees "
-                             f"(mod 180), got {self.follower_alpha} and {self.follower_beta}")
+    follower_alpha: float = param(0.0, finite=True)             # rad, rolling direction of follower A in the robot frame
+    follower_beta: float = param(math.pi / 2, finite=True)      # rad, rolling direction of follower B
+    follower_ka: float = param(0.025, gt=0)                     # m per encoder unit (rad) of follower A
+    follower_kb: float = param(0.025, gt=0)                     # m per encoder unit (rad) of follower B
+    follower_a_offset: tuple[float, float] = param((0.10, 0.0), items=2, finite=True)  # m, contact point of A
+    follower_b_offset: tuple[float, float] = param((0.0, 0.10), items=2, finite=True)  # m, contact point of B
 
     @property
     def acc_limits(self) -> np.ndarray:
         return np.array([self.acc_lim_x, self.acc_lim_y, self.acc_lim_theta])
+
+    # parallel followers measure one direction twice and the other not at all
+    rules = (Rule("follower_beta", lambda p: abs(math.sin(p.follower_beta - p.follower_alpha)) >= 0.1,
+                  "more than about 6 degrees (mod 180) from follower_alpha ({p.follower_alpha})"),)
 
 
 def _wheel_rows(params: ChassisParams) -> np.ndarray:

@@ -23,43 +23,33 @@ from ...schemas import MessageError
 from ...schemas.messages import Header, Odometry, Pose2D, Transform, Twist, WheelCommand, WheelState
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
-from ..runtime.params import ParamError, require_nonnegative
+from ...parameters.declare import ParamError, Rule, param
 from ..runtime.state_file import read_state, write_state
 from .follower_wheels import follower_odometry
 from .kinematics import ChassisParams, Kinematics
 from .odometry import OdomEstimate, wheel_odometry
 
 N_FOLLOWERS = 2
-ODOM_SOURCES = ("wheels", "followers")
 
 
 @dataclass(frozen=True)
 class ChassisNodeParams(ChassisParams):
     """ChassisParams plus what the node needs around the core."""
-    cmd_vel_timeout_s: float = 0.5     # sim s: a command older than this is replaced by zero
-    cmd_vel_delay_s: float = 0.05      # sim s from a command's stamp until it takes effect
-    odom_frame_id: str = "odom"
-    base_frame_id: str = "base_link"
-    follower_odometry: bool = True     # also publish odom_follower (needs two follower encoders)
+    cmd_vel_timeout_s: float = param(0.5, ge=0)  # sim s: a command older than this is replaced by zero
+    cmd_vel_delay_s: float = param(0.05, ge=0)   # sim s from a command's stamp until it takes effect
+    odom_frame_id: str = param("odom", nonempty=True)
+    base_frame_id: str = param("base_link", nonempty=True)
+    follower_odometry: bool = True               # also publish odom_follower (needs two follower encoders)
     # what odom and tf/odom_base carry: the driven wheels' encoders, or the follower wheels and gyro,
     # which roll with the ground and so also measure slip and a robot pushed by someone
-    odom_source: str = "wheels"        # wheels | followers
-    odom_file: str = ""                # where save_odom_rate keeps the odometry's state; "": nowhere
-    save_odom_rate: float = 10.0       # Hz of sim time
+    odom_source: str = param("wheels", choices=("wheels", "followers"))
+    odom_file: str = ""                          # where save_odom_rate keeps the odometry's state; "": nowhere
+    save_odom_rate: float = param(10.0, ge=0)    # Hz of sim time
 
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        require_nonnegative(self, "cmd_vel_timeout_s", "cmd_vel_delay_s", "save_odom_rate")
-        if self.cmd_vel_delay_s >= self.cmd_vel_timeout_s:
-            raise ValueError(f"cmd_vel_delay_s ({self.cmd_vel_delay_s}) must be shorter than "
-                             f"cmd_vel_timeout_s ({self.cmd_vel_timeout_s}), or no command is ever fresh")
-        for name in ("odom_frame_id", "base_frame_id"):
-            if not getattr(self, name):
-                raise ValueError(f"{name} must not be empty")
-        if self.odom_source not in ODOM_SOURCES:
-            raise ValueError(f"odom_source {self.odom_source!r}: one of {' | '.join(ODOM_SOURCES)}")
-        if self.odom_source == "followers" and not self.follower_odometry:
-            raise ValueError("odom_source followers needs follower_odometry: true")
+    rules = (Rule("cmd_vel_delay_s", lambda p: p.cmd_vel_delay_s < p.cmd_vel_timeout_s,
+                  "shorter than cmd_vel_timeout_s ({p.cmd_vel_timeout_s}), or no command is ever fresh"),
+             Rule("odom_source", lambda p: p.odom_source != "followers" or p.follower_odometry,
+                  "wheels unless follower_odometry is true"))
 
 
 @dataclass(frozen=True)

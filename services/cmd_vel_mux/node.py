@@ -18,22 +18,19 @@ from dataclasses import dataclass
 from ...schemas.messages import Clock
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node
-from ..runtime.params import require_nonnegative
 from .mux import CommandMux, Source
+from ...parameters.declare import Parameters, param
 
 TELEOP, NAVIGATION = 0, 1       # Deferred kinds
 
 
 @dataclass(frozen=True)
-class CmdVelMuxParams:
+class CmdVelMuxParams(Parameters):
     teleop_priority: int = 100
-    teleop_timeout: float = 0.5         # s of sim time (twist_mux's example uses 0.5)
+    teleop_timeout: float = param(0.5, gt=0)    # s of sim time (twist_mux's example uses 0.5)
     navigation_priority: int = 10
-    navigation_timeout: float = 0.5
-    command_delay_s: float = 0.02       # sim s from a command's stamp until it is offered
-
-    def __post_init__(self):
-        require_nonnegative(self, "command_delay_s")
+    navigation_timeout: float = param(0.5, gt=0)
+    command_delay_s: float = param(0.02, ge=0)  # sim s from a command's stamp until it is offered
 
 
 class CmdVelMuxNode(Node):

@@ -35,7 +35,7 @@ from ...geometry.footprint import STOP_PADDING, pad
 from ...geometry.frames import scan_points
 from ...geometry.se2 import integrate
 from ..local_planner.dynamic import Movers
-from ..runtime.params import require_at_least, require_nonnegative, require_positive
+from ...parameters.declare import Parameters, Rule, param
 
 APPROACH_SCALES = (1.0, 0.75, 0.5, 0.25)   # of a command, tried in turn against the tracks (then standing)
 TRACKED_POINT_MARGIN = 0.15   # m beyond a track's radius within which a scan point is that track's
@@ -43,29 +43,21 @@ APPROACH_TOLERANCE = 0.01     # m deeper into the stop zone than standing that a
 
 
 @dataclass(frozen=True)
-class CollisionMonitorParams:
+class CollisionMonitorParams(Parameters):
     """Nav2 collision_monitor's stop and slowdown polygons, here grown from the footprint."""
-    footprint: tuple[tuple[float, float], ...] = ((0.416, 0.318), (-0.416, 0.318), (-0.416, -0.318),
-                                                  (0.416, -0.318))   # m, robot frame (the mecanum paper's)
-    stop_padding: float = STOP_PADDING   # m added around the footprint for the stop zone
-    slowdown_padding: float = 0.30       # m added around the footprint for the slowdown zone
-    slowdown_ratio: float = 0.5          # Nav2's default
-    min_points: int = 4                  # Nav2's default: fewer points inside a zone are noise
-    approach_check_s: float = 0.1        # s: a stop-zone point stops commands that come closer within this
+    footprint: tuple[tuple[float, float], ...] = param(((0.416, 0.318), (-0.416, 0.318), (-0.416, -0.318),
+                                                        (0.416, -0.318)), min_items=3)   # m, robot frame (the mecanum paper's)
+    stop_padding: float = param(STOP_PADDING, ge=0)   # m added around the footprint for the stop zone
+    slowdown_padding: float = param(0.30, ge=0)       # m added around the footprint for the slowdown zone
+    slowdown_ratio: float = param(0.5, ge=0.0, le=1.0)          # Nav2's default
+    min_points: int = param(4, ge=1)                  # Nav2's default: fewer points inside a zone are noise
+    approach_check_s: float = param(0.1, gt=0)        # s: a stop-zone point stops commands that come closer within this
     # Nav2's "approach" action, here against the tracker's moving obstacles (constant velocity)
-    time_before_collision: float = 2.0   # s: a command meeting a track in its stop zone sooner is slowed or stopped
-    simulation_time_step: float = 0.1    # s between the predicted poses checked
+    time_before_collision: float = param(2.0, gt=0)   # s: a command meeting a track in its stop zone sooner is slowed or stopped
+    simulation_time_step: float = param(0.1, gt=0)    # s between the predicted poses checked
 
-    def __post_init__(self):
-        if len(self.footprint) < 3:
-            raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
-        require_nonnegative(self, "stop_padding", "slowdown_padding")
-        require_positive(self, "approach_check_s", "time_before_collision", "simulation_time_step")
-        require_at_least(self, 1, "min_points")
-        if self.slowdown_padding < self.stop_padding:
-            raise ValueError("slowdown_padding must be at least stop_padding")
-        if not 0.0 <= self.slowdown_ratio <= 1.0:
-            raise ValueError(f"slowdown_ratio must be within [0, 1], got {self.slowdown_ratio}")
+    rules = (Rule("slowdown_padding", lambda p: p.slowdown_padding >= p.stop_padding,
+                  "at least stop_padding ({p.stop_padding})"),)
 
 
 @dataclass(frozen=True)

@@ -27,8 +27,8 @@ from ...schemas.messages import Odometry, Tracks, Twist
 from ..local_planner.dynamic import Movers, movers_at, tracks_problem
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
-from ..runtime.params import require_nonnegative
 from .collision import CollisionMonitor, CollisionMonitorParams, robot_frame_points
+from ...parameters.declare import Rule, param
 
 
 @dataclass(frozen=True)
@@ -36,17 +36,13 @@ class CollisionMonitorNodeParams(CollisionMonitorParams):
     laser_x: float = LASER_MOUNT[0]     # m: the laser on the robot (the simulated lidar's mount)
     laser_y: float = LASER_MOUNT[1]
     laser_yaw: float = LASER_MOUNT[2]
-    scan_delay_s: float = 0.05               # sim s from a scan's stamp until it is used
-    source_timeout: float = 1.0              # s: an older scan is no scan (Nav2's name; its default is 2)
-    tracks_delay_s: float = 0.5              # sim s from a tracks / odom stamp until it is used (live, tracks trailed
+    scan_delay_s: float = param(0.05, ge=0)               # sim s from a scan's stamp until it is used
+    source_timeout: float = param(1.0, finite=True)              # s: an older scan is no scan (Nav2's name; its default is 2)
+    tracks_delay_s: float = param(0.5, ge=0)              # sim s from a tracks / odom stamp until it is used (live, tracks trailed
                                              # the clock the monitor runs on by more than 0.3 s)
 
-    def __post_init__(self):
-        super().__post_init__()
-        require_nonnegative(self, "scan_delay_s", "tracks_delay_s")
-        if not (np.isfinite(self.source_timeout) and self.source_timeout > self.scan_delay_s):
-            raise ValueError(f"source_timeout must exceed scan_delay_s ({self.scan_delay_s}), "
-                             f"got {self.source_timeout}")
+    rules = (Rule("source_timeout", lambda p: p.source_timeout > p.scan_delay_s,
+                  "more than scan_delay_s ({p.scan_delay_s})"),)
 
 
 _ODOM, _TRACKS = range(2)     # the collision monitor's held inputs besides scans, in input order

@@ -47,12 +47,12 @@ from ...schemas.messages import ClearCostmaps, Diagnostic, Header, LaserScan, Oc
 from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node, QueryError
-from ..runtime.params import require_nonnegative
 from ...geometry.se2 import compose
 from .costmap import Costmap
 from ...geometry.frames import FrameParams, LASER_MOUNT
 from .layers import same_geometry, warm_up
 from .params import CostmapParams, ObstacleLayerParams, StaticLayerParams, load_costmap_params
+from ...parameters.declare import param
 
 SAMPLES = "compose/params/"
 TIMES_KEPT = 10_000     # update times per layer kept for the diagnostic's medians
@@ -69,10 +69,7 @@ class CostmapNodeParams(FrameParams):
     laser_x: float = LASER_MOUNT[0]     # m: the laser in base_link (the simulated lidar's mount)
     laser_y: float = LASER_MOUNT[1]
     laser_yaw: float = LASER_MOUNT[2]
-    request_delay_s: float = 0.3  # sim s from a costmap/clear stamp to its effect
-
-    def __post_init__(self) -> None:
-        require_nonnegative(self, "request_delay_s")
+    request_delay_s: float = param(0.3, ge=0)  # sim s from a costmap/clear stamp to its effect
 
 
 class ServedCostmap:

@@ -25,14 +25,15 @@ anything else unknown is an error naming the key and the file, with the closest 
 from __future__ import annotations
 
 import logging
-import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Union
 
 import yaml
 
-from ..runtime.params import ParamError, load_params, read_yaml, unknown_names
+from ..runtime.params import read_yaml
+from ...parameters.declare import Parameters, ParamError, Rule, param
+from ...parameters.from_mapping import load_params, unknown_names
 
 _log = logging.getLogger("omninav.params")
 
@@ -56,88 +57,69 @@ IGNORED = {
 SOURCE_ALIASES = {"obstacle_max_range": "obstacle_range", "raytrace_max_range": "raytrace_range"}
 
 
-def _finite_at_least(owner: str, name: str, value: float, low: float, strict: bool = False) -> None:
-    if not math.isfinite(value) or value < low or (strict and value == low):
-        relation = ">" if strict else "≥"
-        raise ValueError(f"{owner}: {name} must be {relation} {low}, got {value}")
+def _unique_names(items) -> bool:
+    names = [item.name for item in items]
+    return len(set(names)) == len(names)
 
 
 @dataclass(frozen=True)
-class ObservationSource:
+class ObservationSource(Parameters):
     """One sensor of an obstacle layer (ROS: the section named in observation_sources)."""
     name: str
-    topic: str = ""                     # ROS default: the source's name
-    sensor_frame: str = ""              # "" = the frame the scan's header names
-    data_type: str = "LaserScan"        # only laser scans reach this costmap (ROS default PointCloud)
+    topic: str = ""                                             # ROS default: the source's name
+    sensor_frame: str = ""                                      # "" = the frame the scan's header names
+    data_type: str = param("LaserScan", choices=("LaserScan",))  # only laser scans reach this costmap (ROS default PointCloud)
     marking: bool = True
     clearing: bool = False
-    obstacle_range: float = DEFAULT_OBSTACLE_RANGE   # m, mark hits nearer than this
-    raytrace_range: float = DEFAULT_RAYTRACE_RANGE   # m, clear free space out to this
-    inf_is_valid: bool = False          # +inf readings clear out to range_max
-    observation_persistence: float = 0.0  # s; 0 keeps only the latest scan
+    obstacle_range: float = param(DEFAULT_OBSTACLE_RANGE, ge=0)  # m, mark hits nearer than this
+    raytrace_range: float = param(DEFAULT_RAYTRACE_RANGE, ge=0)  # m, clear free space out to this
+    inf_is_valid: bool = False                                  # +inf readings clear out to range_max
+    observation_persistence: float = param(0.0, ge=0)           # s; 0 keeps only the latest scan
 
     def __post_init__(self):
         if not self.topic:
             object.__setattr__(self, "topic", self.name)
-        if self.data_type != "LaserScan":
-            raise ValueError(f"observation source {self.name!r}: data_type {self.data_type!r} is not "
-                             "supported (only LaserScan)")
-        for key in ("obstacle_range", "raytrace_range", "observation_persistence"):
-            _finite_at_least(f"observation source {self.name!r}", key, getattr(self, key), 0.0)
+        super().__post_init__()
 
 
 @dataclass(frozen=True)
-class StaticLayerParams:
+class StaticLayerParams(Parameters):
     name: str = "static_layer"
     enabled: bool = True
     map_topic: str = "map"
     first_map_only: bool = False
     subscribe_to_updates: bool = False
-    track_unknown_space: bool = True    # map's unknown cells stay NO_INFORMATION
-    use_maximum: bool = False           # combine by max instead of overwriting
-    lethal_cost_threshold: int = 100    # map values at or above are lethal
-    unknown_cost_value: int = -1        # the map value meaning unknown
-    trinary_costmap: bool = True        # everything below lethal is free (else scaled)
-
-    def __post_init__(self):
-        if not 0 <= self.lethal_cost_threshold <= 100:
-            raise ValueError(f"{self.name}: lethal_cost_threshold must be within 0..100, "
-                             f"got {self.lethal_cost_threshold}")
+    track_unknown_space: bool = True                       # map's unknown cells stay NO_INFORMATION
+    use_maximum: bool = False                              # combine by max instead of overwriting
+    lethal_cost_threshold: int = param(100, ge=0, le=100)  # map values at or above are lethal
+    unknown_cost_value: int = -1                           # the map value meaning unknown
+    trinary_costmap: bool = True                           # everything below lethal is free (else scaled)
 
 
 @dataclass(frozen=True)
-class ObstacleLayerParams:
+class ObstacleLayerParams(Parameters):
     name: str = "obstacle_layer"
     enabled: bool = True
-    track_unknown_space: bool | None = None   # None: the costmap's track_unknown_space
+    track_unknown_space: bool | None = None             # None: the costmap's track_unknown_space
     footprint_clearing_enabled: bool = True
-    combination_method: int = 1               # 0 overwrite, 1 maximum
+    combination_method: int = param(1, choices=(0, 1))  # 0 overwrite, 1 maximum
     observation_sources: tuple[ObservationSource, ...] = ()
 
-    def __post_init__(self):
-        if self.combination_method not in (0, 1):
-            raise ValueError(f"{self.name}: combination_method must be 0 (overwrite) or 1 (maximum), "
-                             f"got {self.combination_method}")
-        names = [s.name for s in self.observation_sources]
-        if len(set(names)) != len(names):
-            raise ValueError(f"{self.name}: observation source named twice in {names}")
+    rules = (Rule("observation_sources", lambda p: _unique_names(p.observation_sources), "of different names",
+                  shown=lambda p: [s.name for s in p.observation_sources]),)
 
 
 @dataclass(frozen=True)
-class InflationLayerParams:
+class InflationLayerParams(Parameters):
     name: str = "inflation_layer"
     enabled: bool = True
-    inflation_radius: float = 0.55       # m
-    cost_scaling_factor: float = 10.0    # 1/m, exponential decay beyond the inscribed radius
-    inflate_unknown: bool = False        # let inflation overwrite unknown cells below inscribed cost
-
-    def __post_init__(self):
-        _finite_at_least(self.name, "inflation_radius", self.inflation_radius, 0.0)
-        _finite_at_least(self.name, "cost_scaling_factor", self.cost_scaling_factor, 0.0)
+    inflation_radius: float = param(0.55, ge=0)     # m
+    cost_scaling_factor: float = param(10.0, ge=0)  # 1/m, exponential decay beyond the inscribed radius
+    inflate_unknown: bool = False                   # let inflation overwrite unknown cells below inscribed cost
 
 
 @dataclass(frozen=True)
-class KeepoutLayerParams:
+class KeepoutLayerParams(Parameters):
     """Keepout zones and speed limits from mask images (map_server YAML files, in the map frame),
     after Nav2's keepout and speed filters. Keepout cells (mask value ≥ 100) are lethal; a speed
     mask value v in 1..100 limits the speed to speed_limit_base + speed_limit_multiplier·v
@@ -145,16 +127,11 @@ class KeepoutLayerParams:
     cells have no limit."""
     name: str = "keepout_layer"
     enabled: bool = True
-    mask: str = ""                        # map YAML of the keepout mask ("" = none)
-    speed_limit_mask: str = ""            # map YAML of the speed mask ("" = none)
-    speed_limit_base: float = 0.0
-    speed_limit_multiplier: float = 1.0
+    mask: str = ""              # map YAML of the keepout mask ("" = none)
+    speed_limit_mask: str = ""  # map YAML of the speed mask ("" = none)
+    speed_limit_base: float = param(0.0, finite=True)
+    speed_limit_multiplier: float = param(1.0, finite=True)
     speed_limit_percentage: bool = True
-
-    def __post_init__(self):
-        for key in ("speed_limit_base", "speed_limit_multiplier"):
-            if not math.isfinite(getattr(self, key)):
-                raise ValueError(f"{self.name}: {key} must be finite")
 
 
 LayerParams = Union[StaticLayerParams, ObstacleLayerParams, InflationLayerParams, KeepoutLayerParams]
@@ -173,41 +150,33 @@ LAYER_TYPES: dict[str, type] = {
 
 
 @dataclass(frozen=True)
-class CostmapParams:
+class CostmapParams(Parameters):
     """One costmap (Costmap2DROS). width/height are metres (ROS declares them int but files often
     write 6.0); they size a rolling window, or a costmap without a static map."""
     global_frame: str = "map"
     robot_base_frame: str = "base_link"
-    transform_tolerance: float = 0.3      # s
-    update_frequency: float = 5.0         # Hz, sim time
-    publish_frequency: float = 0.0        # Hz, sim time; 0 = never
+    transform_tolerance: float = param(0.3, ge=0)               # s
+    update_frequency: float = param(5.0, ge=0)                  # Hz, sim time
+    publish_frequency: float = param(0.0, ge=0)                 # Hz, sim time; 0 = never
     rolling_window: bool = False
     track_unknown_space: bool = False
     always_send_full_costmap: bool = False
-    width: float = 10.0                   # m
-    height: float = 10.0                  # m
-    resolution: float = 0.05              # m/cell
-    origin_x: float = 0.0                 # m
-    origin_y: float = 0.0                 # m
-    footprint: tuple[tuple[float, float], ...] = ()   # polygon in the robot frame; () = robot_radius
-    robot_radius: float = 0.46            # m
-    footprint_padding: float = 0.01       # m
+    width: float = param(10.0, gt=0)                            # m
+    height: float = param(10.0, gt=0)                           # m
+    resolution: float = param(0.05, gt=0)                       # m/cell
+    origin_x: float = 0.0                                       # m
+    origin_y: float = 0.0                                       # m
+    footprint: tuple[tuple[float, float], ...] = param((), min_items=3, or_empty=True)  # polygon in the robot frame; () = robot_radius
+    robot_radius: float = param(0.46, ge=0)                     # m
+    footprint_padding: float = param(0.01, ge=0)                # m
     # pre-Hydro default plugin set (no static map unless static_map: true)
     layers: tuple[LayerParams, ...] = field(default_factory=lambda: (ObstacleLayerParams(), InflationLayerParams()))
 
-    def __post_init__(self):
-        for key in ("transform_tolerance", "update_frequency", "publish_frequency", "robot_radius",
-                    "footprint_padding"):
-            _finite_at_least("costmap", key, getattr(self, key), 0.0)
-        for key in ("width", "height", "resolution"):
-            _finite_at_least("costmap", key, getattr(self, key), 0.0, strict=True)
-        if self.footprint and len(self.footprint) < 3:
-            raise ValueError(f"costmap: footprint needs at least 3 points, got {len(self.footprint)}")
-        names = [layer.name for layer in self.layers]
-        if len(set(names)) != len(names):
-            raise ValueError(f"costmap: layer named twice in {names}")
-        if sum(isinstance(layer, InflationLayerParams) and layer.enabled for layer in self.layers) > 1:
-            raise ValueError("costmap: at most one inflation layer")
+    rules = (Rule("layers", lambda p: _unique_names(p.layers), "of different names",
+                  shown=lambda p: [layer.name for layer in p.layers]),
+             Rule("layers", lambda p: sum(isinstance(layer, InflationLayerParams) and layer.enabled
+                                          for layer in p.layers) <= 1, "at most one inflation layer",
+                  shown=lambda p: [layer.name for layer in p.layers]))
 
     def layer(self, kind: type) -> Any:
         """The first enabled layer of a params type, or None."""

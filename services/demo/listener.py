@@ -9,12 +9,13 @@ from dataclasses import dataclass
 
 from ...schemas.messages import Chatter
 from ..runtime.node import Node
+from ...parameters.declare import Parameters, param
 
 
 @dataclass(frozen=True)
-class ListenerParams:
-    summary_period_s: float = 1.0
-    gain: float = 1.0           # scales the running sum, so parameter files have something to set
+class ListenerParams(Parameters):
+    summary_period_s: float = param(1.0, gt=0)
+    gain: float = param(1.0, finite=True)  # scales the running sum, so parameter files have something to set
 
 
 class Listener(Node):

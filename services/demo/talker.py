@@ -6,19 +6,16 @@ from dataclasses import dataclass
 
 from ...schemas.messages import Chatter, Clock
 from ..runtime.node import NS_PER_S, Node
+from ...parameters.declare import Parameters, Rule, param
 
 
 @dataclass(frozen=True)
-class TalkerParams:
-    clock_hz: float = 100.0     # sim-time resolution: one Clock per step
-    chatter_hz: float = 10.0
-    rate: float = 1.0           # sim seconds per wall second
+class TalkerParams(Parameters):
+    clock_hz: float = param(100.0, gt=0)  # sim-time resolution: one Clock per step
+    chatter_hz: float = param(10.0, gt=0)
+    rate: float = param(1.0, gt=0)        # sim seconds per wall second
 
-    def __post_init__(self):
-        if self.clock_hz <= 0 or self.chatter_hz <= 0 or self.rate <= 0:
-            raise ValueError("clock_hz, chatter_hz and rate must be positive")
-        if self.chatter_hz > self.clock_hz:
-            raise ValueError("chatter_hz may not exceed clock_hz")
+    rules = (Rule("chatter_hz", lambda p: p.chatter_hz <= p.clock_hz, "≤ clock_hz ({p.clock_hz})"),)
 
 
 class Talker(Node):

@@ -44,38 +44,27 @@ from ..costmap.params import InflationLayerParams
 from ..global_planner.astar import NO_INFORMATION, search
 from ..global_planner.params import GlobalPlannerParams
 from ...geometry.grid import cell_to_world, in_grid, world_to_cell
+from ...parameters.declare import Parameters, Rule, param
 
 LETHAL, INSCRIBED = 254, 253
 SEARCH = GlobalPlannerParams(use_dijkstra=True, allow_unknown=False, outline_map=False)
 
 
 @dataclass(frozen=True)
-class ExploreParams:
-    robot_radius: float = 0.53          # m: the footprint's circumscribed radius (build_map sets it): at a goal
-    inscribed_radius: float = 0.32      # m: … and its inscribed radius (build_map sets it): along a path
-    clearance: float = 0.1              # m kept between those circles and occupied map cells
-    inflation_radius: float = 1.5       # m: path costs fall off out to here
-    cost_scaling_factor: float = 3.0    # 1/m, as the costmap's inflation
-    min_frontier_size: float = 0.5      # m (explore_lite's name and default)
-    gain_scale: float = 0.3             # score per metre of frontier against a metre of path
-    approach_distance: float = 1.0      # m: a frontier is approached to within this
-    progress_timeout: float = 30.0      # sim s without getting 0.1 m closer to the goal: give it up (explore_lite's)
-    retry_distance: float = 1.0         # m the robot moves from where a frontier failed: it is tried again
-    retry_known_area: float = 1.0       # m² of the map newly known since a frontier failed: it is tried again
-    max_failures: int = 3               # failures of one frontier after which it is dropped for good
+class ExploreParams(Parameters):
+    robot_radius: float = param(0.53, gt=0)        # m: the footprint's circumscribed radius (build_map sets it): at a goal
+    inscribed_radius: float = param(0.32, gt=0)    # m: … and its inscribed radius (build_map sets it): along a path
+    clearance: float = param(0.1, ge=0)            # m kept between those circles and occupied map cells
+    inflation_radius: float = param(1.5, ge=0)     # m: path costs fall off out to here
+    cost_scaling_factor: float = param(3.0, ge=0)  # 1/m, as the costmap's inflation
+    min_frontier_size: float = param(0.5, ge=0)    # m (explore_lite's name and default)
+    gain_scale: float = param(0.3, ge=0)           # score per metre of frontier against a metre of path
+    approach_distance: float = param(1.0, ge=0)    # m: a frontier is approached to within this
+    retry_distance: float = param(1.0, ge=0)       # m the robot moves from where a frontier failed: it is tried again
+    retry_known_area: float = param(1.0, ge=0)     # m² of the map newly known since a frontier failed: it is tried again
+    max_failures: int = param(3, gt=0)             # failures of one frontier after which it is dropped for good
 
-    def __post_init__(self) -> None:
-        for name in ("robot_radius", "inscribed_radius", "clearance", "inflation_radius", "cost_scaling_factor",
-                     "min_frontier_size", "gain_scale", "approach_distance", "progress_timeout", "retry_distance",
-                     "retry_known_area"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"{name} must be a number ≥ 0, got {value}")
-        for name in ("robot_radius", "inscribed_radius", "progress_timeout", "max_failures"):
-            if getattr(self, name) <= 0:
-                raise ValueError(f"{name} must be positive, got {getattr(self, name)}")
-        if self.inscribed_radius > self.robot_radius:
-            raise ValueError(f"inscribed_radius {self.inscribed_radius} exceeds robot_radius {self.robot_radius}")
+    rules = (Rule("inscribed_radius", lambda p: p.inscribed_radius <= p.robot_radius, "≤ robot_radius ({p.robot_radius})"),)
 
 
 @dataclass(frozen=True)

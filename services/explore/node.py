@@ -42,6 +42,7 @@ from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from .frontiers import (ExploreGoal, Explorer, ExploreParams, FailedFrontiers, find_frontiers, frontier_cells, known_area,
                       still_frontier)
+from ...parameters.declare import param
 
 PROGRESS_M = 0.1
 GOAL_PREFIX = "explore-"
@@ -63,12 +64,8 @@ class Progress:
 
 @dataclass(frozen=True)
 class ExploreNodeParams(ExploreParams):
-    status_delay_s: float = 0.3     # sim s from a nav_status stamp to its effect
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        if not (math.isfinite(self.status_delay_s) and self.status_delay_s >= 0):
-            raise ValueError(f"status_delay_s must be zero or positive, got {self.status_delay_s}")
+    status_delay_s: float = param(0.3, ge=0)     # sim s from a nav_status stamp to its effect
+    progress_timeout: float = param(30.0, gt=0)  # sim s without getting 0.1 m closer to the goal: give it up (explore_lite's)
 
 
 class ExploreNode(Node):

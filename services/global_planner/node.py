@@ -43,9 +43,9 @@ from ...schemas.messages import Costmap, Diagnostic, Goal, Header, Odometry, Pat
 from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node, QueryError
-from ..runtime.params import require_nonnegative
 from .astar import GlobalPlanner, PlanResult, warm_up
 from .params import GlobalPlannerParams
+from ...parameters.declare import ParamError, Rule, param
 
 TIMES_KEPT = 10_000     # plan times kept for the diagnostic's median
 QUERY_PARAMETERS = ("start", "goal")
@@ -55,18 +55,18 @@ COSTMAP, MAP_ODOM, POSE, GOAL, CANCEL = range(5)   # sporadic inputs, in input o
 @dataclass(frozen=True)
 class PlannerNodeParams(FrameParams, GlobalPlannerParams):
     """ROS global_planner's parameters (and move_base's planner_frequency) plus the frames."""
-    request_delay_s: float = 0.3  # sim s from a costmap / tf / pose / goal / cancel stamp to its effect
+    request_delay_s: float = param(0.3, ge=0)  # sim s from a costmap / tf / pose / goal / cancel stamp to its effect
     goal_topic: str = "goal"      # where goals come from: "goal" (users) or "plan_request" (the navigator)
+    planner_frequency: float = param(0.0, ge=0)   # Hz (move_base's name): replanning rate; 0 = once per goal
 
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        require_nonnegative(self, "request_delay_s")
-        try:
-            carries = type_for_key(KeyLayout().resolve(self.goal_topic))
-        except KeyError as exc:
-            raise ValueError(f"goal_topic {self.goal_topic!r}: {exc.args[0]}") from None
-        if carries is not Goal:
-            raise ValueError(f"goal_topic {self.goal_topic!r} does not carry Goal messages")
+    rules = (Rule("goal_topic", lambda p: _carries_goals(p.goal_topic), "a topic of Goal messages"),)
+
+
+def _carries_goals(topic: str) -> bool:
+    try:
+        return type_for_key(KeyLayout().resolve(topic)) is Goal
+    except KeyError as exc:
+        raise ParamError(f"parameter goal_topic must be a robot topic: {topic!r}: {exc.args[0]}") from None
 
 
 def parse_pose(name: str, text: str) -> np.ndarray:

@@ -10,7 +10,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ..runtime.params import ForeignNames, load_params, require_at_least, require_nonnegative
+from ..runtime.params import ForeignNames
+from ...parameters.from_mapping import load_params
+from ...parameters.declare import Parameters, param
 
 ORIENTATION_MODES = {0: "none", 1: "forward", 2: "interpolate", 3: "forward_then_interpolate",
                      4: "backward", 5: "leftward", 6: "rightward"}
@@ -30,36 +32,23 @@ NAV2 = ForeignNames(
 
 
 @dataclass(frozen=True)
-class GlobalPlannerParams:
-    use_dijkstra: bool = True          # Dijkstra; false: A* (same optimal cost, fewer cells expanded)
-    use_grid_path: bool = False        # true: the raw 8-connected cell path, unsmoothed
-    allow_unknown: bool = True         # plan through NO_INFORMATION cells
-    default_tolerance: float = 0.0     # m: a goal in an obstacle (or unreachable) may move this far
-    neutral_cost: int = 50             # cost of a free step (per cell length)
-    cost_factor: float = 3.0           # each costmap cost adds cost_factor × cost per cell length
-    lethal_cost: int = 253             # cells at or above this cost are impassable (unknown aside)
-    orientation_mode: int = 1          # ROS OrientationFilter: 0 none … 6 rightward (ORIENTATION_MODES)
-    orientation_window_size: int = 1   # cells either side used for the path direction
-    outline_map: bool = True           # the costmap's border cells are impassable
-    visualize_potential: bool = False  # return the search's cost-to-come grid with each plan
-    planner_frequency: float = 0.0     # Hz (move_base's name): replanning rate; 0 = once per goal
+class GlobalPlannerParams(Parameters):
+    use_dijkstra: bool = True                                   # Dijkstra; false: A* (same optimal cost, fewer cells expanded)
+    use_grid_path: bool = False                                 # true: the raw 8-connected cell path, unsmoothed
+    allow_unknown: bool = True                                  # plan through NO_INFORMATION cells
+    default_tolerance: float = param(0.0, ge=0)                 # m: a goal in an obstacle (or unreachable) may move this far
+    neutral_cost: int = param(50, ge=1, le=255)                 # cost of a free step (per cell length)
+    cost_factor: float = param(3.0, ge=0)                       # each costmap cost adds cost_factor × cost per cell length
+    lethal_cost: int = param(253, ge=1, le=255)                 # cells at or above this cost are impassable (unknown aside)
+    orientation_mode: int = param(1, choices=tuple(ORIENTATION_MODES))  # ROS OrientationFilter: 0 none … 6 rightward (ORIENTATION_MODES)
+    orientation_window_size: int = param(1, ge=1)               # cells either side used for the path direction
+    outline_map: bool = True                                    # the costmap's border cells are impassable
+    visualize_potential: bool = False                           # return the search's cost-to-come grid with each plan
     # the smoother (not in ROS): gradient smoothing that never moves a point to a costlier cell
-    smooth_weight_data: float = 0.2    # pull towards the original point
-    smooth_weight_smooth: float = 0.3  # pull towards the neighbours' midpoint
-    smooth_max_iterations: int = 100
-    smooth_tolerance: float = 1e-3     # cells: stop when no point moves more than this
-
-    def __post_init__(self):
-        if not 1 <= self.lethal_cost <= 255:
-            raise ValueError(f"lethal_cost must be within 1..255, got {self.lethal_cost}")
-        if not 1 <= self.neutral_cost <= 255:
-            raise ValueError(f"neutral_cost must be within 1..255, got {self.neutral_cost}")
-        if self.orientation_mode not in ORIENTATION_MODES:
-            raise ValueError(f"orientation_mode must be one of {ORIENTATION_MODES}, got {self.orientation_mode}")
-        require_at_least(self, 1, "orientation_window_size")
-        require_nonnegative(self, "smooth_max_iterations")
-        require_nonnegative(self, "default_tolerance", "cost_factor", "planner_frequency", "smooth_weight_data",
-                            "smooth_weight_smooth", "smooth_tolerance")
+    smooth_weight_data: float = param(0.2, ge=0)                # pull towards the original point
+    smooth_weight_smooth: float = param(0.3, ge=0)              # pull towards the neighbours' midpoint
+    smooth_max_iterations: int = param(100, ge=0)
+    smooth_tolerance: float = param(1e-3, ge=0)                 # cells: stop when no point moves more than this
 
     @classmethod
     def from_mapping(cls, values: dict | None, source: str = "global_planner") -> GlobalPlannerParams:

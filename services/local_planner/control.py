@@ -30,7 +30,7 @@ Every pose is held to one FootprintCheck (footprint_check.py), the one DWA's rol
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -38,7 +38,8 @@ from ...schemas.messages import Costmap, Path, Tracks
 from ...geometry.footprint import DEFAULT_FOOTPRINT, STOP_PADDING, make_footprint
 from ...geometry.frames import RobotFrames
 from ...geometry.se2 import compose
-from ..runtime.params import load_params, require_nonnegative
+from ...parameters.declare import Rule, group, param
+from ...parameters.from_mapping import load_params
 from .approach import FinalApproach
 from .dwa import DwaPlanner, reachable
 from .dynamic import Movers, movers_at
@@ -57,46 +58,31 @@ START_MOVED = 0.05    # m: a path from the same goal starting farther from the l
 class LocalControlParams(DwaParams, RotationShimParams):
     """DwaParams (TrajectoryPlannerROS / DWAPlannerROS names), RotationShimParams (Nav2's) and the
     core's own; the tolerances are the final approach's, tighter than ROS's."""
-    xy_goal_tolerance: float = 0.02      # m: the controller stops here (the navigator judges success)
-    yaw_goal_tolerance: float = 0.02     # rad
-    controller: str = "dwa"              # dwa | eband | follower
-    final_approach_distance: float = 0.6  # m from the path's end where the final approach takes over
-    rotation_shim: bool | None = None    # turn towards a new path first (shim.py); None: with the dwa controller
-    path_follower: dict = field(default_factory=dict)   # FollowerParams by name (drive: from holonomic_robot)
-    elastic_band: dict = field(default_factory=dict)    # ElasticBandParams by name; limits default to the above
+    xy_goal_tolerance: float = param(0.02, ge=0)         # m: the controller stops here (the navigator judges success)
+    yaw_goal_tolerance: float = param(0.02, ge=0)        # rad
+    controller: str = param("dwa", choices=CONTROLLERS)  # dwa | eband | follower
+    final_approach_distance: float = param(0.6, ge=0)    # m from the path's end where the final approach takes over
+    rotation_shim: bool | None = None                    # turn towards a new path first (shim.py); None: with the dwa controller
+    path_follower: dict = field(default_factory=dict)    # FollowerParams by name (drive: from holonomic_robot)
+    elastic_band: dict = field(default_factory=dict)     # ElasticBandParams by name; limits default to the above
     # the robot, spelled as costmap_2d spells it (the local costmap's values)
-    footprint: tuple[tuple[float, float], ...] = tuple(map(tuple, DEFAULT_FOOTPRINT.tolist()))
-    robot_radius: float = 0.46           # m, when footprint is empty
-    footprint_padding: float = 0.01      # m
-    inflation_radius: float = 0.55       # m: with cost_scaling_factor, where the footprint check starts
-    cost_scaling_factor: float = 10.0    # 1/m
+    footprint: tuple[tuple[float, float], ...] = param(tuple(map(tuple, DEFAULT_FOOTPRINT.tolist())),
+                                                       min_items=3, or_empty=True)
+    robot_radius: float = param(0.46, ge=0)              # m, when footprint is empty
+    footprint_padding: float = param(0.01, ge=0)         # m
+    inflation_radius: float = param(0.55, ge=0)          # m: with cost_scaling_factor, where the footprint check starts
+    cost_scaling_factor: float = param(10.0, ge=0)       # 1/m
     # m: the collision monitor's stop zone (its default), kept free by DWA's rollouts
-    stop_padding: float = STOP_PADDING
-
-    def __post_init__(self):
-        super().__post_init__()
-        require_nonnegative(self, "xy_goal_tolerance", "yaw_goal_tolerance")
-        if self.controller not in CONTROLLERS:
-            raise ValueError(f"controller must be one of {CONTROLLERS}, got {self.controller!r}")
-        require_nonnegative(self, "final_approach_distance", "robot_radius", "footprint_padding",
-                            "inflation_radius", "cost_scaling_factor", "stop_padding")
-        if self.footprint and len(self.footprint) < 3:
-            raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
-        for name in ("path_follower", "elastic_band"):
-            if not isinstance(getattr(self, name), dict):
-                raise ValueError(f"{name} must be a mapping of parameter names to values, got {getattr(self, name)!r}")
-        self.follower_params()
-        self.shim_params()
+    stop_padding: float = param(STOP_PADDING, ge=0)
 
     def dwa_params(self) -> DwaParams:
-        return DwaParams(**{f.name: getattr(self, f.name) for f in fields(DwaParams)})
+        return group(self, DwaParams)
 
     def shim_params(self) -> RotationShimParams:
         """The shim's parameters, its turn clamped to the controller's max_vel_theta and acc_lim_theta."""
-        values = {f.name: getattr(self, f.name) for f in fields(RotationShimParams)}
-        values["rotate_to_heading_angular_vel"] = min(self.rotate_to_heading_angular_vel, self.max_vel_theta)
-        values["max_angular_accel"] = min(self.max_angular_accel, self.acc_lim_theta)
-        return RotationShimParams(**values)
+        return replace(group(self, RotationShimParams),
+                       rotate_to_heading_angular_vel=min(self.rotate_to_heading_angular_vel, self.max_vel_theta),
+                       max_angular_accel=min(self.max_angular_accel, self.acc_lim_theta))
 
     def follower_params(self) -> FollowerParams:
         drive = "holonomic" if self.holonomic_robot else "diff"
@@ -105,6 +91,8 @@ class LocalControlParams(DwaParams, RotationShimParams):
             raise ValueError(f"path_follower: drive {values['drive']!r} contradicts holonomic_robot "
                              f"{self.holonomic_robot}")
         return load_params(FollowerParams, values, "path_follower")
+
+    rules = (Rule("path_follower", lambda p: bool(p.follower_params()), "FollowerParams by name"),)
 
 
 @dataclass(frozen=True)
@@ -160,8 +148,7 @@ class LocalControl:
             shared = ["holonomic_robot", "controller_frequency", "max_vel_x", "max_vel_theta", "acc_lim_x",
                       "acc_lim_theta", *(["max_vel_y", "acc_lim_y"] if p.holonomic_robot else [])]
             values = {**{name: getattr(p, name) for name in shared}, **p.elastic_band}
-            return ElasticBandPlanner(load_params(ElasticBandParams, values, "elastic_band"),
-                                      self.footprint_check.footprint, self.footprint_check.check_cost)
+            return ElasticBandPlanner(load_params(ElasticBandParams, values, "elastic_band"), self.footprint_check)
         return None     # follower: built per path
 
     def follow(self, path: Path, frames: RobotFrames) -> None:

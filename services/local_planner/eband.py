@@ -20,9 +20,8 @@ One control cycle (`ElasticBandPlanner.compute`):
    min_obstacle_dist + penalty_epsilon and below inflation_dist, and for a differential drive
    the non-holonomic arc condition and forward driving; start and end poses are fixed. The
    intervals are then stretched where a velocity limit is still exceeded (the penalties are soft);
-4. the band, interpolated every half cell, is checked in the costmap as DWA checks its rollouts
-   (centre cell inscribed, lethal, unknown or off the grid; from check_cost on, the footprint's
-   outline on a lethal or unknown cell) and, over its first feasibility_check_no_poses poses, its
+4. the band, interpolated every half cell, is checked in the costmap by the local planner's
+   FootprintCheck, as DWA's rollouts are (footprint_check.py) and, over its first feasibility_check_no_poses poses, its
    clearance must not fall more than a cell below min_obstacle_dist (or below the robot's own
    clearance when that is smaller); otherwise the status is no_valid_trajectory and the command
    brakes as hard as allowed. Else the command is the first interval's velocity, clipped to the
@@ -52,12 +51,11 @@ from numba import njit
 from scipy import ndimage
 
 from ...schemas.messages import MapMetaData
-from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE
-from ...geometry.grid import in_grid, world_to_cell
+from ..costmap.layers import LETHAL_OBSTACLE
 from ...geometry.se2 import wrap_angle
 from ...geometry.polygons import densify
 from .dwa import local_path
-from .footprint_check import footprint_outline
+from .footprint_check import FootprintCheck
 from .params import ElasticBandParams
 
 MIN_INTERVAL = 1e-3     # s: the shortest time interval a new band starts with
@@ -576,17 +574,16 @@ class _Band:
 
 class ElasticBandPlanner:
     """The pure elastic-band core: `compute` is one control cycle; the planner keeps the last band
-    to warm-start the next cycle on the same path. `footprint` is the (padded) polygon in the robot
-    frame; `check_cost` the centre cost from which the footprint's outline is checked
-    (footprint_check.footprint_check_cost; 0 checks every pose)."""
+    to warm-start the next cycle on the same path. `footprint_check` is the local planner's one
+    collision check (footprint_check.py: the padded footprint, its check cost and stop zone), the
+    same DWA's rollouts are held to."""
 
-    def __init__(self, params: ElasticBandParams, footprint: np.ndarray, check_cost: int = 0):
+    def __init__(self, params: ElasticBandParams, footprint_check: FootprintCheck):
         self.params = params
-        self.footprint = np.asarray(footprint, np.float64).reshape(-1, 2)
-        self.check_cost = int(check_cost)
+        self.footprint_check = footprint_check
+        self.footprint = footprint_check.footprint
         self.offsets, self.radius = covering_circles(self.footprint)
         self.reach = float(np.hypot(self.footprint[:, 0], self.footprint[:, 1]).max())
-        self._outlines: dict[float, np.ndarray] = {}
         self._band: _Band | None = None
         p = params
         self.limits = np.array([p.max_vel_x, p.max_vel_x_backwards, p.max_vel_y if p.holonomic_robot else 0.0,
@@ -595,11 +592,6 @@ class ElasticBandPlanner:
     def reset(self) -> None:
         """Forget the previous band (a new goal, or after a recovery)."""
         self._band = None
-
-    def _outline(self, resolution: float) -> np.ndarray:
-        if resolution not in self._outlines:
-            self._outlines[resolution] = footprint_outline(self.footprint, resolution / 2)
-        return self._outlines[resolution]
 
     def weights(self, outer: int) -> np.ndarray:
         """The square roots of TEB's weights (residuals are squared), in _evaluate's order, for
@@ -655,25 +647,6 @@ class ElasticBandPlanner:
             need = np.maximum(need, np.abs(left) / p.max_vel_y)
         return need
 
-    def collides(self, dense: np.ndarray, costs: np.ndarray, info: MapMetaData) -> bool:
-        """Whether any of these poses meets an illegal cell, as DWA checks its rollouts: the centre
-        cell inscribed, lethal, unknown or off the grid, or — from check_cost — a lethal or unknown
-        cell under the footprint's outline."""
-        rows, cols = world_to_cell(info, dense[:, 0], dense[:, 1])
-        if not in_grid(info, rows, cols).all():
-            return True
-        centre = costs[rows, cols]
-        if (centre >= INSCRIBED_INFLATED_OBSTACLE).any():
-            return True
-        near = dense[centre >= self.check_cost]
-        if len(near) == 0:
-            return False
-        outline = self._outline(info.resolution)
-        c, s = np.cos(near[:, 2])[:, None], np.sin(near[:, 2])[:, None]
-        rows, cols = world_to_cell(info, near[:, 0:1] + c * outline[:, 0] - s * outline[:, 1],
-                                   near[:, 1:2] + s * outline[:, 0] + c * outline[:, 1])
-        return bool(not in_grid(info, rows, cols).all() or (costs[rows, cols] >= LETHAL_OBSTACLE).any())
-
     def command(self, poses: np.ndarray, dts: np.ndarray, velocity) -> np.ndarray:
         """The first interval's body twist, within the velocity limits and one control period's reach."""
         p = self.params
@@ -721,7 +694,8 @@ class ElasticBandPlanner:
         near = where[min(p.feasibility_check_no_poses, len(poses) - 1)]
         clearance = _clearances(dense[:near + 1], field, _grid_frame(info), self.offsets, self.radius)
         closest = float(clearance.min())
-        if self.collides(dense[1:], costs, info):
+        # checked as DWA checks its rollouts, from the robot's pose (the band's first)
+        if not self.footprint_check.legal_poses(dense, costs, info)[1:].all():
             return EbandResult("no_valid_trajectory", brake, poses, dts,
                                "the optimised band collides in the costmap; braking", closest, warm is not None)
         if closest < min(p.min_obstacle_dist, float(clearance[0])) - info.resolution:
@@ -753,4 +727,4 @@ def warm_up() -> None:
     costs[0] = LETHAL_OBSTACLE
     for holonomic in (True, False):
         params = ElasticBandParams(holonomic_robot=holonomic, max_vel_y=0.1)
-        ElasticBandPlanner(params, square).compute((0.5, 1.0, 0.0), (0.0, 0.0, 0.0), costs, info, path)
+        ElasticBandPlanner(params, FootprintCheck(square)).compute((0.5, 1.0, 0.0), (0.0, 0.0, 0.0), costs, info, path)

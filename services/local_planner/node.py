@@ -37,7 +37,9 @@ from ...schemas.messages import Costmap, Diagnostic, LocalCommand, Odometry, Pat
 from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, Ticks
-from ..runtime.params import ForeignNames, ParamError, load_params, require_nonnegative
+from ..runtime.params import ForeignNames
+from ...parameters.declare import ParamError, param
+from ...parameters.from_mapping import load_params
 from .control import ControlInputs, LocalControl, LocalControlParams
 from .dwa import warm_up
 from .dynamic import tracks_problem
@@ -90,12 +92,8 @@ NAV2 = ForeignNames(
 class LocalPlannerNodeParams(FrameParams, LocalControlParams):
     """The core's parameters (LocalControlParams: DwaParams, RotationShimParams and its own), the
     frames and the node's input delays."""
-    request_delay_s: float = 0.5         # sim s from a costmap / tf / path stamp to its effect
-    tracks_delay_s: float = 0.3          # sim s from a tracks stamp to its effect (they are predicted to the tick)
-
-    def __post_init__(self):
-        super().__post_init__()
-        require_nonnegative(self, "request_delay_s", "tracks_delay_s")
+    request_delay_s: float = param(0.5, ge=0)         # sim s from a costmap / tf / path stamp to its effect
+    tracks_delay_s: float = param(0.3, ge=0)          # sim s from a tracks stamp to its effect (they are predicted to the tick)
 
     @classmethod
     def from_mapping(cls, values: dict | None, source: str = "local_planner") -> LocalPlannerNodeParams:

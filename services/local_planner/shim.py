@@ -25,25 +25,21 @@ from typing import Callable
 
 import numpy as np
 
-from ..runtime.params import require_positive
 from ...geometry.se2 import wrap_angle
 from .path_ahead import ahead_of
+from ...parameters.declare import Parameters, param
 
 SWEEP_STEP = 0.05    # rad between the swept poses checked: a footprint corner 0.55 m out moves half a 5 cm cell
 
 
 @dataclass(frozen=True)
-class RotationShimParams:
+class RotationShimParams(Parameters):
     """Nav2 RotationShimController's names and defaults."""
-    angular_dist_threshold: float = 0.785        # rad: turn on the spot first while the path is further off
-    forward_sampling_distance: float = 0.5       # m along the path to the point the robot should face
-    rotate_to_heading_angular_vel: float = 1.8   # rad/s
-    max_angular_accel: float = 3.2               # rad/s²
-    simulate_ahead_time: float = 1.0             # s of the turn checked for collisions
-
-    def __post_init__(self):
-        require_positive(self, "angular_dist_threshold", "forward_sampling_distance", "rotate_to_heading_angular_vel",
-                         "max_angular_accel", "simulate_ahead_time")
+    angular_dist_threshold: float = param(0.785, gt=0)       # rad: turn on the spot first while the path is further off
+    forward_sampling_distance: float = param(0.5, gt=0)      # m along the path to the point the robot should face
+    rotate_to_heading_angular_vel: float = param(1.8, gt=0)  # rad/s
+    max_angular_accel: float = param(3.2, gt=0)              # rad/s²
+    simulate_ahead_time: float = param(1.0, gt=0)            # s of the turn checked for collisions
 
 
 @dataclass(frozen=True)

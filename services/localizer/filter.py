@@ -330,6 +330,7 @@ class Amcl:
         self.params = params
         self.rng = rng
         self.laser = LaserModel(grid, params)
+        self.motion = params.motion_params()    # the motion model's own group (its noise)
         self._free_xy, self._col_step, self._row_step = free_cells(grid)
         if self._free_xy.shape[0] == 0:
             raise ValueError("the map has no free cell (occupancy 0) to place particles in")
@@ -423,7 +424,7 @@ class Amcl:
             if not (moved or self._force_update or temporal):
                 return False
             self._force_update = False  # as in amcl, only a scan after the first one uses it up
-            step = motion.decompose(p.odom_model_type, self._odom, odom_pose, p.odom_alphas)
+            step = motion.decompose(p.odom_model_type, self._odom, odom_pose, self.motion.alphas)
             motion.sample_motion(self._poses[self._current], self.n, step, self.rng)
             if temporal:
                 self._jitter()

@@ -39,7 +39,7 @@ from ...schemas.messages import (Diagnostic, Header, LaserScan, OccupancyGrid, O
 from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
-from ..runtime.params import ParamError
+from ...parameters.declare import ParamError, param
 from ..runtime.state_file import read_state, write_state
 from ...geometry.odometry_history import OdomHistory
 from ...geometry.se2 import compose, relative
@@ -54,23 +54,14 @@ _MAP, _INITIALPOSE, _GLOBAL = 0, 1, 2   # request kinds, in input order (the ord
 @dataclass(frozen=True)
 class LocalizerParams(AmclParams):
     """ROS amcl's parameters plus what the node needs around the core."""
-    map_file: str = ""              # map_server YAML read at start; "": wait for the map key
-    laser_x: float = 0.0            # m, the laser's pose in base_link (there is no tf tree here)
+    map_file: str = ""                         # map_server YAML read at start; "": wait for the map key
+    laser_x: float = 0.0                       # m, the laser's pose in base_link (there is no tf tree here)
     laser_y: float = 0.0
-    laser_yaw: float = 0.0          # rad
-    seed: int = 0                   # of the filter's random generator
-    pose_file: str = ""             # where save_pose_rate keeps the last pose; "": nowhere
-    request_delay_s: float = 0.2    # sim s from a map / initialpose / global_localization stamp to its effect
-    odom_history_s: float = 2.0     # sim s of odometry kept for interpolation and initial poses
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        for name in ("request_delay_s", "odom_history_s"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"parameter {name!r} must be zero or positive, got {value!r}")
-        if self.seed < 0:
-            raise ValueError(f"parameter 'seed' must be ≥ 0, got {self.seed}")
+    laser_yaw: float = 0.0                     # rad
+    seed: int = param(0, ge=0)                 # of the filter's random generator
+    pose_file: str = ""                        # where save_pose_rate keeps the last pose; "": nowhere
+    request_delay_s: float = param(0.2, ge=0)  # sim s from a map / initialpose / global_localization stamp to its effect
+    odom_history_s: float = param(2.0, ge=0)   # sim s of odometry kept for interpolation and initial poses
 
 
 @dataclass(frozen=True)

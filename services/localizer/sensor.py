@@ -35,7 +35,7 @@ from scipy import ndimage
 from ...schemas.messages import LaserScan, OccupancyGrid
 from ...geometry.raycast import cast_grid
 from ...geometry.grid import grid_coords
-from .params import AmclParams
+from .params import AmclParams, BeamModelParams, LikelihoodFieldProbParams
 
 OCCUPIED, FREE = 100, 0  # amcl's map conversion: everything else is unknown
 
@@ -250,6 +250,7 @@ class LaserModel:
 
     def __init__(self, grid: OccupancyGrid, params: AmclParams):
         self.params = params
+        self.model = params.laser_params()    # the model's own group (BeamModelParams, LikelihoodField*Params)
         self.frame = GridFrame.of(grid)
         self.resolution = float(grid.info.resolution)
         data = np.asarray(grid.data)
@@ -279,23 +280,23 @@ class LaserModel:
 
     def weigh(self, poses: np.ndarray, n: int, scan: ScanBeams, weights: np.ndarray, converged: bool = False) -> float:
         """Multiply weights[:n] by each particle's scan likelihood; returns their new sum."""
-        p, frame = self.params, self.frame
-        if p.laser_model_type == "beam":
+        m, frame = self.model, self.frame
+        if isinstance(m, BeamModelParams):
             return _beam(poses, n, frame.affine, frame.yaw, self.blocked, self.resolution, scan.origin[0],
-                         scan.origin[1], scan.ranges, scan.bearings, scan.range_max, p.laser_z_hit,
-                         p.laser_z_short, p.laser_z_max, p.laser_z_rand, p.laser_sigma_hit,
-                         p.laser_lambda_short, weights)
+                         scan.origin[1], scan.ranges, scan.bearings, scan.range_max, m.laser_z_hit,
+                         m.laser_z_short, m.laser_z_max, m.laser_z_rand, m.laser_sigma_hit,
+                         m.laser_lambda_short, weights)
         end_x, end_y = scan.end_points()
-        z_rand_term = p.laser_z_rand / scan.range_max
-        if p.laser_model_type == "likelihood_field":
+        z_rand_term = m.laser_z_rand / scan.range_max
+        if not isinstance(m, LikelihoodFieldProbParams):
             return _likelihood_field(poses, n, frame.affine, end_x, end_y, self.hit, self.off_map_hit,
-                                     p.laser_z_hit, z_rand_term, weights)
-        beamskip = p.do_beamskip and converged
+                                     m.laser_z_hit, z_rand_term, weights)
+        beamskip = m.do_beamskip and converged
         if beamskip and self._scratch.size < n * end_x.size:
             self._scratch = np.empty(n * end_x.size)
         total, self.beams_skipped = _likelihood_field_prob(
-            poses, n, frame.affine, end_x, end_y, self.hit, self.off_map_hit, p.laser_z_hit,
-            z_rand_term, beamskip, self.agree_hit, p.beam_skip_threshold, p.beam_skip_error_threshold,
+            poses, n, frame.affine, end_x, end_y, self.hit, self.off_map_hit, m.laser_z_hit,
+            z_rand_term, beamskip, self.agree_hit, m.beam_skip_threshold, m.beam_skip_error_threshold,
             self._scratch, weights)
         return total
 

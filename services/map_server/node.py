@@ -22,19 +22,14 @@ from dataclasses import dataclass
 from ...schemas.messages import OccupancyGrid
 from ..runtime.node import Node
 from .mapio import MapError, load_map
+from ...parameters.declare import Parameters, param
 
 
 @dataclass(frozen=True)
-class MapServerParams:
-    yaml_filename: str = ""         # the map's YAML file (relative to the working directory)
+class MapServerParams(Parameters):
+    yaml_filename: str = param("", nonempty=True)  # the map's YAML file (relative to the working directory)
     frame_id: str = "map"
-    publish_period_s: float = 0.0   # 0: publish once, at start; > 0: at the first clock, then every so much sim time
-
-    def __post_init__(self):
-        if not self.yaml_filename:
-            raise ValueError("yaml_filename is required: the map_server YAML file of the map to serve")
-        if self.publish_period_s < 0:
-            raise ValueError(f"publish_period_s must be 0 (once) or positive, got {self.publish_period_s}")
+    publish_period_s: float = param(0.0, ge=0)     # 0: publish once, at start; > 0: at the first clock, then every so much sim time
 
 
 class MapServerNode(Node):

@@ -53,7 +53,7 @@ from ...schemas.messages import (CancelGoal, ClearCostmaps, Goal, Header, LocalC
 from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node, QueryError
-from ..runtime.params import ParamError, require_nonnegative, require_positive
+from ...parameters.declare import ParamError, param
 from ..runtime.state_file import read_state, remove_state, write_state
 from .core import ACTIVE, ControlResult, Navigator, NavActions, NavInputs, PlanResult, State
 from .params import NavigatorParams
@@ -68,16 +68,11 @@ FOLLOWING = (State.PLANNING, State.CONTROLLING)   # states in which the local pl
 class NavigatorNodeParams(FrameParams, NavigatorParams):
     """move_base's parameters (params.py) plus the frames and what the node needs around the core."""
     base_frame: str = "base_link"
-    request_delay_s: float = 0.3  # sim s from a tf / pose / plan / goal / cancel stamp to its effect
-    stop_duration_s: float = 0.5  # sim s of zero commands after a goal ends
-    status_period_s: float = 1.0  # sim s between repeated statuses while a goal is pending or active
-    goal_file: str = ""           # where the active goal is kept for a restarted navigator; "": nowhere
-    resend_path_after_s: float = 1.0  # sim s after a follow_path before an idle local planner is sent it again
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        require_nonnegative(self, "request_delay_s", "stop_duration_s")
-        require_positive(self, "status_period_s", "resend_path_after_s")
+    request_delay_s: float = param(0.3, ge=0)      # sim s from a tf / pose / plan / goal / cancel stamp to its effect
+    stop_duration_s: float = param(0.5, ge=0)      # sim s of zero commands after a goal ends
+    status_period_s: float = param(1.0, gt=0)      # sim s between repeated statuses while a goal is pending or active
+    goal_file: str = ""                            # where the active goal is kept for a restarted navigator; "": nowhere
+    resend_path_after_s: float = param(1.0, gt=0)  # sim s after a follow_path before an idle local planner is sent it again
 
 
 @dataclass(frozen=True)

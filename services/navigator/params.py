@@ -19,8 +19,10 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ..runtime.params import (ParamError, load_params, require_at_least, require_nonnegative, require_positive,
-                              unwrap_ros)
+from ..runtime.params import unwrap_ros
+from ...parameters.declare import ParamError
+from ...parameters.from_mapping import load_params
+from ...parameters.declare import Parameters, Rule, param
 
 RECOVERY_NAMES = ("clear_costmaps", "rotate", "back_up", "wait")
 # move_base recovery plugin types -> the behaviour here
@@ -32,42 +34,29 @@ ROS_IGNORED = frozenset({"base_global_planner", "base_local_planner", "make_plan
 
 
 @dataclass(frozen=True)
-class NavigatorParams:
-    planner_frequency: float = 0.0        # Hz: replanning while controlling; 0 = only on a new goal or a failure
-    controller_frequency: float = 20.0    # Hz: the rate step() is called at; sets the recovery command period
-    planner_patience: float = 5.0         # s without a valid plan → recovery
-    controller_patience: float = 15.0     # s without a valid command → recovery
-    max_planning_retries: int = -1        # failed plans tolerated before recovery; -1 = unlimited (patience only)
-    oscillation_timeout: float = 0.0      # s without moving oscillation_distance → recovery; 0 = off
-    oscillation_distance: float = 0.5     # m
-    conservative_reset_dist: float = 3.0  # m: clear_costmaps keeps obstacles within this square around the robot
+class NavigatorParams(Parameters):
+    planner_frequency: float = param(0.0, ge=0)            # Hz: replanning while controlling; 0 = only on a new goal or a failure
+    controller_frequency: float = param(20.0, gt=0)        # Hz: the rate step() is called at; sets the recovery command period
+    planner_patience: float = param(5.0, ge=0)             # s without a valid plan → recovery
+    controller_patience: float = param(15.0, ge=0)         # s without a valid command → recovery
+    max_planning_retries: int = param(-1, ge=-1)           # failed plans tolerated before recovery; -1 = unlimited (patience only)
+    oscillation_timeout: float = param(0.0, ge=0)          # s without moving oscillation_distance → recovery; 0 = off
+    oscillation_distance: float = param(0.5, ge=0)         # m
+    conservative_reset_dist: float = param(3.0, ge=0)      # m: clear_costmaps keeps obstacles within this square around the robot
     recovery_behavior_enabled: bool = True
-    clearing_rotation_allowed: bool = True  # false drops "rotate" from the recovery order
-    shutdown_costmaps: bool = False       # accepted for ROS files; costmaps here run independently
-    recovery_behaviors: tuple[str, ...] = RECOVERY_NAMES
-    xy_goal_tolerance: float = 0.10       # m
-    yaw_goal_tolerance: float = 0.05      # rad (final pose only; waypoints check xy only)
-    trans_stopped_vel: float = 0.1        # m/s: at the final pose, success only below this (dwa_local_planner)
-    rot_stopped_vel: float = 0.1          # rad/s: likewise
-    min_pose_beam_fit: float = 0.5        # success only while the localizer's latest beam fit is at least this; 0 = off
-    escape_vel: float = -0.1              # m/s along x while backing up (negative: backwards)
-    rotate_angle: float = 2 * math.pi     # rad: rotate_recovery turns a full circle
-    max_rotational_vel: float = 1.0       # rad/s for rotate
-    backup_dist: float = 0.15             # m for back_up
-    wait_duration: float = 1.0            # s for wait
-
-    def __post_init__(self):
-        unknown = [name for name in self.recovery_behaviors if name not in RECOVERY_NAMES]
-        if unknown:
-            raise ValueError(f"recovery_behaviors: unknown {unknown}; known: {list(RECOVERY_NAMES)}")
-        require_positive(self, "controller_frequency", "max_rotational_vel")
-        if self.escape_vel == 0 and self.backup_dist > 0 and "back_up" in self.recovery_behaviors:
-            raise ValueError("escape_vel must be non-zero when back_up is a recovery behaviour")
-        require_at_least(self, -1, "max_planning_retries")
-        require_nonnegative(self, "planner_frequency", "planner_patience", "controller_patience",
-                            "oscillation_timeout", "oscillation_distance", "conservative_reset_dist",
-                            "xy_goal_tolerance", "yaw_goal_tolerance", "trans_stopped_vel", "rot_stopped_vel", "min_pose_beam_fit",
-                            "backup_dist", "wait_duration")
+    clearing_rotation_allowed: bool = True                 # false drops "rotate" from the recovery order
+    shutdown_costmaps: bool = False                        # accepted for ROS files; costmaps here run independently
+    recovery_behaviors: tuple[str, ...] = param(RECOVERY_NAMES, choices=RECOVERY_NAMES)
+    xy_goal_tolerance: float = param(0.10, ge=0)           # m
+    yaw_goal_tolerance: float = param(0.05, ge=0)          # rad (final pose only; waypoints check xy only)
+    trans_stopped_vel: float = param(0.1, ge=0)            # m/s: at the final pose, success only below this (dwa_local_planner)
+    rot_stopped_vel: float = param(0.1, ge=0)              # rad/s: likewise
+    min_pose_beam_fit: float = param(0.5, ge=0)            # success only while the localizer's latest beam fit is at least this; 0 = off
+    escape_vel: float = param(-0.1, finite=True)           # m/s along x while backing up (negative: backwards)
+    rotate_angle: float = param(2 * math.pi, finite=True)  # rad: rotate_recovery turns a full circle
+    max_rotational_vel: float = param(1.0, gt=0)           # rad/s for rotate
+    backup_dist: float = param(0.15, ge=0)                 # m for back_up
+    wait_duration: float = param(1.0, ge=0)                # s for wait
 
     @property
     def recovery_order(self) -> tuple[str, ...]:
@@ -87,6 +76,9 @@ class NavigatorParams:
                 if isinstance(entry, dict) and isinstance(values.get(entry.get("name")), dict):
                     del values[entry["name"]]
         return load_params(cls, values, source)
+
+    rules = (Rule("escape_vel", lambda p: p.escape_vel != 0 or p.backup_dist <= 0 or "back_up" not in p.recovery_behaviors,
+                  "non-zero when back_up is a recovery behaviour"),)
 
 
 def _ros_recovery(entry, source: str) -> str:

@@ -7,7 +7,8 @@ import signal
 import threading
 
 from ...schemas.keys import ALL
-from ..runtime.params import ParamError, load_params
+from ...parameters.declare import ParamError
+from ...parameters.from_mapping import load_params
 from ..runtime.run import configure_logging
 from ..runtime.zenoh_config import router_endpoint
 from .node import RecorderNode, RecorderParams

@@ -27,6 +27,7 @@ from ..runtime.node import Node
 from ..runtime.zenoh_config import open_client
 from .mcap_io import RecordingWriter
 from .tally import SequenceTally
+from ...parameters.declare import Parameters, param
 
 RECORDINGS_DIR = "recordings"
 _FIFO_CAPACITY = 16384      # samples; at 100k/s that is 160 ms of slack for a slow chunk write
@@ -35,23 +36,13 @@ _IDLE_S = 0.002
 
 
 @dataclass(frozen=True)
-class RecorderParams:
-    output: str = ""                        # "" = recordings/omninav-<local time>.mcap
-    keys: tuple[str, ...] = (ALL,)          # Zenoh key expressions
-    split_size_mb: float = 0.0              # start the next numbered file past this size; 0 = never
-    split_duration_s: float = 0.0           # ... or after this long; 0 = never
-    flush_period_s: float = 0.5             # what a SIGKILL can lose, at most
-    chunk_size: int = 256 * 1024            # uncompressed bytes per zstd chunk
-
-    def __post_init__(self):
-        if not self.keys:
-            raise ValueError("keys: give at least one key expression")
-        if self.split_size_mb < 0 or self.split_duration_s < 0:
-            raise ValueError("split_size_mb and split_duration_s must be >= 0 (0 = no split)")
-        if self.flush_period_s <= 0:
-            raise ValueError(f"flush_period_s must be positive, got {self.flush_period_s}")
-        if self.chunk_size <= 0:
-            raise ValueError(f"chunk_size must be positive, got {self.chunk_size}")
+class RecorderParams(Parameters):
+    output: str = ""                                      # "" = recordings/omninav-<local time>.mcap
+    keys: tuple[str, ...] = param((ALL,), nonempty=True)  # Zenoh key expressions
+    split_size_mb: float = param(0.0, ge=0)               # start the next numbered file past this size; 0 = never
+    split_duration_s: float = param(0.0, ge=0)            # ... or after this long; 0 = never
+    flush_period_s: float = param(0.5, gt=0)              # what a SIGKILL can lose, at most
+    chunk_size: int = param(256 * 1024, gt=0)             # uncompressed bytes per zstd chunk
 
 
 def default_output() -> Path:

@@ -28,7 +28,8 @@ from ..recorder.mcap_io import Record, RecordingError, RecordingWriter, read_rec
 from ..runtime.live import RUN_STARTED
 from ..runtime.merge import order_key
 from ..runtime.node import NS_PER_S, PARAMS_VALUE, Node, Publisher
-from ..runtime.params import ParamError, parse_overrides
+from ..runtime.params import parse_overrides
+from ...parameters.declare import ParamError
 from ..runtime.service_registry import UnknownService, node_class
 from ..runtime.run import build_node, configure_logging
 

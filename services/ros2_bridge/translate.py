@@ -34,6 +34,7 @@ from ...schemas.messages import (Clock, Goal, Header, OccupancyGrid, Path, Pose2
 from ..importers.rosbag import laser_scan, odometry, yaw_of
 from ...geometry.se2 import compose
 from .rmw import BEST_EFFORT, TRANSIENT_LOCAL, Qos
+from ...parameters.declare import Parameters
 
 NS_PER_S = 1_000_000_000
 _PLANAR = (0, 1, 5)         # x, y, yaw among ROS's (x, y, z, roll, pitch, yaw) covariance axes
@@ -137,7 +138,7 @@ def laser_mounting(scan_frame: str | None, mounting: Mounting, base: str) -> tup
 
 
 @dataclass(frozen=True)
-class Ros2BridgeParams:
+class Ros2BridgeParams(Parameters):
     """The robot's ROS 2 side (domain, router, who the bridge is on its graph), its frames and the laser
     mounting the stack's services are configured with."""
     domain: int = 0                     # the robot's ROS_DOMAIN_ID

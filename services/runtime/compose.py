@@ -7,14 +7,15 @@ docs/compose.md for the format.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout
 from .node import Node
-from .params import (ParamError, load_node_params, read_params_mapping, read_yaml,
-                     unknown_names)
+from ...parameters.declare import ParamError
+from ...parameters.from_mapping import unknown_names
+from .params import load_node_params, read_params_mapping, read_yaml
 from .service_registry import UnknownService, node_class
 from .zenoh_config import check_loopback
 
@@ -37,6 +38,8 @@ class ServiceSpec:
     restart: str              # one of RESTART_POLICIES
     max_restarts: int | None  # None: no limit
     process: str              # the OS process (container) it runs in: its own name unless `process` says
+    # its Node class, imported once while the file is loaded (what `up` and a container then build)
+    node_type: type | None = field(default=None, compare=False, repr=False)
 
 
 @dataclass(frozen=True)
@@ -166,7 +169,7 @@ def _service(entry: Any, where: str, base: Path, default_robot: str) -> ServiceS
         KeyLayout(default_robot).diagnostics(process)   # a process name is a Zenoh user name and a file name
     except ValueError as exc:
         raise ComposeError(f"{where}.process: {exc}") from None
-    return ServiceSpec(name, service, module, params, robot, restart, max_restarts, process)
+    return ServiceSpec(name, service, module, params, robot, restart, max_restarts, process, cls)
 
 
 def _params(entry: dict, where: str, base: Path, name: str, params_type: type) -> dict:

@@ -24,7 +24,7 @@ import time
 from .compose import ComposeError, load_compose
 from .live import LiveRunner, tokens_present
 from .node import Node
-from .params import ParamError
+from ...parameters.declare import ParamError
 from .service_registry import UnknownService
 from .run import build_node
 from .zenoh_config import open_client
@@ -101,7 +101,7 @@ def main(args: argparse.Namespace) -> int:
     log = logging.getLogger("omninav.container")
     try:
         compose = load_compose(args.compose)
-        nodes = [build_node(s.service or s.name, overrides=s.params, robot=s.robot, name=s.name, spec=s.module)
+        nodes = [build_node(s.service or s.name, overrides=s.params, robot=s.robot, name=s.name, node_type=s.node_type)
                  for s in compose.services]
     except (ComposeError, UnknownService, ParamError, ValueError) as exc:
         log.error("%s", exc)

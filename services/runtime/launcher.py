@@ -30,8 +30,8 @@ from ...schemas.keys import KeyLayout
 from .acl import (CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, union, write_passwords,
                   write_puts)
 from .compose import Compose, ComposeError, ProcessSpec, load_compose
-from .params import ParamError
-from .service_registry import UnknownService, node_class
+from ...parameters.declare import ParamError
+from .service_registry import UnknownService
 from .node import Node
 from .live import tokens_present
 from .lockstep import LOCKSTEP_ENV, Lockstep, service_names
@@ -245,7 +245,7 @@ def build_nodes(compose: Compose) -> dict[str, Node]:
     for spec in compose.services:
         try:
             nodes[spec.name] = build_node(spec.service or spec.name, overrides=spec.params, robot=spec.robot,
-                                          name=spec.name, spec=spec.module)
+                                          name=spec.name, node_type=spec.node_type)
         except (UnknownService, ParamError) as exc:
             raise ComposeError(f"{compose.path}: {spec.name}: {exc}") from None
         except Exception as exc:    # its setup() failed
@@ -271,7 +271,7 @@ def lockstep_participants(compose: Compose) -> list[str]:
     and those that talk to Zenoh themselves (the recorder, the view), which nothing waits for."""
     names = []
     for spec in compose.services:
-        cls = node_class(spec.service or spec.name, spec.module)
+        cls = spec.node_type
         if not cls.coordinates_lockstep and not hasattr(cls, "run_live"):
             names.append(spec.name)
     return names
@@ -309,8 +309,7 @@ def main(args: argparse.Namespace) -> int:
         except OSError as exc:
             out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
             return 1
-        classes = {spec.name: [node_class(s.service or s.name, s.module) for s in spec.services]
-                   for spec in compose.processes}
+        classes = {spec.name: [s.node_type for s in spec.services] for spec in compose.processes}
         services = [Supervised(spec, endpoint, Path(params_dir), credentials, out, start_wave(classes[spec.name]),
                                max(c.stop_timeout_s for c in classes[spec.name]))
                     for spec in compose.processes]

@@ -18,6 +18,7 @@ from ...schemas.codec import encode
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ...schemas.messages import Clock, Diagnostic, Header
 from ...schemas.registry import type_info
+from ...parameters.declare import Parameters
 
 if TYPE_CHECKING:
     from .deferred import Deferred
@@ -28,7 +29,7 @@ PARAMS_VALUE = "params"     # Diagnostic value: the service's parameters, as JSO
 
 
 @dataclass(frozen=True)
-class NoParams:
+class NoParams(Parameters):
     """For services without parameters."""
 
 

@@ -8,18 +8,21 @@ import sys
 
 from .live import LiveRunner
 from .lockstep import Lockstep, service_names
-from .params import ParamError, load_node_params, parse_overrides, read_params_mapping
+from ...parameters.declare import ParamError
+from .params import load_node_params, parse_overrides, read_params_mapping
 from .service_registry import UnknownService, node_class
 
 
 def build_node(service: str, params_file: str | None = None, overrides: dict | None = None,
-               robot: str = "r1", name: str | None = None, spec: str | None = None, base: dict | None = None):
+               robot: str = "r1", name: str | None = None, spec: str | None = None, base: dict | None = None,
+               node_type: type | None = None):
     """Construct a service's Node with validated parameters (raises UnknownService / ParamError).
 
     base: values the file's and the overrides go over (replay: the live run's, from its Diagnostic;
     built values, so an override there does not re-derive what was derived from it live).
+    node_type: the Node class when the caller already imported it (a loaded compose file's).
     """
-    cls = node_class(service, spec)
+    cls = node_type or node_class(service, spec)
     # merge the raw mappings, not built dataclasses: a built one carries derived defaults
     # (e.g. a lidar's angle_min from its fov) that an override must be free to change
     values = read_params_mapping(params_file, name or service) if params_file else {}

@@ -14,7 +14,8 @@ from typing import Any
 
 import yaml
 
-from .params import load_params, read_params_mapping
+from ...parameters.from_mapping import load_params
+from .params import read_params_mapping
 
 
 def write_state(path: str | Path, state: Any, comment: str) -> None:

@@ -31,6 +31,7 @@ from ...geometry.odometry_history import OdomHistory
 from ..runtime.node import NS_PER_S, Node
 from .params import SlamParams
 from .rbpf import Rbpf
+from ...parameters.declare import param
 
 MAX_PENDING_SCANS = 100     # scans waiting for odometry; beyond this the oldest are dropped
 
@@ -38,24 +39,13 @@ MAX_PENDING_SCANS = 100     # scans waiting for odometry; beyond this the oldest
 @dataclass(frozen=True)
 class SlamNodeParams(SlamParams):
     """SlamParams plus what the node needs around the core (gmapping's frame names)."""
-    initial_pose_x: float = 0.0     # m, m, rad: the map-frame pose of the robot at the first scan
-    initial_pose_y: float = 0.0
-    initial_pose_a: float = 0.0
-    map_frame: str = "map"
-    odom_frame: str = "odom"
-    odom_history_s: float = 2.0     # sim s of odometry kept for interpolation
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        for name in ("initial_pose_x", "initial_pose_y", "initial_pose_a"):
-            if not math.isfinite(getattr(self, name)):
-                raise ValueError(f"{name} must be finite, got {getattr(self, name)}")
-        if not self.map_update_interval > 0:
-            raise ValueError(f"map_update_interval must be positive, got {self.map_update_interval}")
-        if not self.odom_history_s >= 0:
-            raise ValueError(f"odom_history_s must be zero or positive, got {self.odom_history_s}")
-        if not (self.map_frame and self.odom_frame):
-            raise ValueError("map_frame and odom_frame must not be empty")
+    initial_pose_x: float = param(0.0, finite=True)  # m, m, rad: the map-frame pose of the robot at the first scan
+    initial_pose_y: float = param(0.0, finite=True)
+    initial_pose_a: float = param(0.0, finite=True)
+    map_frame: str = param("map", nonempty=True)
+    odom_frame: str = param("odom", nonempty=True)
+    odom_history_s: float = param(2.0, ge=0)         # sim s of odometry kept for interpolation
+    map_update_interval: float = param(5.0, gt=0)    # s of sim time between published maps
 
 
 class SlamNode(Node):

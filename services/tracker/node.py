@@ -24,9 +24,9 @@ from ...geometry.frames import FrameParams, LASER_MOUNT
 from ...geometry.frames import scan_points
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
-from ..runtime.params import require_nonnegative
 from ...geometry.se2 import compose
 from .tracker import MoverTracker, TrackerParams, warm_up
+from ...parameters.declare import param
 
 _MAP, _MAP_ODOM = range(2)      # sporadic inputs, in input order (the order of equal stamps)
 
@@ -37,11 +37,7 @@ class TrackerNodeParams(FrameParams, TrackerParams):
     laser_y: float = LASER_MOUNT[1]
     laser_yaw: float = LASER_MOUNT[2]
     use_map: bool = True                     # explain scan points by the static map (the map key)
-    request_delay_s: float = 0.3             # sim s from a map / tf/map_odom stamp to its effect
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        require_nonnegative(self, "request_delay_s")
+    request_delay_s: float = param(0.3, ge=0)             # sim s from a map / tf/map_odom stamp to its effect
 
 
 class TrackerNode(Node):

@@ -41,63 +41,42 @@ from scipy.spatial import cKDTree
 
 from ...schemas.messages import OccupancyGrid
 from ...geometry.se2 import compose, inverse
+from ...parameters.declare import Parameters, Rule, param
 
 ARC_CENTROID = 2.0 / math.pi   # a half circle's points have their centroid this many radii from its centre
 UNSET = -1.0                   # an evidence cell without a streak
 
 
 @dataclass(frozen=True)
-class TrackerParams:
+class TrackerParams(Parameters):
     """Names after PCL's EuclideanClusterExtraction (cluster_tolerance, min/max_cluster_size) and the
     usual multi-target tracker's; no ROS package sets the others' defaults."""
-    cluster_tolerance: float = 0.2        # m: points this close belong to one cluster
-    min_cluster_size: int = 3             # points: fewer are noise
-    max_cluster_size: int = 400           # points
-    max_cluster_radius: float = 0.6       # m: a wider cluster is a wall, not a mover
-    max_static_share: float = 0.3         # of a cluster's points static: more, and it is part of the static world
-    map_obstacle_distance: float = 0.15   # m from an occupied map cell within which a point is static
-    map_occupied_thresh: int = 65         # map value (percent) from which a cell is occupied (map_server's 0.65)
-    evidence_resolution: float = 0.1      # m: cells of the rolling evidence grid
-    evidence_size: float = 24.0           # m: side of the evidence grid, centred on the robot
-    static_after_s: float = 2.0           # s of cell hits without a break after which the cell is static
-    evidence_clear_margin: float = 0.2    # m short of a hit in which a beam does not end a cell's streak
-    measurement_noise: float = 0.05       # m: std of a cluster centre
-    process_noise: float = 1.0            # m/s²: std of the white acceleration of a mover
-    initial_velocity_std: float = 1.0     # m/s: of a new track
-    gate_chi2: float = 13.8               # squared Mahalanobis distance (χ², 2 dof, 99.9 %)
-    max_association_distance: float = 1.0  # m between a predicted track and a measurement
-    confirm_hits: int = 4                 # hits before a track is confirmed (published) ...
-    min_travel: float = 0.3               # m ... and how far it must have gone from where it was first seen:
-                                          # what never moved is the static world (the costmap's), not a mover
-    max_misses: int = 10                  # scans without a hit before a confirmed track is deleted
-    tentative_max_misses: int = 1         # the same for a tentative track
-    radius_smoothing: float = 0.3         # weight of a new cluster's radius in the track's estimate
-    min_radius: float = 0.1               # m: a track is at least this wide
+    cluster_tolerance: float = param(0.2, gt=0)         # m: points this close belong to one cluster
+    min_cluster_size: int = param(3, ge=1)              # points: fewer are noise
+    max_cluster_size: int = param(400, ge=1)            # points
+    max_cluster_radius: float = param(0.6, gt=0)        # m: a wider cluster is a wall, not a mover
+    max_static_share: float = param(0.3, ge=0, le=1)    # of a cluster's points static: more, and it is part of the static world
+    map_obstacle_distance: float = param(0.15, ge=0)    # m from an occupied map cell within which a point is static
+    map_occupied_thresh: int = param(65, ge=0, le=100)  # map value (percent) from which a cell is occupied (map_server's 0.65)
+    evidence_resolution: float = param(0.1, gt=0)       # m: cells of the rolling evidence grid
+    evidence_size: float = param(24.0, gt=0)            # m: side of the evidence grid, centred on the robot
+    static_after_s: float = param(2.0, gt=0)            # s of cell hits without a break after which the cell is static
+    evidence_clear_margin: float = param(0.2, ge=0)     # m short of a hit in which a beam does not end a cell's streak
+    measurement_noise: float = param(0.05, gt=0)        # m: std of a cluster centre
+    process_noise: float = param(1.0, gt=0)             # m/s²: std of the white acceleration of a mover
+    initial_velocity_std: float = param(1.0, gt=0)      # m/s: of a new track
+    gate_chi2: float = param(13.8, gt=0)                # squared Mahalanobis distance (χ², 2 dof, 99.9 %)
+    max_association_distance: float = param(1.0, gt=0)  # m between a predicted track and a measurement
+    confirm_hits: int = param(4, ge=1)                  # hits before a track is confirmed (published) ...
+    min_travel: float = param(0.3, ge=0)                # m ... and how far it must have gone from where it was first seen:
+                                                        # what never moved is the static world (the costmap's), not a mover
+    max_misses: int = param(10, ge=1)                   # scans without a hit before a confirmed track is deleted
+    tentative_max_misses: int = param(1, ge=0)          # the same for a tentative track
+    radius_smoothing: float = param(0.3, gt=0, le=1)    # weight of a new cluster's radius in the track's estimate
+    min_radius: float = param(0.1, gt=0)                # m: a track is at least this wide
 
-    def __post_init__(self) -> None:
-        for name in ("cluster_tolerance", "max_cluster_radius", "evidence_resolution", "evidence_size",
-                     "static_after_s", "measurement_noise", "process_noise", "initial_velocity_std",
-                     "gate_chi2", "max_association_distance", "min_radius"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value > 0):
-                raise ValueError(f"parameter {name!r} must be positive, got {value!r}")
-        for name in ("map_obstacle_distance", "evidence_clear_margin", "min_travel"):
-            value = getattr(self, name)
-            if not (math.isfinite(value) and value >= 0):
-                raise ValueError(f"parameter {name!r} must be zero or positive, got {value!r}")
-        for name in ("min_cluster_size", "max_cluster_size", "confirm_hits", "max_misses"):
-            if getattr(self, name) < 1:
-                raise ValueError(f"parameter {name!r} must be at least 1, got {getattr(self, name)!r}")
-        if self.tentative_max_misses < 0:
-            raise ValueError(f"parameter 'tentative_max_misses' must be ≥ 0, got {self.tentative_max_misses}")
-        if self.max_cluster_size < self.min_cluster_size:
-            raise ValueError("max_cluster_size must be at least min_cluster_size")
-        if not 0 <= self.max_static_share <= 1:
-            raise ValueError(f"parameter 'max_static_share' must be in [0, 1], got {self.max_static_share}")
-        if not 0 < self.radius_smoothing <= 1:
-            raise ValueError(f"parameter 'radius_smoothing' must be in (0, 1], got {self.radius_smoothing}")
-        if not 0 <= self.map_occupied_thresh <= 100:
-            raise ValueError(f"parameter 'map_occupied_thresh' must be in [0, 100], got {self.map_occupied_thresh}")
+    rules = (Rule("max_cluster_size", lambda p: p.max_cluster_size >= p.min_cluster_size,
+                  "at least min_cluster_size ({p.min_cluster_size})"),)
 
 
 @dataclass

@@ -19,23 +19,17 @@ import numpy as np
 
 from ...schemas.messages import Header, Odometry, Pose2D, PoseWithCovariance, Transform
 from ..runtime.node import NS_PER_S, Node
-from ..runtime.params import require_nonnegative
 from ...geometry.se2 import compose, inverse
+from ...parameters.declare import Parameters, param
 
 
 @dataclass(frozen=True)
-class TruthPoseParams:
-    publish_rate_hz: float = 20.0   # sim Hz of pose and tf/map_odom; 0 = at every odometry
-    position_std: float = 0.005     # m, stated in the covariance (the truth is exact; consumers may divide by it)
-    yaw_std: float = 0.005          # rad
-    map_frame: str = "map"
-    odom_frame: str = "odom"
-
-    def __post_init__(self) -> None:
-        require_nonnegative(self, "publish_rate_hz", "position_std", "yaw_std")
-        for name in ("map_frame", "odom_frame"):
-            if not getattr(self, name):
-                raise ValueError(f"{name} must not be empty")
+class TruthPoseParams(Parameters):
+    publish_rate_hz: float = param(20.0, ge=0)  # sim Hz of pose and tf/map_odom; 0 = at every odometry
+    position_std: float = param(0.005, ge=0)    # m, stated in the covariance (the truth is exact; consumers may divide by it)
+    yaw_std: float = param(0.005, ge=0)         # rad
+    map_frame: str = param("map", nonempty=True)
+    odom_frame: str = param("odom", nonempty=True)
 
 
 class TruthPoseNode(Node):

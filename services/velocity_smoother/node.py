@@ -23,18 +23,14 @@ from ...geometry.frames import twist_message, twist_vector
 from ...schemas.messages import Clock
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node, Ticks
-from ..runtime.params import require_nonnegative
 from .smoother import VelocitySmoother, VelocitySmootherParams
+from ...parameters.declare import param
 
 
 @dataclass(frozen=True)
 class VelocitySmootherNodeParams(VelocitySmootherParams):
     """Nav2's velocity_smoother names (VelocitySmootherParams) and the node's own."""
-    command_delay_s: float = 0.04       # sim s from a command's stamp until it takes effect
-
-    def __post_init__(self):
-        super().__post_init__()
-        require_nonnegative(self, "command_delay_s")
+    command_delay_s: float = param(0.04, ge=0)       # sim s from a command's stamp until it takes effect
 
 
 class VelocitySmootherNode(Node):

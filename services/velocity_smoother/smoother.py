@@ -9,39 +9,28 @@ the robot stops at the deceleration limits rather than at once.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..runtime.params import require_positive
+from ...parameters.declare import Parameters, Rule, param
 
 
 @dataclass(frozen=True)
-class VelocitySmootherParams:
+class VelocitySmootherParams(Parameters):
     """Nav2 velocity_smoother's names and defaults; axes are (vx, vy, wz)."""
-    smoothing_frequency: float = 20.0                   # Hz
+    smoothing_frequency: float = param(20.0, gt=0)  # Hz
     # what the chassis allows on every axis: Nav2's defaults are a differential drive's (vy 0), which
     # would stop a mecanum robot strafing
-    max_velocity: tuple[float, float, float] = (0.5, 0.5, 2.5)
-    min_velocity: tuple[float, float, float] = (-0.5, -0.5, -2.5)
-    max_accel: tuple[float, float, float] = (2.5, 2.5, 3.2)
-    max_decel: tuple[float, float, float] = (-2.5, -2.5, -3.2)
-    deadband_velocity: tuple[float, float, float] = (0.0, 0.0, 0.0)
-    velocity_timeout: float = 1.0                       # s without a command → decelerate to a stop
+    max_velocity: tuple[float, float, float] = param((0.5, 0.5, 2.5), items=3, finite=True)
+    min_velocity: tuple[float, float, float] = param((-0.5, -0.5, -2.5), items=3, finite=True)
+    max_accel: tuple[float, float, float] = param((2.5, 2.5, 3.2), items=3, ge=0)
+    max_decel: tuple[float, float, float] = param((-2.5, -2.5, -3.2), items=3, le=0)
+    deadband_velocity: tuple[float, float, float] = param((0.0, 0.0, 0.0), items=3, finite=True)
+    velocity_timeout: float = param(1.0, gt=0)      # s without a command → decelerate to a stop
 
-    def __post_init__(self):
-        require_positive(self, "smoothing_frequency", "velocity_timeout")
-        for name in ("max_velocity", "min_velocity", "max_accel", "max_decel", "deadband_velocity"):
-            value = getattr(self, name)
-            if len(value) != 3 or not all(math.isfinite(v) for v in value):
-                raise ValueError(f"{name} must be three finite numbers [vx, vy, wz], got {value}")
-        for i in range(3):
-            if self.min_velocity[i] > self.max_velocity[i]:
-                raise ValueError(f"min_velocity {self.min_velocity} exceeds max_velocity {self.max_velocity}")
-            if self.max_accel[i] < 0 or self.max_decel[i] > 0:
-                raise ValueError("max_accel must be ≥ 0 and max_decel ≤ 0 on every axis "
-                                 f"(got {self.max_accel}, {self.max_decel})")
+    rules = (Rule("max_velocity", lambda p: all(low <= high for low, high in zip(p.min_velocity, p.max_velocity)),
+                  "at least min_velocity ({p.min_velocity}) on every axis"),)
 
 
 def smooth_step(target, current, dt: float, params: VelocitySmootherParams) -> np.ndarray:

@@ -22,6 +22,7 @@ from foxglove.messages import (ArrowPrimitive, Color, CylinderPrimitive, FrameTr
 from ...schemas import messages as m
 from ...schemas.keys import KeyLayout, type_for_key
 from ...geometry.footprint import DEFAULT_FOOTPRINT
+from ...parameters.declare import Parameters, param
 
 NS_PER_S = 1_000_000_000
 WORLD_FRAME, MAP_FRAME, ODOM_FRAME, BASE_FRAME = "world", "map", "odom", "base_link"
@@ -57,17 +58,11 @@ DIAGNOSTIC_SCHEMA = {
 
 
 @dataclass(frozen=True)
-class ViewParams:
+class ViewParams(Parameters):
     """What the messages do not say: the robot's outline and where its lidar sits."""
     # polygon in base_link, m: the simulator's default robot
-    footprint: tuple[tuple[float, float], ...] = tuple(map(tuple, DEFAULT_FOOTPRINT.tolist()))
-    laser_mount: tuple[float, float, float] = (0.0, 0.0, 0.0)            # x, y, yaw of the laser in base_link
-
-    def __post_init__(self):
-        if len(self.footprint) < 3:
-            raise ValueError(f"footprint needs at least 3 points, got {len(self.footprint)}")
-        if len(self.laser_mount) != 3:
-            raise ValueError(f"laser_mount is x, y, yaw; got {self.laser_mount}")
+    footprint: tuple[tuple[float, float], ...] = param(tuple(map(tuple, DEFAULT_FOOTPRINT.tolist())), min_items=3)
+    laser_mount: tuple[float, float, float] = param((0.0, 0.0, 0.0), items=3, finite=True)            # x, y, yaw of the laser in base_link
 
 
 # ---------------------------------------------------------------- geometry helpers

@@ -19,6 +19,7 @@ from ..runtime.live import LiveRunner
 from ..runtime.node import Node
 from .channels import ChannelSet
 from .convert import Converter, ROUTES, Route, RouteTable, ViewParams, goal_from_client
+from ...parameters.declare import param
 
 LOOPBACK = "127.0.0.1"
 GOAL_TOPIC = "/goal_pose"       # the topic the Foxglove app's "Publish pose" tool uses by default
@@ -27,15 +28,8 @@ GOAL_ENCODING = "json"
 
 @dataclass(frozen=True)
 class ViewNodeParams(ViewParams):
-    port: int = 8765                # 0: any free port (tests)
-    grid_period_s: float = 1.0      # sim time between two publications of one grid, at least
-
-    def __post_init__(self):
-        super().__post_init__()
-        if not 0 <= self.port <= 65535:
-            raise ValueError(f"port {self.port} is not a TCP port")
-        if self.grid_period_s < 0:
-            raise ValueError(f"grid_period_s must not be negative, got {self.grid_period_s}")
+    port: int = param(8765, ge=0, le=65535)  # 0: any free port (tests)
+    grid_period_s: float = param(1.0, ge=0)  # sim time between two publications of one grid, at least
 
 
 class GoalForwarder(ServerListener):
