@@ -33,6 +33,7 @@ class InProcessRunner:
             for index, inp in enumerate(node.inputs):
                 self._routes[inp.key].append((position, index, inp))
         self._taps: list[Callable[[str, bytes, int], None]] = []
+        self._watchers: dict[str, list[Callable[[str, Any], None]]] = defaultdict(list)
         self._writers: list = []
         for node in self.nodes:
             for pub in (*node.outputs.values(), node.diagnostics):
@@ -41,6 +42,12 @@ class InProcessRunner:
     def tap(self, callback: Callable[[str, bytes, int], None]) -> None:
         """Also hand every published (key, payload, stamp_ns) to callback — a recorder, a probe."""
         self._taps.append(callback)
+
+    def watch(self, keys: Iterable[str], callback: Callable[[str, Any], None]) -> None:
+        """Also hand every message published on these keys to callback(key, message), decoded: the
+        one message the subscribers get, so read-only. A payload that does not decode is skipped."""
+        for key in keys:
+            self._watchers[key].append(callback)
 
     def record(self, writer) -> None:
         """Also write every published message to a recording (a RecordingWriter), as the recorder
@@ -52,18 +59,28 @@ class InProcessRunner:
             writer.write(pub.key, pub.type_name, payload, pub.seq, stamp_ns, stamp_ns)
         for tap in self._taps:
             tap(pub.key, payload, stamp_ns)
-        decoded: dict[type, Any] = {}
+        decoded: dict[type, Any] = {}      # one message per type, handed to everyone who takes it
+
+        def message(msg_type: type) -> Any:
+            if msg_type not in decoded:
+                decoded[msg_type] = decode(payload, msg_type, key=pub.key)
+            return decoded[msg_type]
+
         for position, index, inp in self._routes.get(pub.key, ()):
-            msg = decoded.get(inp.msg_type)
-            if msg is None:
-                try:
-                    msg = decoded[inp.msg_type] = decode(payload, inp.msg_type, key=pub.key)
-                except MessageError as exc:
-                    self.nodes[position].reject(pub.key, exc)
-                    continue
+            try:
+                msg = message(inp.msg_type)
+            except MessageError as exc:
+                self.nodes[position].reject(pub.key, exc)
+                continue
             self._pushed[position] = True
             if not self._mergers[position].push(index, msg.header.stamp_ns, (index, msg)):
                 self.nodes[position].counters[f"late/{pub.key}"] += 1
+        for callback in self._watchers.get(pub.key, ()):
+            try:
+                msg = message(pub.msg_type)
+            except MessageError:
+                break       # watchers skip what does not decode
+            callback(pub.key, msg)
 
     def _settle(self) -> None:
         moved = True
