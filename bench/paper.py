@@ -11,15 +11,21 @@ How the runs are driven: by default in lockstep in one process each (`navigate -
 experiments/lockstep_mission.py), --workers at once — the same figures every time, as fast as the
 CPUs compute; `--processes`: every service its own process, in lockstep (`navigate --lockstep`),
 one run after another; `--rate R`: as processes at R × real time, as a robot would run them.
+In-process runs go through `omninav navigate` inside the worker process itself (the same
+arguments, its JSON summary captured, its messages in the run's log): a worker imports the stack
+and loads its JIT caches once, not once per run.
 """
 from __future__ import annotations
 
 import argparse
+import contextlib
+import io
 import json
 import statistics
 import subprocess
 import sys
 import time
+import traceback
 from pathlib import Path
 
 from ..experiments.workers import run_in_workers
@@ -45,29 +51,55 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--out", help="folder for the runs (default out/paper-<date>-<time>)")
 
 
-def run_navigate(cmd: list[str], log: Path) -> dict:
-    """One navigate run: its JSON summary, or a failed row saying why (the log keeps the details)."""
+def run_navigate(argv: list[str], log: Path) -> dict:
+    """One navigate run as its own process: its JSON summary, or a failed row saying why (the log
+    keeps the details)."""
     with open(log, "wb") as sink:
         try:
-            done = subprocess.run(cmd, cwd=REPO, stdout=subprocess.PIPE, stderr=sink, timeout=RUN_TIMEOUT_S)
+            done = subprocess.run([sys.executable, "-m", "omninav.cli.main", *argv], cwd=REPO, stdout=subprocess.PIPE,
+                                  stderr=sink, timeout=RUN_TIMEOUT_S)
         except subprocess.TimeoutExpired:
             return {"success": False, "error": f"no result within {RUN_TIMEOUT_S} wall s; see {log}"}
-    lines = done.stdout.decode(errors="replace").strip().splitlines()
-    if done.returncode in (0, 1) and lines:
+    return summary_row(done.returncode, done.stdout.decode(errors="replace"), log)
+
+
+def run_navigate_here(argv: list[str], log: Path) -> dict:
+    """As run_navigate, in this process: `omninav navigate` with argv, its output captured."""
+    from ..cli.main import main as omninav
+
+    printed = io.StringIO()
+    with open(log, "w") as sink, contextlib.redirect_stdout(printed), contextlib.redirect_stderr(sink):
+        try:
+            status = omninav(argv)
+        except Exception:       # one broken run is a failed row, not the end of the experiment
+            traceback.print_exc(file=sink)
+            return {"success": False, "error": f"navigate raised; see {log}"}
+    return summary_row(status, printed.getvalue(), log)
+
+
+def summary_row(status: int, printed: str, log: Path) -> dict:
+    """navigate's JSON summary (its last line; exit 0 or 1), or a failed row naming the exit."""
+    lines = printed.strip().splitlines()
+    if status in (0, 1) and lines:
         return json.loads(lines[-1])
-    return {"success": False, "error": f"navigate exit {done.returncode}; see {log}"}
+    return {"success": False, "error": f"navigate exit {status}; see {log}"}
 
 
-def navigate_command(seed: int, args: argparse.Namespace, out: Path) -> list[str]:
+def navigate_arguments(seed: int, args: argparse.Namespace, out: Path) -> list[str]:
     pace = ["--rate", str(args.rate)] if args.rate is not None else \
         ["--lockstep"] if args.processes else ["--in-process"]
-    return [sys.executable, "-m", "omninav.cli.main", "navigate", "--world", "paper", "--localization",
-            args.localization, "--seed", str(seed), *pace, "-o", str(out / f"seed{seed}"), "--json"]
+    return ["navigate", "--world", "paper", "--localization", args.localization, "--seed", str(seed), *pace,
+            "-o", str(out / f"seed{seed}"), "--json"]
+
+
+def in_process(args: argparse.Namespace) -> bool:
+    return args.rate is None and not args.processes
 
 
 def one_run(job: tuple[int, argparse.Namespace, str]) -> dict:
     seed, args, out = job
-    row = run_navigate(navigate_command(seed, args, Path(out)), Path(out) / f"seed{seed}.log")
+    argv, log = navigate_arguments(seed, args, Path(out)), Path(out) / f"seed{seed}.log"
+    row = (run_navigate_here if in_process(args) else run_navigate)(argv, log)
     row["seed"] = seed
     row["within_aim"] = bool(row["success"] and row["final_xy_error_m"] <= AIM_XY_M
                              and row["final_yaw_error_deg"] <= AIM_YAW_DEG)
@@ -80,9 +112,8 @@ def main(args: argparse.Namespace) -> int:
     out = Path(args.out or REPO / "out" / time.strftime("paper-%Y%m%d-%H%M%S")).resolve()
     out.mkdir(parents=True, exist_ok=True)
     began = time.monotonic()
-    in_process = args.rate is None and not args.processes
     jobs = [(seed, args, str(out)) for seed in range(args.runs)]
-    rows = run_in_workers(one_run, jobs, args.workers if in_process else 1,
+    rows = run_in_workers(one_run, jobs, args.workers if in_process(args) else 1,
                           on_result=None if args.json else print_row)
     result = summarize(rows, args.localization)
     result["wall_s"] = round(time.monotonic() - began, 1)

@@ -119,7 +119,7 @@ def run_mission(services: list[dict], world: World, goals: np.ndarray, *, timeou
     sequencer = GoalSequencer(goals, timeout_s, robot=robot)
     runner = InProcessRunner([*nodes.values(), sequencer])
     collector = MissionCollector(robot)
-    runner.tap(lambda key, payload, _stamp: collector.add(key, payload))
+    runner.watch(collector.keys, collector.add_message)
     if watch is not None:
         runner.tap(watch)
     writer = RecordingWriter(recording) if recording is not None else None

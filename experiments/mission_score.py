@@ -38,7 +38,7 @@ import numpy as np
 
 from ..schemas import MessageError, decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
-from ..schemas.messages import Diagnostic, Goal, NavStatus, Path as PathMsg
+from ..schemas.messages import Goal, NavStatus, Path as PathMsg
 from ..sim.world import World
 from ..geometry.polygons import point_segment_distance, points_in_polygons, transform_points
 from ..services.recorder.mcap_io import RecordingError, read_records
@@ -143,21 +143,23 @@ class MissionCollector:
         return [*self.wanted, *self.diagnostics]
 
     def add(self, key: str, payload: bytes) -> None:
+        if key in self.diagnostics or key in self.wanted:
+            try:
+                msg = decode(payload, type_for_key(key), key=key)
+            except MessageError:
+                return      # a malformed message counts as not sent
+            self.add_message(key, msg)
+
+    def add_message(self, key: str, msg) -> None:
+        """As add, for a message already decoded (kept: it must not change afterwards)."""
         service = self.diagnostics.get(key)
         if service is not None:
-            try:
-                run = decode(payload, Diagnostic, key=key).values.get(RUN_STARTED)
-            except MessageError:
-                run = None
+            run = msg.values.get(RUN_STARTED)
             if isinstance(run, int):
                 self.runs[service].add(run)
         part = self.wanted.get(key)
-        if part is None:
-            return
-        try:
-            self.found[part].append(decode(payload, type_for_key(key), key=key))
-        except MessageError:
-            pass        # a malformed message counts as not sent
+        if part is not None:
+            self.found[part].append(msg)
 
     def record(self, source: str) -> MissionRecord:
         """The MissionRecord (MissionError naming `source` if it holds no ground truth)."""

@@ -31,3 +31,18 @@ def test_needs_a_source():
     import pytest
     with pytest.raises(ValueError, match="source"):
         InProcessRunner([Listener()])
+
+
+def test_watch_hands_over_the_messages_the_subscribers_get():
+    talker, listener = Talker(TalkerParams(clock_hz=100, chatter_hz=10)), Listener()
+    runner = InProcessRunner([talker, listener])
+    payloads, watched, handled = [], [], []
+    chatter = next(i for i in listener.inputs if i.key.endswith("/chatter"))
+    chatter.handler = (lambda handle: lambda msg: (handled.append(msg), handle(msg)))(chatter.handler)
+    runner.tap(lambda key, payload, stamp: payloads.append(payload) if key == chatter.key else None)
+    runner.watch([chatter.key], lambda key, msg: watched.append((key, msg)))
+    runner.run_until(lambda: False, 100)
+    runner.close()
+    assert len(watched) == len(payloads) == 10
+    assert [m.text for _, m in watched] == [decode(p).text for p in payloads]
+    assert all(a is b for (_, a), b in zip(watched, handled))      # decoded once, shared

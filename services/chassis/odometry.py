@@ -1,6 +1,7 @@
 """Odometry: encoder increments (and a gyro) integrated exactly into a pose (SE(2) algebra: ../se2.py)."""
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -91,11 +92,13 @@ class EncoderOdometry:
     def _advance(self, motion: np.ndarray, dt: float) -> None:
         p = self.params
         step = se2_exp(motion)
+        dx, dy = step[0].item(), step[1].item()     # floats: numpy scalars cost more than the arithmetic
         path = float(np.hypot(motion[0], motion[1]))
         turn = abs(float(motion[2]))
-        c, s = np.cos(self.pose[2]), np.sin(self.pose[2])
-        jac_pose = np.array([[1.0, 0.0, -s * step[0] - c * step[1]],
-                             [0.0, 1.0, c * step[0] - s * step[1]],
+        heading = self.pose[2].item()
+        c, s = math.cos(heading), math.sin(heading)
+        jac_pose = np.array([[1.0, 0.0, -s * dx - c * dy],
+                             [0.0, 1.0, c * dx - s * dy],
                              [0.0, 0.0, 1.0]])
         jac_step = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         noise = np.diag([p.odom_trans_var_per_m * path, p.odom_trans_var_per_m * path,

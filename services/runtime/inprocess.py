@@ -1,19 +1,22 @@
 """Run several Nodes in one thread, in lockstep: the whole pipeline deterministic and as fast as
 the CPU allows, for evaluations and benchmarks.
 
-Each published message is decoded again and pushed into every subscriber's StampMerger (the same
-bytes and the same order rules as live), so the nodes run exactly their live code. Sources (the
+Each published message is decoded again from its bytes and pushed into every subscriber's
+StampMerger (the same bytes and the same order rules as live), so the nodes run exactly their live
+code. It is decoded once and the one message handed to every subscriber, as ROS 2's intra-process
+communication shares one const message: handlers treat what they receive as read-only (its arrays
+are read-only views over the payload; nothing may assign to its fields). Sources (the
 sim) are ticked one step at a time, and after each tick every node processes whatever its merger
 releases until nothing moves: the sim never runs ahead of a slow service.
 """
 from __future__ import annotations
 
 from collections import defaultdict
-from typing import Callable, Iterable
+from typing import Any, Callable, Iterable
 
 from ...schemas import MessageError, decode
 from .merge import StampMerger
-from .node import Node, Publisher
+from .node import Input, Node, Publisher
 
 
 class InProcessRunner:
@@ -22,12 +25,15 @@ class InProcessRunner:
         self.sources = [n for n in self.nodes if n.pace_s() is not None]
         if not self.sources:
             raise ValueError("an in-process run needs a source node (the sim) to advance time")
-        self._mergers = {id(n): StampMerger([i.synced for i in n.inputs]) for n in self.nodes}
-        self._routes: dict[str, list[tuple[Node, int]]] = defaultdict(list)
-        for node in self.nodes:
+        self._mergers = [StampMerger([i.synced for i in n.inputs]) for n in self.nodes]
+        # which mergers were pushed to since they last released: only those can have become ready
+        self._pushed = [False] * len(self.nodes)
+        self._routes: dict[str, list[tuple[int, int, Input]]] = defaultdict(list)
+        for position, node in enumerate(self.nodes):
             for index, inp in enumerate(node.inputs):
-                self._routes[inp.key].append((node, index))
+                self._routes[inp.key].append((position, index, inp))
         self._taps: list[Callable[[str, bytes, int], None]] = []
+        self._watchers: dict[str, list[Callable[[str, Any], None]]] = defaultdict(list)
         self._writers: list = []
         for node in self.nodes:
             for pub in (*node.outputs.values(), node.diagnostics):
@@ -36,6 +42,12 @@ class InProcessRunner:
     def tap(self, callback: Callable[[str, bytes, int], None]) -> None:
         """Also hand every published (key, payload, stamp_ns) to callback — a recorder, a probe."""
         self._taps.append(callback)
+
+    def watch(self, keys: Iterable[str], callback: Callable[[str, Any], None]) -> None:
+        """Also hand every message published on these keys to callback(key, message), decoded: the
+        one message the subscribers get, so read-only. A payload that does not decode is skipped."""
+        for key in keys:
+            self._watchers[key].append(callback)
 
     def record(self, writer) -> None:
         """Also write every published message to a recording (a RecordingWriter), as the recorder
@@ -47,22 +59,38 @@ class InProcessRunner:
             writer.write(pub.key, pub.type_name, payload, pub.seq, stamp_ns, stamp_ns)
         for tap in self._taps:
             tap(pub.key, payload, stamp_ns)
-        for node, index in self._routes.get(pub.key, ()):
-            inp = node.inputs[index]
+        decoded: dict[type, Any] = {}      # one message per type, handed to everyone who takes it
+
+        def message(msg_type: type) -> Any:
+            if msg_type not in decoded:
+                decoded[msg_type] = decode(payload, msg_type, key=pub.key)
+            return decoded[msg_type]
+
+        for position, index, inp in self._routes.get(pub.key, ()):
             try:
-                msg = decode(payload, inp.msg_type, key=pub.key)
+                msg = message(inp.msg_type)
             except MessageError as exc:
-                node.reject(pub.key, exc)
+                self.nodes[position].reject(pub.key, exc)
                 continue
-            if not self._mergers[id(node)].push(index, msg.header.stamp_ns, (index, msg)):
-                node.counters[f"late/{pub.key}"] += 1
+            self._pushed[position] = True
+            if not self._mergers[position].push(index, msg.header.stamp_ns, (index, msg)):
+                self.nodes[position].counters[f"late/{pub.key}"] += 1
+        for callback in self._watchers.get(pub.key, ()):
+            try:
+                msg = message(pub.msg_type)
+            except MessageError:
+                break       # watchers skip what does not decode
+            callback(pub.key, msg)
 
     def _settle(self) -> None:
         moved = True
         while moved:
             moved = False
-            for node in self.nodes:
-                for index, msg in self._mergers[id(node)].pop_ready():
+            for position, node in enumerate(self.nodes):
+                if not self._pushed[position]:
+                    continue
+                self._pushed[position] = False
+                for index, msg in self._mergers[position].pop_ready():
                     node.process(index, msg)
                     moved = True
 
@@ -81,8 +109,8 @@ class InProcessRunner:
         return max_steps
 
     def close(self) -> None:
-        for node in self.nodes:
-            for index, msg in self._mergers[id(node)].drain():
+        for node, merger in zip(self.nodes, self._mergers):
+            for index, msg in merger.drain():
                 node.process(index, msg)
         for node in self.nodes:
             node.close()

@@ -24,11 +24,13 @@ class StampMerger:
     synced: list[bool]
     _heap: list = field(default_factory=list)
     _latest: list[int | None] = field(init=False)
+    _waited_on: list[int] = field(init=False)       # the synced streams
     _arrival: itertools.count = field(default_factory=itertools.count)
     released_upto: int | None = None   # stamp of the last released item
 
     def __post_init__(self):
         self._latest = [None] * len(self.synced)
+        self._waited_on = [i for i, synced in enumerate(self.synced) if synced]
 
     def push(self, stream: int, stamp_ns: int, item: Any, enqueued_at: float = 0.0) -> bool:
         """Buffer an item; False if it arrived too late to keep stamp order (it is still buffered)."""
@@ -39,10 +41,10 @@ class StampMerger:
         return not late
 
     def _ready(self, stamp_ns: int, stream: int) -> bool:
-        for other, (synced, last) in enumerate(zip(self.synced, self._latest)):
-            if other == stream or not synced:
-                continue
-            if last is None or last < stamp_ns or (last == stamp_ns and other < stream):
+        latest = self._latest
+        for other in self._waited_on:
+            last = latest[other]
+            if other != stream and (last is None or last < stamp_ns or (last == stamp_ns and other < stream)):
                 return False
         return True
 

@@ -54,6 +54,10 @@ class Input:
     # a sporadic input whose effect the node defers by this much sim time may arrive that late
     # (after inputs stamped up to stamp + max_delay_ns) without changing the outputs
     max_delay_ns: int = 0
+    received: str = dataclasses.field(init=False)      # its counter's name, made once
+
+    def __post_init__(self) -> None:
+        self.received = f"received/{self.key}"
 
 
 class Publisher:
@@ -193,7 +197,7 @@ class Node:
         inp = self.inputs[index]
         self.now_ns = max(self.now_ns, msg.header.stamp_ns)
         self.first_seq.setdefault(inp.key, msg.header.seq)
-        self.counters[f"received/{inp.key}"] += 1
+        self.counters[inp.received] += 1
         try:
             inp.handler(msg)
         except Exception as exc:    # the guard: one bad message must not end the service

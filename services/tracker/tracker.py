@@ -132,6 +132,9 @@ def _evidence_update(since, now, origin_u, origin_v, us, vs, clear_cells):
             since[row, col] = now
 
 
+_NEIGHBOURS = np.indices((3, 3)).reshape(2, -1) - 1    # (row, col) offsets of the 9 cells of a 3 × 3 block
+
+
 class EvidenceGrid:
     """Since when each cell (odom frame) has been hit without a break; a square that follows the
     robot, shifted by whole cells so that a cell keeps its place in the odom frame."""
@@ -170,12 +173,16 @@ class EvidenceGrid:
 
     def static(self, now_s: float, points: np.ndarray) -> np.ndarray:
         """(N,) whether each point lies on or next to a cell hit without a break for static_after_s."""
-        old = (self.since >= 0) & (now_s - self.since >= self.params.static_after_s)
-        near_old = ndimage.binary_dilation(old, np.ones((3, 3), bool))
+        # the 3 × 3 neighbourhood of each point's cell, looked up for the points only (dilating the
+        # whole grid each scan cost more than the rest of the tracker)
         cols, rows = np.floor(self.grid_coords(points)).astype(np.int64).T
         inside = (rows >= 0) & (rows < self.cells) & (cols >= 0) & (cols < self.cells)
+        near_rows, near_cols = rows[inside, None] + _NEIGHBOURS[0], cols[inside, None] + _NEIGHBOURS[1]
+        on_grid = (near_rows >= 0) & (near_rows < self.cells) & (near_cols >= 0) & (near_cols < self.cells)
+        since = self.since[np.clip(near_rows, 0, self.cells - 1), np.clip(near_cols, 0, self.cells - 1)]
+        old = on_grid & (since >= 0) & (now_s - since >= self.params.static_after_s)
         result = np.zeros(len(points), bool)
-        result[inside] = near_old[rows[inside], cols[inside]]
+        result[inside] = old.any(axis=1)
         return result
 
 
