@@ -198,7 +198,7 @@ def _point_field(pool, hits, table, u, v, reach, inv_two_sigma2, floor, inv_l_oc
     return best, best_du, best_dv
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor, inv_l_occ, scratch,
                prior, prior_weight, h, g):
     """Cost Σ (1 − S)² over the N end points + N · Σ prior_weight · (pose − prior)², and the score (mean
@@ -316,8 +316,18 @@ def search(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, window, lstep,
     patch = np.full((rows.max() + reach - row_base + 1, cols.max() + reach - col_base + 1), np.float32(-1.0))
     rows -= row_base
     cols -= col_base
+    return _best_candidate(pool, table, kernel, inv_l_occ, rows, cols, patch, row_base, col_base, x, y, th, step,
+                           n_lin, n_ang, astep, inv_delta)
+
+
+@njit(cache=True, _nrt=False)
+def _best_candidate(pool, table, kernel, inv_l_occ, rows, cols, patch, row_base, col_base, x, y, th, step, n_lin,
+                    n_ang, astep, inv_delta):
+    """search()'s scoring of its candidates (rows, cols: each angle's end point cells, relative to the
+    patch), apart because it allocates nothing: so no reference counting slows its loops."""
+    n = rows.shape[1]
     best_total, best_x, best_y, best_th = -1.0, x, y, th
-    for ia in range(n_angles):
+    for ia in range(2 * n_ang + 1):
         t = th + (ia - n_ang) * astep
         for iy in range(-n_lin, n_lin + 1):
             for ix in range(-n_lin, n_lin + 1):
@@ -385,7 +395,7 @@ def match_one(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, s
     return x, y, th, score
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def log_likelihood(pool, table, geo, px, py, x, y, th, radius, lsigma, inv_l_occ):
     """Σ over end points of −d²/(2·lsigma²), d the distance to the nearest obstacle cell centre
     within `radius` cells (capped at radius + ½ cell)."""
