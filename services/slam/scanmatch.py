@@ -138,54 +138,35 @@ def _cell_field(pool, table, u, v, kernel, inv_l_occ, nodes):
 
 
 @njit(cache=True, inline="always")
-def _load_points(pool, hits, table, row0, col0, inv_l_occ, block, mean_u, mean_v):
-    """Evidence and mean hit point (grid coordinates) of the block.shape cells from (row0, col0)
-    on; False if no cell has evidence. Most blocks lie inside one tile: then the tile is looked
-    up once."""
-    m = block.shape[0]
+def _point_field(pool, hits, table, u, v, reach, inv_two_sigma2, floor, inv_l_occ):
+    """The field at grid coordinates (u, v) and its gradient (per cell): the best over the cells
+    around of evidence × a Gaussian of the distance to the cell's mean hit point, cut (and shifted
+    to zero) at reach + ½ cells — the block of (2·reach + 2)² cells read holds every hit point that
+    close. Most blocks lie inside one tile: then the tile is looked up once."""
+    row0, col0 = int(math.floor(v - 0.5)) - reach, int(math.floor(u - 0.5)) - reach
+    m = 2 * reach + 2
     last_r, last_c = row0 + m - 1, col0 + m - 1
     one_tile = (row0 >= 0 and col0 >= 0 and row0 >> TILE_BITS == last_r >> TILE_BITS
                 and col0 >> TILE_BITS == last_c >> TILE_BITS
                 and last_r >> TILE_BITS < table.shape[0] and last_c >> TILE_BITS < table.shape[1])
-    if one_tile and table[row0 >> TILE_BITS, col0 >> TILE_BITS] < 0:
-        return False
-    any_evidence = False
+    block_tile = table[row0 >> TILE_BITS, col0 >> TILE_BITS] if one_tile else -1
+    if one_tile and block_tile < 0:
+        return 0.0, 0.0, 0.0
+    cut2 = (reach + 0.5) * (reach + 0.5)
+    best, best_du, best_dv = 0.0, 0.0, 0.0
     for i in range(m):
         for j in range(m):
             row, col = row0 + i, col0 + j
             if one_tile:
-                tile = table[row >> TILE_BITS, col >> TILE_BITS]
+                tile = block_tile
                 o = min(max(pool[tile, row & TILE_MASK, col & TILE_MASK] * inv_l_occ, 0.0), 1.0)
             else:
                 o = _evidence(pool, table, row, col, inv_l_occ)
                 tile = table[row >> TILE_BITS, col >> TILE_BITS] if o > 0.0 else -1
-            block[i, j] = o
-            if o > 0.0:
-                any_evidence = True
-                cell = hits[tile, row & TILE_MASK, col & TILE_MASK]
-                mean_u[i, j] = col + cell[0] * INV_HIT_SCALE
-                mean_v[i, j] = row + cell[1] * INV_HIT_SCALE
-    return any_evidence
-
-
-@njit(cache=True, inline="always")
-def _point_field(pool, hits, table, u, v, reach, inv_two_sigma2, floor, inv_l_occ, block, mean_u, mean_v):
-    """The field at grid coordinates (u, v) and its gradient (per cell): the best over the cells
-    around of evidence × a Gaussian of the distance to the cell's mean hit point, cut (and shifted
-    to zero) at reach + ½ cells — the block of (2·reach + 2)² cells read holds every hit point that
-    close. `block`, `mean_u`, `mean_v` are scratch space of that size."""
-    c0, r0 = int(math.floor(u - 0.5)), int(math.floor(v - 0.5))
-    if not _load_points(pool, hits, table, r0 - reach, c0 - reach, inv_l_occ, block, mean_u, mean_v):
-        return 0.0, 0.0, 0.0
-    cut2 = (reach + 0.5) * (reach + 0.5)
-    best, best_du, best_dv = 0.0, 0.0, 0.0
-    m = block.shape[0]
-    for i in range(m):
-        for j in range(m):
-            o = block[i, j]
             if o <= 0.0:
                 continue
-            du, dv = u - mean_u[i, j], v - mean_v[i, j]
+            du = u - (col + hits[tile, row & TILE_MASK, col & TILE_MASK, 0] * INV_HIT_SCALE)
+            dv = v - (row + hits[tile, row & TILE_MASK, col & TILE_MASK, 1] * INV_HIT_SCALE)
             d2 = du * du + dv * dv
             if d2 >= cut2:
                 continue
@@ -198,8 +179,8 @@ def _point_field(pool, hits, table, u, v, reach, inv_two_sigma2, floor, inv_l_oc
 
 
 @njit(cache=True, _nrt=False)
-def _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor, inv_l_occ, scratch,
-               prior, prior_weight, h, g, nodes):
+def _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor, inv_l_occ, prior,
+               prior_weight, h, g, nodes):
     """Cost Σ (1 − S)² over the N end points + N · Σ prior_weight · (pose − prior)², and the score (mean
     S), at a pose on the cell field, or with `points` on the hit point field; fills in the
     Gauss-Newton system h, g."""
@@ -213,8 +194,7 @@ def _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two
         wx, wy = c * px[i] - s * py[i], s * px[i] + c * py[i]
         u, v = (x + wx - xmin) * inv_delta, (y + wy - ymin) * inv_delta
         if points:
-            f, du, dv = _point_field(pool, hits, table, u, v, reach + 1, inv_two_sigma2, floor, inv_l_occ,
-                                     scratch[0], scratch[1], scratch[2])
+            f, du, dv = _point_field(pool, hits, table, u, v, reach + 1, inv_two_sigma2, floor, inv_l_occ)
         else:
             f, du, dv = _cell_field(pool, table, u, v, kernel, inv_l_occ, nodes)
         r = 1.0 - f
@@ -266,14 +246,12 @@ def _refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, 
             prior_weight, nodes):
     """refine() with the node cache `nodes` (node_cache) of the cell field's kernel."""
     reach = (kernel.shape[0] - 1) // 2
-    m = 2 * reach + 4
-    scratch = np.empty((3, m, m))
     inv_two_sigma2 = 1.0 / (2.0 * (sigma * geo[2]) ** 2)
     floor = math.exp(-(reach + 1.5) ** 2 * inv_two_sigma2)
     h, g = np.zeros((3, 3)), np.zeros(3)
     h_new, g_new = np.zeros((3, 3)), np.zeros(3)
     cost, score = _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor,
-                             inv_l_occ, scratch, prior, prior_weight, h, g, nodes)
+                             inv_l_occ, prior, prior_weight, h, g, nodes)
     damping = 1e-3
     for _ in range(iterations):
         if h[0, 0] + h[1, 1] + h[2, 2] == 0.0:
@@ -287,7 +265,7 @@ def _refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, 
             step = np.linalg.solve(a, -g)
             nx, ny, nth = x + step[0], y + step[1], th + step[2]
             new_cost, new_score = _linearize(pool, hits, table, geo, px, py, nx, ny, nth, kernel, points,
-                                             inv_two_sigma2, floor, inv_l_occ, scratch, prior, prior_weight, h_new,
+                                             inv_two_sigma2, floor, inv_l_occ, prior, prior_weight, h_new,
                                              g_new, nodes)
             if new_cost < cost:
                 x, y, th, cost, score = nx, ny, nth, new_cost, new_score
