@@ -73,7 +73,7 @@ def cell_value(pool, table, row, col):
     return pool[tile, row & TILE_MASK, col & TILE_MASK]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def segment_cells(u0, v0, u1, v1, rows, cols):
     """The cells a segment from (u0, v0) to (u1, v1) crosses (4-connected, both ends included),
     into rows/cols (at least |Δcol| + |Δrow| + 1 long); returns how many."""
@@ -104,7 +104,7 @@ def segment_cells(u0, v0, u1, v1, rows, cols):
     return n
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _mark_tiles(table, u0, v0, u_end, v_end, marked, tiles, rows, cols):
     """Every tile the beams cross, once each, into `tiles` (k, 2); returns k."""
     th, tw = table.shape
@@ -129,7 +129,7 @@ def _take_tile(refs, free, free_top):
     return tile
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _add_hit(cell, u_offset, v_offset):
     """Fold a hit at (u_offset, v_offset) (cells, in [0, 1)) into a cell's mean hit point."""
     n = min(int(cell[2]) + 1, MAX_HITS)
@@ -174,6 +174,14 @@ def _update(pool, hits, refs, free, free_top, table, u0, v0, u_end, v_end, hit, 
             hits[fresh] = hits[tile]
             refs[tile] -= 1
             table[tr, tc] = fresh
+    _trace(pool, hits, table, u0, v0, u_end, v_end, hit, l_occ, l_free, l_max, rows, cols)
+    return 0
+
+
+@njit(cache=True, _nrt=False)
+def _trace(pool, hits, table, u0, v0, u_end, v_end, hit, l_occ, l_free, l_max, rows, cols):
+    """_update's beams into the map's own tiles, apart because it allocates nothing: so no reference
+    counting slows its loops."""
     th, tw = table.shape
     for b in range(u_end.shape[0]):
         n = segment_cells(u0, v0, u_end[b], v_end[b], rows, cols)
@@ -187,7 +195,6 @@ def _update(pool, hits, refs, free, free_top, table, u0, v0, u_end, v_end, hit, 
             pool[tile, r & TILE_MASK, c & TILE_MASK] = min(max(value, -l_max), l_max)
             if end:
                 _add_hit(hits[tile, r & TILE_MASK, c & TILE_MASK], u_end[b] - c, v_end[b] - r)
-    return 0
 
 
 @njit(cache=True)

@@ -81,57 +81,63 @@ def _node(pool, table, row, col, kernel, inv_l_occ):
 
 
 @njit(cache=True, inline="always")
-def _load_block(pool, table, row0, col0, inv_l_occ, block):
-    """Evidence of the block.shape cells from (row0, col0) on; False if all are zero.
-    Most blocks lie inside one tile: then the tile is looked up once."""
-    m = block.shape[0]
-    last_r, last_c = row0 + m - 1, col0 + m - 1
-    any_evidence = False
-    if (row0 >= 0 and col0 >= 0 and row0 >> TILE_BITS == last_r >> TILE_BITS
-            and col0 >> TILE_BITS == last_c >> TILE_BITS
-            and last_r >> TILE_BITS < table.shape[0] and last_c >> TILE_BITS < table.shape[1]):
-        tile = table[row0 >> TILE_BITS, col0 >> TILE_BITS]
-        if tile < 0:
-            return False
-        r_in, c_in = row0 & TILE_MASK, col0 & TILE_MASK
-        for i in range(m):
-            for j in range(m):
-                o = min(max(pool[tile, r_in + i, c_in + j] * inv_l_occ, 0.0), 1.0)
-                block[i, j] = o
-                any_evidence |= o > 0.0
-        return any_evidence
-    for i in range(m):
-        for j in range(m):
-            o = _evidence(pool, table, row0 + i, col0 + j, inv_l_occ)
-            block[i, j] = o
-            any_evidence |= o > 0.0
-    return any_evidence
+def _cached_node(pool, table, row, col, kernel, inv_l_occ, cache):
+    """_node, computed once per cell of the area `cache` (field_cache) covers and kept there: a
+    refinement reads the same few cells around the end points at every step."""
+    values, stamps, frame = cache[0], cache[1], cache[2]
+    i, j = row - frame[0], col - frame[1]
+    if 0 <= i < values.shape[0] and 0 <= j < values.shape[1]:
+        if stamps[i, j] != frame[2]:
+            values[i, j] = _node(pool, table, row, col, kernel, inv_l_occ)
+            stamps[i, j] = frame[2]
+        return values[i, j]
+    return _node(pool, table, row, col, kernel, inv_l_occ)
+
+
+@njit(cache=True)
+def field_cache(geo, px, py, poses, margin):
+    """An empty cache of field values for the cells the end points (px, py) fall in from any of
+    `poses`, and `margin` cells around: (node values, their stamps, frame, hit point blocks' first
+    entry, their number of entries, their stamps, entries). A value is current when its stamp
+    equals frame[2]; frame[:2] is the area's first (row, col), frame[3] the entries in use. Set
+    frame[2] to a new value and frame[3] to 0 to empty it (another particle's map)."""
+    xmin, ymin, inv_delta = geo[0], geo[1], geo[2]
+    row0, row1, col0, col1 = 1 << 62, -(1 << 62), 1 << 62, -(1 << 62)
+    for k in range(poses.shape[0]):
+        x, y, th = poses[k, 0], poses[k, 1], poses[k, 2]
+        c, s = math.cos(th), math.sin(th)
+        for i in range(px.shape[0]):
+            row = int(math.floor((y + s * px[i] + c * py[i] - ymin) * inv_delta))
+            col = int(math.floor((x + c * px[i] - s * py[i] - xmin) * inv_delta))
+            row0, row1, col0, col1 = min(row0, row), max(row1, row), min(col0, col), max(col1, col)
+    if row1 < row0:
+        row0, row1, col0, col1 = 0, -1, 0, -1
+    shape = (row1 - row0 + 1 + 2 * margin, col1 - col0 + 1 + 2 * margin)
+    return (np.empty(shape), np.zeros(shape, np.int64), np.array([row0 - margin, col0 - margin, 1, 0]),
+            np.empty(shape, np.int64), np.empty(shape, np.int64), np.zeros(shape, np.int64),
+            np.empty((BLOCK_ENTRIES * px.shape[0], 3)))
+
+
+BLOCK_ENTRIES = 64  # hit point block entries kept per end point (beyond: computed without the cache)
+
+
+@njit(cache=True)
+def _one_pose(x, y, th):
+    poses = np.empty((1, 3))
+    poses[0, 0], poses[0, 1], poses[0, 2] = x, y, th
+    return poses
 
 
 @njit(cache=True, inline="always")
-def _block_node(block, i0, j0, kernel):
-    best = 0.0
-    n = kernel.shape[0]
-    for i in range(n):
-        for j in range(n):
-            best = max(best, block[i0 + i, j0 + j] * kernel[i, j])
-    return best
-
-
-@njit(cache=True, inline="always")
-def _cell_field(pool, table, u, v, kernel, inv_l_occ, block):
-    """The field of cell centres interpolated bilinearly at grid coordinates (u, v), and its gradient (per cell).
-    `block` is scratch space of (2·kernelSize + 2)² cells."""
-    k = (kernel.shape[0] - 1) // 2
+def _cell_field(pool, table, u, v, kernel, inv_l_occ, cache):
+    """The field of cell centres interpolated bilinearly at grid coordinates (u, v), and its gradient (per cell)."""
     a, b = u - 0.5, v - 0.5
     c0, r0 = int(math.floor(a)), int(math.floor(b))
-    if not _load_block(pool, table, r0 - k, c0 - k, inv_l_occ, block):
-        return 0.0, 0.0, 0.0
+    s00 = _cached_node(pool, table, r0, c0, kernel, inv_l_occ, cache)
+    s01 = _cached_node(pool, table, r0, c0 + 1, kernel, inv_l_occ, cache)
+    s10 = _cached_node(pool, table, r0 + 1, c0, kernel, inv_l_occ, cache)
+    s11 = _cached_node(pool, table, r0 + 1, c0 + 1, kernel, inv_l_occ, cache)
     fu, fv = a - c0, b - r0
-    s00 = _block_node(block, 0, 0, kernel)
-    s01 = _block_node(block, 0, 1, kernel)
-    s10 = _block_node(block, 1, 0, kernel)
-    s11 = _block_node(block, 1, 1, kernel)
     s = (1 - fv) * ((1 - fu) * s00 + fu * s01) + fv * ((1 - fu) * s10 + fu * s11)
     ds_du = (1 - fv) * (s01 - s00) + fv * (s11 - s10)
     ds_dv = (1 - fu) * (s10 - s00) + fu * (s11 - s01)
@@ -139,74 +145,81 @@ def _cell_field(pool, table, u, v, kernel, inv_l_occ, block):
 
 
 @njit(cache=True, inline="always")
-def _load_points(pool, hits, table, row0, col0, inv_l_occ, block, mean_u, mean_v):
-    """Evidence and mean hit point (grid coordinates) of the block.shape cells from (row0, col0)
-    on; False if no cell has evidence. Most blocks lie inside one tile: then the tile is looked
-    up once."""
-    m = block.shape[0]
+def _load_points(pool, hits, table, row0, col0, m, inv_l_occ, entries, first):
+    """Evidence and mean hit point (grid coordinates) of each cell with evidence among the m × m
+    from (row0, col0) on, row by row, into entries[first:]; returns how many. Most blocks lie
+    inside one tile: then the tile is looked up once."""
     last_r, last_c = row0 + m - 1, col0 + m - 1
     one_tile = (row0 >= 0 and col0 >= 0 and row0 >> TILE_BITS == last_r >> TILE_BITS
                 and col0 >> TILE_BITS == last_c >> TILE_BITS
                 and last_r >> TILE_BITS < table.shape[0] and last_c >> TILE_BITS < table.shape[1])
-    if one_tile and table[row0 >> TILE_BITS, col0 >> TILE_BITS] < 0:
-        return False
-    any_evidence = False
+    block_tile = table[row0 >> TILE_BITS, col0 >> TILE_BITS] if one_tile else -1
+    if one_tile and block_tile < 0:
+        return 0
+    k = first
     for i in range(m):
         for j in range(m):
             row, col = row0 + i, col0 + j
             if one_tile:
-                tile = table[row >> TILE_BITS, col >> TILE_BITS]
+                tile = block_tile
                 o = min(max(pool[tile, row & TILE_MASK, col & TILE_MASK] * inv_l_occ, 0.0), 1.0)
             else:
                 o = _evidence(pool, table, row, col, inv_l_occ)
                 tile = table[row >> TILE_BITS, col >> TILE_BITS] if o > 0.0 else -1
-            block[i, j] = o
             if o > 0.0:
-                any_evidence = True
-                cell = hits[tile, row & TILE_MASK, col & TILE_MASK]
-                mean_u[i, j] = col + cell[0] * INV_HIT_SCALE
-                mean_v[i, j] = row + cell[1] * INV_HIT_SCALE
-    return any_evidence
+                entries[k, 0] = o
+                entries[k, 1] = col + hits[tile, row & TILE_MASK, col & TILE_MASK, 0] * INV_HIT_SCALE
+                entries[k, 2] = row + hits[tile, row & TILE_MASK, col & TILE_MASK, 1] * INV_HIT_SCALE
+                k += 1
+    return k - first
 
 
 @njit(cache=True, inline="always")
-def _point_field(pool, hits, table, u, v, reach, inv_two_sigma2, floor, inv_l_occ, block, mean_u, mean_v):
+def _point_field(pool, hits, table, u, v, reach, inv_two_sigma2, floor, inv_l_occ, cache):
     """The field at grid coordinates (u, v) and its gradient (per cell): the best over the cells
     around of evidence × a Gaussian of the distance to the cell's mean hit point, cut (and shifted
     to zero) at reach + ½ cells — the block of (2·reach + 2)² cells read holds every hit point that
-    close. `block`, `mean_u`, `mean_v` are scratch space of that size."""
-    c0, r0 = int(math.floor(u - 0.5)), int(math.floor(v - 0.5))
-    if not _load_points(pool, hits, table, r0 - reach, c0 - reach, inv_l_occ, block, mean_u, mean_v):
-        return 0.0, 0.0, 0.0
+    close. The block's cells with evidence are kept in `cache` (field_cache): the polish reads the
+    same blocks at every step."""
+    frame, starts, counts, stamps, entries = cache[2], cache[3], cache[4], cache[5], cache[6]
+    m = 2 * reach + 2
+    row0, col0 = int(math.floor(v - 0.5)) - reach, int(math.floor(u - 0.5)) - reach
+    i, j = row0 - frame[0], col0 - frame[1]
+    if 0 <= i < starts.shape[0] and 0 <= j < starts.shape[1] and (
+            stamps[i, j] == frame[2] or frame[3] + 2 * m * m <= entries.shape[0]):
+        if stamps[i, j] != frame[2]:
+            starts[i, j] = frame[3]
+            counts[i, j] = _load_points(pool, hits, table, row0, col0, m, inv_l_occ, entries, frame[3])
+            stamps[i, j] = frame[2]
+            frame[3] += counts[i, j]
+        first, count = starts[i, j], counts[i, j]
+    else:   # outside the cache, or it is full: the block goes into the entries' last m² rows, kept spare
+        first = entries.shape[0] - m * m
+        count = _load_points(pool, hits, table, row0, col0, m, inv_l_occ, entries, first) if first >= 0 else 0
     cut2 = (reach + 0.5) * (reach + 0.5)
     best, best_du, best_dv = 0.0, 0.0, 0.0
-    m = block.shape[0]
-    for i in range(m):
-        for j in range(m):
-            o = block[i, j]
-            if o <= 0.0:
-                continue
-            du, dv = u - mean_u[i, j], v - mean_v[i, j]
-            d2 = du * du + dv * dv
-            if d2 >= cut2:
-                continue
-            g = math.exp(-d2 * inv_two_sigma2)
-            value = o * (g - floor) / (1.0 - floor)
-            if value > best:
-                slope = -2.0 * inv_two_sigma2 * o * g / (1.0 - floor)
-                best, best_du, best_dv = value, slope * du, slope * dv
+    for e in range(first, first + count):
+        o = entries[e, 0]
+        du, dv = u - entries[e, 1], v - entries[e, 2]
+        d2 = du * du + dv * dv
+        if d2 >= cut2:
+            continue
+        g = math.exp(-d2 * inv_two_sigma2)
+        value = o * (g - floor) / (1.0 - floor)
+        if value > best:
+            slope = -2.0 * inv_two_sigma2 * o * g / (1.0 - floor)
+            best, best_du, best_dv = value, slope * du, slope * dv
     return best, best_du, best_dv
 
 
-@njit(cache=True)
-def _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor, inv_l_occ, scratch,
-               prior, prior_weight, h, g):
+@njit(cache=True, _nrt=False)
+def _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor, inv_l_occ, prior,
+               prior_weight, h, g, cache):
     """Cost Σ (1 − S)² over the N end points + N · Σ prior_weight · (pose − prior)², and the score (mean
     S), at a pose on the cell field, or with `points` on the hit point field; fills in the
     Gauss-Newton system h, g."""
     xmin, ymin, inv_delta = geo[0], geo[1], geo[2]
     reach = (kernel.shape[0] - 1) // 2
-    cell_block = scratch[0, :2 * reach + 2, :2 * reach + 2]
     c, s = math.cos(th), math.sin(th)
     h[:] = 0.0
     g[:] = 0.0
@@ -215,10 +228,9 @@ def _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two
         wx, wy = c * px[i] - s * py[i], s * px[i] + c * py[i]
         u, v = (x + wx - xmin) * inv_delta, (y + wy - ymin) * inv_delta
         if points:
-            f, du, dv = _point_field(pool, hits, table, u, v, reach + 1, inv_two_sigma2, floor, inv_l_occ,
-                                     scratch[0], scratch[1], scratch[2])
+            f, du, dv = _point_field(pool, hits, table, u, v, reach + 1, inv_two_sigma2, floor, inv_l_occ, cache)
         else:
-            f, du, dv = _cell_field(pool, table, u, v, kernel, inv_l_occ, cell_block)
+            f, du, dv = _cell_field(pool, table, u, v, kernel, inv_l_occ, cache)
         r = 1.0 - f
         cost += r * r
         total += f
@@ -256,15 +268,24 @@ def refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, i
     `points` on the hit point field (a Gaussian of width sigma, m, cut at kernelSize + 1½ cells),
     pulled towards the pose `prior` with prior_weight (x, y, θ; per end point, see _linearize);
     returns (x, y, th, score)."""
+    return _refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations, points, prior,
+                   prior_weight, field_cache(geo, px, py, _one_pose(x, y, th), NODE_MARGIN))
+
+
+NODE_MARGIN = 4  # cells around the end points at the start pose that a refinement keeps field values of
+
+
+@njit(cache=True)
+def _refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations, points, prior,
+            prior_weight, cache):
+    """refine() with `cache` (field_cache) over `table`, of the cell field's kernel."""
     reach = (kernel.shape[0] - 1) // 2
-    m = 2 * reach + 4
-    scratch = np.empty((3, m, m))
     inv_two_sigma2 = 1.0 / (2.0 * (sigma * geo[2]) ** 2)
     floor = math.exp(-(reach + 1.5) ** 2 * inv_two_sigma2)
     h, g = np.zeros((3, 3)), np.zeros(3)
     h_new, g_new = np.zeros((3, 3)), np.zeros(3)
     cost, score = _linearize(pool, hits, table, geo, px, py, x, y, th, kernel, points, inv_two_sigma2, floor,
-                             inv_l_occ, scratch, prior, prior_weight, h, g)
+                             inv_l_occ, prior, prior_weight, h, g, cache)
     damping = 1e-3
     for _ in range(iterations):
         if h[0, 0] + h[1, 1] + h[2, 2] == 0.0:
@@ -278,8 +299,8 @@ def refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, i
             step = np.linalg.solve(a, -g)
             nx, ny, nth = x + step[0], y + step[1], th + step[2]
             new_cost, new_score = _linearize(pool, hits, table, geo, px, py, nx, ny, nth, kernel, points,
-                                             inv_two_sigma2, floor, inv_l_occ, scratch, prior, prior_weight, h_new,
-                                             g_new)
+                                             inv_two_sigma2, floor, inv_l_occ, prior, prior_weight, h_new,
+                                             g_new, cache)
             if new_cost < cost:
                 x, y, th, cost, score = nx, ny, nth, new_cost, new_score
                 h[:, :] = h_new
@@ -294,11 +315,12 @@ def refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, i
 
 
 @njit(cache=True)
-def search(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, window, lstep, angle, astep):
+def search(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, window, lstep, angle, astep, cache):
     """Exhaustive search over a box of poses around (x, y, th): translations in whole cells (lstep
     rounded to cells), angles in astep; the field is read at the nearest cell centre. Returns the
     best (x, y, th, score). Field values are computed once per cell, on first use, in a patch
-    covering every candidate's end points, so a candidate costs one array read per point."""
+    covering every candidate's end points, so a candidate costs one array read per point; `cache` is
+    a field_cache of `kernel` or an empty one."""
     xmin, ymin, inv_delta = geo[0], geo[1], geo[2]
     step = max(1, int(round(lstep * inv_delta)))
     n_lin = int(window * inv_delta + 1e-9) // step
@@ -316,8 +338,18 @@ def search(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, window, lstep,
     patch = np.full((rows.max() + reach - row_base + 1, cols.max() + reach - col_base + 1), np.float32(-1.0))
     rows -= row_base
     cols -= col_base
+    return _best_candidate(pool, table, kernel, inv_l_occ, cache, rows, cols, patch, row_base, col_base, x, y, th,
+                           step, n_lin, n_ang, astep, inv_delta)
+
+
+@njit(cache=True, _nrt=False)
+def _best_candidate(pool, table, kernel, inv_l_occ, cache, rows, cols, patch, row_base, col_base, x, y, th, step,
+                    n_lin, n_ang, astep, inv_delta):
+    """search()'s scoring of its candidates (rows, cols: each angle's end point cells, relative to the
+    patch), apart because it allocates nothing: so no reference counting slows its loops."""
+    n = rows.shape[1]
     best_total, best_x, best_y, best_th = -1.0, x, y, th
-    for ia in range(n_angles):
+    for ia in range(2 * n_ang + 1):
         t = th + (ia - n_ang) * astep
         for iy in range(-n_lin, n_lin + 1):
             for ix in range(-n_lin, n_lin + 1):
@@ -327,7 +359,7 @@ def search(pool, table, geo, px, py, x, y, th, kernel, inv_l_occ, window, lstep,
                     r, c = rows[ia, i] + dr, cols[ia, i] + dc
                     value = patch[r, c]
                     if value < 0.0:
-                        value = _node(pool, table, r + row_base, c + col_base, kernel, inv_l_occ)
+                        value = _cached_node(pool, table, r + row_base, c + col_base, kernel, inv_l_occ, cache)
                         patch[r, c] = value
                     total += value
                 # on a tie (an empty map, a featureless corridor) the guess itself wins
@@ -346,22 +378,23 @@ POLISH_ITERATIONS = 3
 
 @njit(cache=True)
 def _match_cells(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma, inv_l_occ, iterations,
-                 search_below, window, lstep, angle, astep, prior, prior_weight):
+                 search_below, window, lstep, angle, astep, prior, prior_weight, cache):
     """The match on the cell field: refinement, and the search when that scores below search_below.
     Returns (x, y, th, score) and the pose the winning refinement was pulled towards: `prior`, or
     the search's best (the odometry was off by more than refinement corrects)."""
-    rx, ry, rth, score = refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations,
-                                False, prior, prior_weight)
+    rx, ry, rth, score = _refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations,
+                                 False, prior, prior_weight, cache)
     if score >= search_below or (window <= 0.0 and angle <= 0.0):
         return rx, ry, rth, score, prior
     stride = max(1, px.shape[0] // SEARCH_POINTS)
+    no_cache = field_cache(geo, px[:0], py[:0], np.empty((0, 3)), 0)
     cx, cy, cth, _ = search(pool, table, geo, px[::stride], py[::stride], x, y, th, coarse_kernel, inv_l_occ,
-                            window, lstep, angle, astep)
+                            window, lstep, angle, astep, no_cache)
     cx, cy, cth, _ = search(pool, table, geo, px, py, cx, cy, cth, kernel, inv_l_occ,
-                            lstep / 2, lstep / 2, astep / 2, astep / 4)
+                            lstep / 2, lstep / 2, astep / 2, astep / 4, cache)
     found = np.array([cx, cy, cth])
-    sx, sy, sth, s_score = refine(pool, hits, table, geo, px, py, cx, cy, cth, kernel, sigma, inv_l_occ,
-                                  iterations, False, found, prior_weight)
+    sx, sy, sth, s_score = _refine(pool, hits, table, geo, px, py, cx, cy, cth, kernel, sigma, inv_l_occ,
+                                   iterations, False, found, prior_weight, cache)
     if s_score > score:
         return sx, sy, sth, s_score, found
     return rx, ry, rth, score, prior
@@ -376,16 +409,25 @@ def match_one(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, s
     Every refinement is pulled towards `prior` (the odometry's prediction), or, after a search that
     won, towards the search's best, with prior_weight (x, y, θ; 0: no pull). Returns (x, y, th, the
     cell field's score)."""
-    x, y, th, score, prior = _match_cells(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma,
-                                          inv_l_occ, iterations, search_below, window, lstep, angle, astep,
-                                          prior, prior_weight)
-    if score >= search_below:
-        x, y, th, _ = refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ,
-                             min(iterations, POLISH_ITERATIONS), True, prior, prior_weight)
-    return x, y, th, score
+    cache = field_cache(geo, px, py, _one_pose(x, y, th), NODE_MARGIN + int(window * geo[2]))
+    return _match_one(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma, inv_l_occ, iterations,
+                      search_below, window, lstep, angle, astep, prior, prior_weight, cache)
 
 
 @njit(cache=True)
+def _match_one(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma, inv_l_occ, iterations,
+               search_below, window, lstep, angle, astep, prior, prior_weight, cache):
+    """match_one() with `cache` (field_cache) over `table`, of `kernel`."""
+    x, y, th, score, prior = _match_cells(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, sigma,
+                                          inv_l_occ, iterations, search_below, window, lstep, angle, astep,
+                                          prior, prior_weight, cache)
+    if score >= search_below:
+        x, y, th, _ = _refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ,
+                              min(iterations, POLISH_ITERATIONS), True, prior, prior_weight, cache)
+    return x, y, th, score
+
+
+@njit(cache=True, _nrt=False)
 def log_likelihood(pool, table, geo, px, py, x, y, th, radius, lsigma, inv_l_occ):
     """Σ over end points of −d²/(2·lsigma²), d the distance to the nearest obstacle cell centre
     within `radius` cells (capped at radius + ½ cell)."""
@@ -419,10 +461,13 @@ def match_all(pool, hits, tables, geo, px, py, poses, kernel, coarse_kernel, sig
     out = poses.copy()
     scores = np.empty(n)
     loglik = np.empty(n)
+    # one cache area for every particle (their guesses are close), emptied for each particle's map
+    cache = field_cache(geo, px, py, poses, NODE_MARGIN + int(window * geo[2]))
     for i in range(n):
-        x, y, th, score = match_one(pool, hits, tables[i], geo, px, py, poses[i, 0], poses[i, 1], poses[i, 2],
-                                    kernel, coarse_kernel, sigma, inv_l_occ, iterations, search_below, window,
-                                    lstep, angle, astep, priors[i], prior_weight)
+        cache[2][2], cache[2][3] = i + 1, 0
+        x, y, th, score = _match_one(pool, hits, tables[i], geo, px, py, poses[i, 0], poses[i, 1], poses[i, 2],
+                                     kernel, coarse_kernel, sigma, inv_l_occ, iterations, search_below, window,
+                                     lstep, angle, astep, priors[i], prior_weight, cache)
         scores[i] = score
         if score >= minimum_score:
             out[i, 0], out[i, 1], out[i, 2] = x, y, th
