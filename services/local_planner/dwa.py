@@ -35,15 +35,15 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy import ndimage
 
 from ...schemas.messages import MapMetaData
+from ...geometry.distance import nearest_cells
 from ...geometry.polygons import densify
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE
 from ...geometry.grid import in_grid, world_to_cell
 from .dynamic import Movers, critic, slack
 from .dynamic import warm_up as warm_up_movers
-from .footprint_check import FootprintCheck, PoseCheck, kernel_grid, pose_cost
+from .footprint_check import FootprintCheck, PoseCheck, kernel_grid, trajectory_cost
 from .footprint_check import warm_up as warm_up_footprint_check
 from .params import DwaParams
 
@@ -162,8 +162,9 @@ def _distances_to(masks, passable: np.ndarray, resolution: float) -> list[np.nda
         reached = np.isfinite(distance)
         if not reached.all():
             if reached_before is None or not np.array_equal(reached, reached_before):
-                reached_before, nearest = reached, ndimage.distance_transform_edt(~reached, return_indices=True)
-            gap, (rows, cols) = nearest
+                reached_before, nearest = reached, nearest_cells(reached)
+            squared, rows, cols = nearest
+            gap = np.sqrt(squared)
             distance = np.where(reached, distance, distance[rows, cols] + gap)
         result.append((distance * resolution).astype(np.float32))
     return result
@@ -189,53 +190,54 @@ def path_maps(path: np.ndarray, pose, info: MapMetaData, costs: np.ndarray | Non
 
 # ---------------------------------------------------------------- rollout kernel
 
-@njit(cache=True)
+@njit(cache=True, inline="always")
 def _step(vx, vy, w, dt):
-    """(bx, by, phi): the exact pose increment of a constant twist over dt, robot frame (se2_exp, inlined)."""
+    """(bx, by, phi, cos phi, sin phi): the exact pose increment of a constant twist over dt, robot
+    frame (se2_exp, inlined), and its rotation."""
     phi = w * dt
+    cos_phi, sin_phi = math.cos(phi), math.sin(phi)
     if abs(phi) < SMALL_ANGLE:
         along, across = 1.0, 0.5 * phi
     else:
-        along, across = math.sin(phi) / phi, (1.0 - math.cos(phi)) / phi
-    return (along * vx - across * vy) * dt, (across * vx + along * vy) * dt, phi
+        along, across = sin_phi / phi, (1.0 - cos_phi) / phi
+    return (along * vx - across * vy) * dt, (across * vx + along * vy) * dt, phi, cos_phi, sin_phi
 
 
 @njit(cache=True)
 def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, skips, grid, outline, check_cost,
              centre_limit, poses, max_cost, legal):
     """Roll out and check every sample; fills poses (T, n_steps+1, 3), max_cost (T,), legal (T,).
+    The heading's cosine and sine turn by the step's rotation rather than being recomputed: a
+    twist that holds (every step but a ramp's) costs no trigonometry. A trajectory is rolled out
+    whole, then checked up to its first illegal pose, which it keeps from there on.
 
     grid as in kernel_grid; near, skips, outline, check_cost and centre_limit as in PoseCheck and FootprintCheck."""
+    headings = np.empty((n_steps + 1, 2))
     for t in range(samples.shape[0]):
         if ramp:
             vx, vy, w = v0[0], v0[1], v0[2]
         else:
             vx, vy, w = samples[t, 0], samples[t, 1], samples[t, 2]
-        bx, by, phi = _step(vx, vy, w, dt)     # the sample's own, unless ramping
+        bx, by, phi, cos_phi, sin_phi = _step(vx, vy, w, dt)     # the sample's own, unless ramping
         x, y, th = pose0[0], pose0[1], pose0[2]
         c, s = math.cos(th), math.sin(th)
         poses[t, 0, 0], poses[t, 0, 1], poses[t, 0, 2] = x, y, th
-        worst, ok, k = 0, True, 0
-        while k < n_steps and ok:
-            if ramp:
+        for k in range(1, n_steps + 1):
+            if ramp and (vx != samples[t, 0] or vy != samples[t, 1] or w != samples[t, 2]):
                 vx += min(max(samples[t, 0] - vx, -step_limit[0]), step_limit[0])
                 vy += min(max(samples[t, 1] - vy, -step_limit[1]), step_limit[1])
                 w += min(max(samples[t, 2] - w, -step_limit[2]), step_limit[2])
-                bx, by, phi = _step(vx, vy, w, dt)
+                bx, by, phi, cos_phi, sin_phi = _step(vx, vy, w, dt)
             x, y, th = x + c * bx - s * by, y + s * bx + c * by, th + phi
-            c, s = math.cos(th), math.sin(th)
-            k += 1
+            c, s = c * cos_phi - s * sin_phi, s * cos_phi + c * sin_phi
             poses[t, k, 0], poses[t, k, 1], poses[t, k, 2] = x, y, th
-            cost = pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost, centre_limit)
-            if cost < 0:
-                ok = False
-                break
-            if cost > worst:
-                worst = cost
-        for j in range(k + 1, n_steps + 1):   # a stopped rollout keeps its last pose
-            poses[t, j, 0], poses[t, j, 1], poses[t, j, 2] = x, y, th
-        legal[t] = ok
-        max_cost[t] = worst
+            headings[k, 0], headings[k, 1] = c, s
+        count, max_cost[t] = trajectory_cost(poses[t, 1:], headings[1:], costs, near, skips, grid, outline, check_cost,
+                                             centre_limit)
+        legal[t] = count == n_steps
+        for j in range(count + 2, n_steps + 1):   # a stopped rollout keeps its first illegal pose
+            poses[t, j, 0], poses[t, j, 1], poses[t, j, 2] = poses[t, count + 1, 0], poses[t, count + 1, 1], \
+                poses[t, count + 1, 2]
 
 
 # ---------------------------------------------------------------- the planner

@@ -9,7 +9,7 @@ lies on a lethal or unknown cell or off the grid. The outline is the footprint g
 collision monitor's stop zone (stop_padding), or, when the robot already stands within that zone,
 less (`FootprintCheck.setup`). Not every outline point is looked at: a point's clearance to the
 nearest lethal or unknown cell says how many next points cannot touch one (`outline_skips`). The
-kernels here are numba's; dwa.py's rollout calls `pose_cost` on every pose it reaches.
+kernels here are numba's; dwa.py's rollout calls `trajectory_cost` on every trajectory.
 """
 from __future__ import annotations
 
@@ -21,6 +21,7 @@ from numba import njit
 
 from ...schemas.messages import MapMetaData
 from ...geometry.footprint import pad
+from ...geometry.distance import nearest_cells
 from ...geometry.polygons import densify
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
 
@@ -40,56 +41,6 @@ class PoseCheck:
     # already stands on an inscribed cell (a tracking error put it there): then lethal, and the
     # outline alone decides, as ROS does for a polygon footprint, so the robot can drive out again
     centre_limit: int = INSCRIBED_INFLATED_OBSTACLE
-
-
-@njit(cache=True)
-def _lower_envelope(f, out, v, z):
-    """out[q] = min over p of f[p] + (q - p)² (f may be inf; all inf gives inf): Felzenszwalb and
-    Huttenlocher's lower envelope of parabolas, v and z scratch of len(f) and len(f) + 1. Exact for
-    integer f: a boundary between two parabolas is a fraction of denominator below 2·len(f), too
-    far from any other integer for rounding to move it past one."""
-    n, k = f.shape[0], -1
-    for q in range(n):
-        if f[q] == np.inf:
-            continue
-        s = -np.inf
-        while k >= 0:
-            s = ((f[q] + q * q) - (f[v[k]] + v[k] * v[k])) / (2.0 * (q - v[k]))
-            if s > z[k]:
-                break
-            k -= 1
-        if k < 0:
-            s = -np.inf
-        k += 1
-        v[k], z[k], z[k + 1] = q, s, np.inf
-    if k < 0:
-        out[:] = np.inf
-        return
-    j = 0
-    for q in range(n):
-        while z[j + 1] < q:
-            j += 1
-        out[q] = (q - v[j]) * (q - v[j]) + f[v[j]]
-
-
-@njit(cache=True)
-def _clearance_cells(blocked):
-    """(H, W) cells from each cell's centre to the nearest blocked cell's (0 on them, inf without
-    any): the exact Euclidean distance transform, by columns then rows."""
-    height, width = blocked.shape
-    squared = np.full((height, width), np.inf)
-    size = max(height, width)
-    f, out, v, z = np.empty(size), np.empty(size), np.empty(size, np.int64), np.empty(size + 1)
-    for col in range(width):
-        for row in range(height):
-            f[row] = 0.0 if blocked[row, col] else np.inf
-        _lower_envelope(f[:height], out[:height], v, z)
-        squared[:, col] = out[:height]
-    for row in range(height):
-        f[:width] = squared[row]
-        _lower_envelope(f[:width], out[:width], v, z)
-        squared[row] = out[:width]
-    return np.sqrt(squared)
 
 
 def outline_skips(clearance: np.ndarray, resolution: float) -> np.ndarray:
@@ -136,27 +87,38 @@ def _outline_clear(skips, x, y, c, s, grid, outline):
     return True
 
 
-@njit(cache=True, inline="always")
-def pose_cost(costs, near, skips, x, y, c, s, grid, outline, check_cost, centre_limit):
-    """The centre cost of the robot at (x, y), heading (cos, sin) = (c, s), or -1 when that pose is
-    illegal: its centre cell off the grid or at centre_limit or above (inscribed, lethal, unknown),
-    or — from check_cost on, or where `near` — a point of the outline on a lethal or unknown cell or
-    off the grid. near, skips and centre_limit as in PoseCheck, grid as in kernel_grid."""
-    row, col = _cell(x, y, grid, costs.shape[0], costs.shape[1])
-    if row < 0 or costs[row, col] >= centre_limit:
-        return -1
-    cost = int(costs[row, col])
-    if (cost >= check_cost or near[row, col]) and not _outline_clear(skips, x, y, c, s, grid, outline):
-        return -1
-    return cost
+@njit(cache=True)
+def trajectory_cost(poses, headings, costs, near, skips, grid, outline, check_cost, centre_limit):
+    """(count, worst): how many of the poses (N, 3), from the first, the robot may stand at, and the
+    highest centre cost among those. A pose is illegal when its centre cell is off the grid or at
+    centre_limit or above (inscribed, lethal, unknown), or when — from check_cost on, or where
+    `near` — a point of the outline lies on a lethal or unknown cell or off the grid. headings (N, 2)
+    are the cos and sin of each pose's yaw (a rollout turns them without trigonometry); near, skips
+    and centre_limit as in PoseCheck, grid as in kernel_grid. One call checks a whole trajectory:
+    a numba call per pose would take and release each array it is given, which costs more than the
+    check itself."""
+    height, width = costs.shape
+    worst = 0
+    for i in range(poses.shape[0]):
+        x, y = poses[i, 0], poses[i, 1]
+        row, col = _cell(x, y, grid, height, width)
+        if row < 0 or costs[row, col] >= centre_limit:
+            return i, worst
+        cost = int(costs[row, col])
+        if cost >= check_cost or near[row, col]:
+            if not _outline_clear(skips, x, y, headings[i, 0], headings[i, 1], grid, outline):
+                return i, worst
+        worst = max(worst, cost)
+    return poses.shape[0], worst
 
 
 @njit(cache=True)
 def _check_poses(poses, costs, near, skips, grid, outline, check_cost, centre_limit, legal):
+    headings = np.empty((1, 2))
     for i in range(poses.shape[0]):
-        x, y, th = poses[i, 0], poses[i, 1], poses[i, 2]
-        legal[i] = pose_cost(costs, near, skips, x, y, math.cos(th), math.sin(th), grid, outline, check_cost,
-                             centre_limit) >= 0
+        headings[0, 0], headings[0, 1] = math.cos(poses[i, 2]), math.sin(poses[i, 2])
+        legal[i] = trajectory_cost(poses[i:i + 1], headings, costs, near, skips, grid, outline, check_cost,
+                                   centre_limit)[0] == 1
 
 
 def footprint_outline(points: np.ndarray, spacing: float) -> np.ndarray:
@@ -175,7 +137,7 @@ def footprint_check_cost(inscribed_radius: float, circumscribed_radius: float, i
 
 
 def kernel_grid(info: MapMetaData) -> np.ndarray:
-    """The kernels' view of the grid (`grid` in pose_cost): (origin x, origin y, cos origin yaw, sin
+    """The kernels' view of the grid (`grid` in trajectory_cost): (origin x, origin y, cos origin yaw, sin
     origin yaw, 1/resolution)."""
     theta = info.origin.theta
     return np.array([info.origin.x, info.origin.y, math.cos(theta), math.sin(theta), 1.0 / info.resolution])
@@ -227,7 +189,7 @@ class FootprintCheck:
         centre_limit = (LETHAL_OBSTACLE if row >= 0 and costs[row, col] == INSCRIBED_INFLATED_OBSTACLE
                         else INSCRIBED_INFLATED_OBSTACLE)
         blocked = costs >= LETHAL_OBSTACLE
-        clearance = _clearance_cells(blocked) * info.resolution
+        clearance = np.sqrt(nearest_cells(blocked)[0]) * info.resolution
         skips = outline_skips(clearance, info.resolution)
         quarter = info.resolution / 4
         legal = np.empty(1, np.bool_)
