@@ -71,9 +71,6 @@ LOCALIZATIONS = ("amcl", "slam", "truth", "odom")
 # a robot that stands still for 10 s (move_base's oscillation check, off by default) recovers
 NAVIGATOR = {"xy_goal_tolerance": 0.03, "yaw_goal_tolerance": 0.03, "trans_stopped_vel": 0.02,
              "rot_stopped_vel": 0.02, "oscillation_timeout": 10.0, "oscillation_distance": 0.2}
-# where a mission's localizer departs from ROS amcl (docs/localizer.md): it keeps converging while
-# the robot stands (a shove or a late correction is not left standing), and its recovery keeps its
-# weight averages and draws half its random poses near the estimate (a shove moves the robot a little)
 # the world's robot (the mecanum paper's) has follower wheels and a gyro: odometry from them rolls
 # with the ground, so a person who shoves the robot moves its odometry too, and AMCL stays on the
 # robot instead of being left where the wheels say it stood (a profile's robot keeps its own)
@@ -83,6 +80,9 @@ FOLLOWER_ODOMETRY = {"odom_source": "followers"}
 # pose wanders (generated crossing and head-on worlds: median error 0.76 m against 0.02 m with
 # ROS's suggested 0.001 / 0.1, the same recordings replayed into the localizer)
 RECOVERY_WITH_FOLLOWERS = {"recovery_alpha_slow": 0.001, "recovery_alpha_fast": 0.1}
+# where a mission's localizer departs from ROS amcl (docs/localizer.md): it keeps converging while
+# the robot stands (a shove or a late correction is not left standing), and its recovery keeps its
+# weight averages and draws half its random poses near the estimate (a shove moves the robot a little)
 LOCALIZER_BEYOND_ROS = {"temporal_update": 0.2, "recovery_reset_after_injection": False, "recovery_local_share": 0.5}
 # without a map the plan was made through unknown space: replan as the scans fill it in
 MAPLESS_NAVIGATOR = {"planner_frequency": 2.0}
@@ -207,6 +207,7 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
     `state_dir`: where the localizer, chassis and navigator keep what they resume from after a restart."""
     x, y, yaw = (float(v) for v in world.robot.start)
     start = {"initial_pose_x": x, "initial_pose_y": y, "initial_pose_a": yaw}
+    followers = profile is None        # the world's robot has follower wheels; a profile's says what it has
     common = profile.costmap_common_params if profile is not None else PARAMS / "costmap_common_params.yaml"
     own_files = {"global": PARAMS / ("costmap_global_mapless_params.yaml" if localization == "odom" else
                                      "costmap_global_params.yaml"),
@@ -217,14 +218,14 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "sim", "service": "sim", "params": {"world": str(world_file), "drive": drive, "seed": seed,
                                                      "rate": rate, **({"dt": sim_dt} if sim_dt else {})}},
         {"name": "chassis", "service": "chassis",
-         "params": {"drive": drive, **(FOLLOWER_ODOMETRY if profile is None else {})}},
+         "params": {"drive": drive, **(FOLLOWER_ODOMETRY if followers else {})}},
         {"name": "lidar", "service": "lidar", "params": {"world": str(world_file)}},
     ]
     if localization in ("amcl", "truth"):      # slam serves its own map; odom has none
         services.append({"name": "map_server", "service": "map_server",
                          "params": {"yaml_filename": str(map_file), "publish_period_s": 1.0}})
     if localization != "odom":
-        services.append(localization_service(localization, start, map_file, seed, followers=profile is None))
+        services.append(localization_service(localization, start, map_file, seed, followers))
     services += [
         {"name": "costmap", "service": "costmap", "params": {**costmap_files, **start}},
         # slam's map is still being drawn (and where people walked): the evidence grid alone tells the
