@@ -6,7 +6,8 @@ import pytest
 from omninav.schemas.messages import Header, MapMetaData, Pose2D, Tracks
 from omninav.services.local_planner.dwa import DwaPlanner
 from omninav.services.local_planner.footprint_check import FootprintCheck
-from omninav.services.local_planner.dynamic import Movers, critic, first_contact, movers_at, slack, tracks_problem
+from omninav.geometry.movers import Movers, movers_at, tracks_problem
+from omninav.services.local_planner.dynamic import critic, first_contact, slack
 from omninav.services.local_planner.params import DwaParams
 
 FOOTPRINT = np.array([[0.416, 0.318], [-0.416, 0.318], [-0.416, -0.318], [0.416, -0.318]])

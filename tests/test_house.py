@@ -38,7 +38,7 @@ ROOMS: dict[str, set[str]] = {
     "services/replay": SERVICE_BASE | {"services/recorder"},          # reads MCAP with the recorder's mcap_io
     "services/view": SERVICE_BASE | {"services/recorder"},            # export reads MCAP the same way
     "services/local_planner": SERVICE_BASE | {"services/costmap"},    # the cost values of the costmap it reads
-    "services/collision_monitor": SERVICE_BASE | {"services/local_planner"},   # tracks predicted (dynamic.py)
+    "services/collision_monitor": SERVICE_BASE,
     "services/explore": SERVICE_BASE | {"services/costmap", "services/global_planner"},   # inflation, A*
     "services/ros2_bridge": SERVICE_BASE | {"services/importers"},    # the ROS → omninav conversions of rosbag.py
     "cli": LIBRARY | {"experiments", "bench"},              # the command reaches everything

@@ -6,7 +6,7 @@ import pytest
 
 from omninav.schemas.messages import LaserScan
 from omninav.services.collision_monitor.collision import CollisionMonitor, robot_frame_points
-from omninav.services.local_planner.dynamic import Movers
+from omninav.geometry.movers import Movers
 from omninav.services.collision_monitor.collision import CollisionMonitorParams
 from omninav.services.velocity_smoother.smoother import VelocitySmootherParams
 from omninav.services.velocity_smoother.smoother import VelocitySmoother

@@ -34,7 +34,7 @@ from ...geometry.polygons import points_in_polygons
 from ...geometry.footprint import STOP_PADDING, pad
 from ...geometry.frames import scan_points
 from ...geometry.se2 import integrate
-from ..local_planner.dynamic import Movers
+from ...geometry.movers import Movers
 from ...parameters.declare import Parameters, Rule, param
 
 APPROACH_SCALES = (1.0, 0.75, 0.5, 0.25)   # of a command, tried in turn against the tracks (then standing)

@@ -24,7 +24,7 @@ import numpy as np
 from ...geometry.frames import LASER_MOUNT, twist_message, twist_vector
 from ...geometry.se2 import integrate, inverse
 from ...schemas.messages import Odometry, Tracks, Twist
-from ..local_planner.dynamic import Movers, movers_at, tracks_problem
+from ...geometry.movers import Movers, movers_at, tracks_problem
 from ..runtime.deferred import Deferred
 from ..runtime.node import NS_PER_S, Node
 from .collision import CollisionMonitor, CollisionMonitorParams, robot_frame_points

@@ -42,7 +42,7 @@ from ...parameters.declare import Rule, group, param
 from ...parameters.from_mapping import load_params
 from .approach import FinalApproach
 from .dwa import DwaPlanner, reachable
-from .dynamic import Movers, movers_at
+from ...geometry.movers import Movers, movers_at
 from .footprint_check import FootprintCheck, footprint_check_cost
 from .params import DwaParams, FollowerParams
 from .path_ahead import ahead_of

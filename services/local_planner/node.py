@@ -42,7 +42,7 @@ from ...parameters.declare import ParamError, param
 from ...parameters.from_mapping import load_params
 from .control import ControlInputs, LocalControl, LocalControlParams
 from .dwa import warm_up
-from .dynamic import tracks_problem
+from ...geometry.movers import tracks_problem
 
 TIMES_KEPT = 10_000     # cycle times kept for the diagnostic's median
 COSTMAP, MAP_ODOM, PATH = range(3)    # sporadic inputs, in input order (the order of equal stamps)
