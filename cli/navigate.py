@@ -68,9 +68,12 @@ LOCALIZATIONS = ("amcl", "slam", "truth", "odom")
 # the navigator's arrival check, tighter than move_base's 0.10 m / 0.05 rad: the local planner's
 # final approach stops within 0.02 m / 0.02 rad, and a mission aims for 5 cm and 2°; success only
 # once nearly stopped, so the commands still on their way (about 0.1–0.3 s) cannot carry it past;
-# a robot that stands still for 10 s (move_base's oscillation check, off by default) recovers
+# a robot that stands still for 10 s (move_base's oscillation check, off by default) recovers;
+# the plan is made again every sim second (Nav2's default tree; move_base's planner_frequency is 0),
+# so that it moves aside from where the global costmap's mover layer says people will walk
 NAVIGATOR = {"xy_goal_tolerance": 0.03, "yaw_goal_tolerance": 0.03, "trans_stopped_vel": 0.02,
-             "rot_stopped_vel": 0.02, "oscillation_timeout": 10.0, "oscillation_distance": 0.2}
+             "rot_stopped_vel": 0.02, "oscillation_timeout": 10.0, "oscillation_distance": 0.2,
+             "planner_frequency": 1.0}
 # the world's robot (the mecanum paper's) has follower wheels and a gyro: odometry from them rolls
 # with the ground, so a person who shoves the robot moves its odometry too, and AMCL stays on the
 # robot instead of being left where the wheels say it stood (a profile's robot keeps its own)
@@ -210,7 +213,7 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
     followers = profile is None        # the world's robot has follower wheels; a profile's says what it has
     common = profile.costmap_common_params if profile is not None else PARAMS / "costmap_common_params.yaml"
     own_files = {"global": PARAMS / ("costmap_global_mapless_params.yaml" if localization == "odom" else
-                                     "costmap_global_params.yaml"),
+                                     "costmap_global_movers_params.yaml"),
                  "local": (profile and profile.costmap_local_params) or PARAMS / "costmap_local_params.yaml"}
     costmap_files = {f"{which}_costmap_files": [str(common), str(own)] for which, own in own_files.items()}
     services = [

@@ -25,7 +25,9 @@ from ...geometry.grid import cell_to_world, in_grid, world_to_cell
 from ...geometry.footprint import Footprint, make_footprint
 from .layers import (FREE_SPACE, NO_INFORMATION, Box, InflationLayer, KeepoutLayer, ObstacleLayer, StaticLayer,
                      View, grow, same_geometry, shift_grid, union, whole)
-from .params import CostmapParams, InflationLayerParams, KeepoutLayerParams, ObstacleLayerParams, StaticLayerParams
+from .mover_layer import MoverLayer
+from .params import (CostmapParams, InflationLayerParams, KeepoutLayerParams, MoverLayerParams, ObstacleLayerParams,
+                     StaticLayerParams)
 
 _CELLS_EPSILON = 1e-9   # width / resolution = 119.99999999 still means 120 cells
 
@@ -73,6 +75,8 @@ class Costmap:
             return InflationLayer(p, self.footprint.inscribed_radius, self.params.resolution)
         if isinstance(p, KeepoutLayerParams):
             return KeepoutLayer(p, _load_mask(p.mask), _load_mask(p.speed_limit_mask))
+        if isinstance(p, MoverLayerParams):
+            return MoverLayer(p, self.footprint.inscribed_radius)
         raise TypeError(f"no layer for {type(p).__name__}")
 
     def _initial_geometry(self) -> MapMetaData:
@@ -115,6 +119,13 @@ class Costmap:
         for layer in self.layers:
             if isinstance(layer, KeepoutLayer):
                 layer.set_masks(keepout, speed)
+
+    def set_movers(self, movers) -> None:
+        """The tracks (geometry/movers.py Movers, None: none) at the coming update's time in the
+        global frame, for the mover layer(s)."""
+        for layer in self.layers:
+            if isinstance(layer, MoverLayer):
+                layer.set_movers(movers)
 
     def add_scan(self, scan: LaserScan, sensor_pose, topic: str = "scan") -> int:
         """Feed a scan (sensor pose x, y, yaw in this costmap's global frame) to every observation

@@ -16,6 +16,11 @@ published, only answered); `get` on either key answers its costs after the last 
 stamped with the sim time they are sent at, which runs up to a scan period behind the clock: the
 node waits for the scans (consumers defer them, see global_planner/node.py).
 
+A costmap with a mover layer (mover_layer.py) also takes the tracker's tracks (sporadic, held
+tracks_delay_s as the local planner holds them): at each of its update cycles the tracks in effect
+are predicted to the cycle's time and carried into its frame; tracks older than tracks_timeout_s
+(a tracker that stopped) are dropped rather than walked on for ever.
+
 costmap/clear (ClearCostmaps, the navigator's clear_costmaps recovery) forgets the obstacle layers'
 cells outside the square of side reset_distance around the robot, in both costmaps, as move_base's
 clear_costmap_recovery. A clear stamped t takes effect at each costmap's first update cycle stamped
@@ -43,15 +48,16 @@ import numpy as np
 from ...schemas import MessageError
 from ...schemas.keys import type_for_key
 from ...schemas.messages import Costmap as CostmapMsg
-from ...schemas.messages import ClearCostmaps, Diagnostic, Header, LaserScan, OccupancyGrid, Transform
+from ...schemas.messages import ClearCostmaps, Diagnostic, Header, LaserScan, OccupancyGrid, Tracks, Transform
+from ...geometry.movers import movers_at, tracks_problem
 from ..map_server.mapio import MapError, load_map
 from ..runtime.deferred import Deferred
-from ..runtime.node import Node, QueryError
+from ..runtime.node import NS_PER_S, Node, QueryError
 from ...geometry.se2 import compose
 from .costmap import Costmap
 from ...geometry.frames import FrameParams, LASER_MOUNT
 from .layers import same_geometry, warm_up
-from .params import CostmapParams, ObstacleLayerParams, StaticLayerParams, load_costmap_params
+from .params import CostmapParams, MoverLayerParams, ObstacleLayerParams, StaticLayerParams, load_costmap_params
 from ...parameters.declare import param
 
 SAMPLES = "compose/params/"
@@ -70,6 +76,8 @@ class CostmapNodeParams(FrameParams):
     laser_y: float = LASER_MOUNT[1]
     laser_yaw: float = LASER_MOUNT[2]
     request_delay_s: float = param(0.3, ge=0)  # sim s from a costmap/clear stamp to its effect
+    tracks_delay_s: float = param(0.3, ge=0)   # sim s from a tracks stamp to its effect (mover layers only)
+    tracks_timeout_s: float = param(1.0, gt=0)  # sim s after which tracks in effect are forgotten
 
 
 class ServedCostmap:
@@ -83,6 +91,7 @@ class ServedCostmap:
         self.frame = params.global_frame
         self.publisher = publisher
         self.needs_map = any(isinstance(l, StaticLayerParams) and l.enabled for l in params.layers)
+        self.needs_tracks = params.layer(MoverLayerParams) is not None
         self.has_map = static_map is not None
         self.cycles = 0                         # update cycles run (by the timer)
         self.updated_ns: int | None = None      # sim time of the last update
@@ -141,6 +150,10 @@ class CostmapNode(Node):
         self.subscribe("tf/map_odom", self.on_map_odom, synced=False)
         self.clear_key = self.keys.resolve("costmap/clear")
         self.subscribe("costmap/clear", self.on_clear, synced=False, max_delay_s=p.request_delay_s)
+        self.pending_tracks = Deferred(p.tracks_delay_s)
+        self.tracks: Tracks | None = None       # in effect
+        if any(served.needs_tracks for served in self.costmaps.values()):
+            self.subscribe_deferred("tracks", self.pending_tracks, check=self._tracks_problem)
         # updates before publishes: a publish due at the same instant sends that update
         for served in self.costmaps.values():
             if served.core.params.update_frequency > 0:
@@ -180,6 +193,11 @@ class CostmapNode(Node):
         laser = compose(self.frames.odom, self.laser)
         for served in self.costmaps.values():
             served.core.add_scan(msg, self.frames.in_frame(served.frame, laser), topic)
+
+    def _tracks_problem(self, msg: Tracks) -> str:
+        if msg.header.frame_id != self.frames.odom_frame:
+            return f"tracks in frame {msg.header.frame_id!r}, expected the odom frame {self.frames.odom_frame!r}"
+        return tracks_problem(msg)
 
     def on_map(self, msg: OccupancyGrid) -> None:
         if self.map is not None and same_geometry(msg.info, self.map.info) and np.array_equal(msg.data, self.map.data):
@@ -221,7 +239,17 @@ class CostmapNode(Node):
     def on_cycle(self, served: ServedCostmap) -> None:
         served.cycles += 1
         self._apply_clears(served)
+        if served.needs_tracks:
+            served.core.set_movers(self._movers_in(served.frame))
         self._update(served)
+
+    def _movers_in(self, frame: str):
+        """The tracks in effect, predicted to now in `frame`; None without tracks or when they are stale."""
+        for _, msg in self.pending_tracks.due(self.now_ns):
+            self.tracks = msg
+        if self.tracks is None or self.now_ns - self.tracks.header.stamp_ns > self.params.tracks_timeout_s * NS_PER_S:
+            return None
+        return movers_at(self.tracks, self.now_ns / NS_PER_S, self.frames.in_frame(frame, (0.0, 0.0, 0.0)), 0.0)
 
     def _apply_clears(self, served: ServedCostmap) -> None:
         """The clears stamped before now − request_delay_s, around the robot where it is now."""

@@ -134,7 +134,19 @@ class KeepoutLayerParams(Parameters):
     speed_limit_percentage: bool = True
 
 
-LayerParams = Union[StaticLayerParams, ObstacleLayerParams, InflationLayerParams, KeepoutLayerParams]
+@dataclass(frozen=True)
+class MoverLayerParams(Parameters):
+    """The tracker's moving obstacles, stamped where they will walk (mover_layer.py); no ROS
+    counterpart (social_navigation_layers' passing layer is the nearest)."""
+    name: str = "mover_layer"
+    enabled: bool = True
+    prediction_time: float = param(5.0, gt=0)          # s of each track's way ahead that is stamped
+    sweep_cost: int = param(200, ge=1, le=252)         # of every cell of that way (below 253: dear, not closed)
+    margin: float = param(0.1, ge=0)                   # m beyond the track's radius plus the robot's inscribed radius
+    min_speed: float = param(0.1, ge=0)                # m/s: slower tracks are left to the obstacle layer
+
+
+LayerParams = Union[StaticLayerParams, ObstacleLayerParams, InflationLayerParams, KeepoutLayerParams, MoverLayerParams]
 
 LAYER_TYPES: dict[str, type] = {
     "costmap_2d::StaticLayer": StaticLayerParams,
@@ -146,6 +158,7 @@ LAYER_TYPES: dict[str, type] = {
     "nav2_costmap_2d::VoxelLayer": ObstacleLayerParams,
     "nav2_costmap_2d::InflationLayer": InflationLayerParams,
     "omninav::KeepoutLayer": KeepoutLayerParams,
+    "omninav::MoverLayer": MoverLayerParams,
 }
 
 
@@ -295,6 +308,7 @@ _PARENT_COPIES = {
     ObstacleLayerParams: ("raytrace_range", "obstacle_range", "track_unknown_space"),
     InflationLayerParams: ("cost_scaling_factor", "inflation_radius"),
     KeepoutLayerParams: (),
+    MoverLayerParams: (),
 }
 _PARENT_COPIES_ALL = {key for keys in _PARENT_COPIES.values() for key in keys}
 
