@@ -11,8 +11,9 @@ cost 68 equally expensive (with the defaults); here the weight keeps growing wit
 paths keep away from walls as the inflation gradient asks.
 
 A* uses neutral_cost × the octile distance, which never exceeds the true remaining cost and is
-consistent, so A* and Dijkstra return paths of the same (optimal) cost; ties on f are broken
-towards the goal. Both run in numba over a binary heap.
+consistent, so A* and Dijkstra return paths of the same (optimal) cost. Both run in numba over a
+ring of buckets of f, stacks without any ordering inside (no heap): a cell reached more cheaply
+after its expansion is expanded again, so the costs stay exact (see _search).
 
 A goal in an impassable cell moves to the nearest passable cell within default_tolerance that the
 start can reach; so does a goal the start cannot reach. Orientations along the path follow ROS's
@@ -36,7 +37,7 @@ from .path_smoother import smooth
 
 OK, NO_PATH, GOAL_IN_OBSTACLE, OFF_MAP = "ok", "no_path", "goal_in_obstacle", "off_map"
 NO_INFORMATION = 255
-BUCKETS_PER_STEP = 100   # queue buckets per neutral_cost of f; measured fastest on the Willow bench
+BUCKETS_PER_STEP = 10   # queue buckets per neutral_cost of f; measured fastest on the Willow bench
 SQRT2 = math.sqrt(2.0)
 
 
@@ -76,143 +77,102 @@ def _octile(r, c, goal_r, goal_c):
     return max(dr, dc) + (1.4142135623730951 - 1.0) * min(dr, dc)
 
 
-@njit(cache=True, inline="always")
-def _push(keys, ties, items, size, key, tie, item):
-    """Binary-heap insert (capacity ensured by the caller); returns the new size."""
-    hole = size
-    while hole > 0:
-        above = (hole - 1) // 2
-        if key < keys[above] or (key == keys[above] and tie < ties[above]):
-            keys[hole], ties[hole], items[hole] = keys[above], ties[above], items[above]
-            hole = above
-        else:
-            break
-    keys[hole], ties[hole], items[hole] = key, tie, item
-    return size + 1
-
-
-@njit(cache=True, inline="always")
-def _pop(keys, ties, items, size):
-    """Binary-heap removal of the least (key, tie); returns (item, new size)."""
-    top = items[0]
-    size -= 1
-    key, tie, item = keys[size], ties[size], items[size]
-    hole = 0
-    while True:
-        child = 2 * hole + 1
-        if child >= size:
-            break
-        if child + 1 < size and (keys[child + 1] < keys[child]
-                                 or (keys[child + 1] == keys[child] and ties[child + 1] < ties[child])):
-            child += 1
-        if keys[child] < key or (keys[child] == key and ties[child] < tie):
-            keys[hole], ties[hole], items[hole] = keys[child], ties[child], items[child]
-            hole = child
-        else:
-            break
-    keys[hole], ties[hole], items[hole] = key, tie, item
-    return top, size
-
-
 @njit(cache=True)
-def _search(node, padded, start, goal, neutral, use_heuristic, base):
-    """Best-first search over padded flat indices from `start` until `goal` is expanded (True) or
-    the reachable cells are exhausted (False). node rows are (weight, g, stamp, parent), reused
-    across searches: a cell is untouched while stamp < base, open at base, expanded at base + 1.
+def _search(node, padded, start, goal, neutral, use_heuristic, base, per_bucket, buckets):
+    """Best-first search over padded flat indices from `start` until the cost to `goal` is final
+    (True) or the reachable cells are exhausted (False). node rows are (weight, g, stamp, parent),
+    reused across searches: a cell is untouched while stamp < base, reached at base, expanded at
+    base + 1.
 
-    The queue orders by f, then by h (on equal f, nearer the goal first). With a consistent
-    heuristic f never decreases along the search, so entries wait in buckets of f (a hundredth of
-    a free step wide) and only the current bucket is a binary heap: pops stay shallow while the
-    order stays exact. Returns (found, expanded)."""
+    The queue is buckets of f, 1/per_bucket wide, in a ring of `buckets` (more than the largest
+    rise of f in one step spans), each a stack: no heap and no ordering within a bucket. Within a
+    bucket a cell may be expanded before a slightly cheaper way to it is found (A*'s f may stay
+    level along a step); it is then expanded again, so every cost-to-come is exact once no entry
+    below it is left. The cost to the goal is final when the lowest bucket left starts above it:
+    every entry with a lower f has been expanded. Returns (found, expansions)."""
     goal_r, goal_c = goal // padded, goal % padded
-    keys, ties, items = np.empty(4096), np.empty(4096), np.empty(4096, np.int64)
-    # entries of later buckets: linked lists through a pool whose consumed entries are reused
-    pool_key, pool_tie, pool_item = np.empty(4096), np.empty(4096), np.empty(4096, np.int64)
-    pool_next = np.empty(4096, np.int64)
-    pool_used, free = 0, -1
-    heads = np.full(1024, -1, np.int64)
+    heads = np.full(buckets, -1, np.int64)
+    # the entries: linked lists through a pool whose consumed entries are reused
+    pool_item, pool_g, pool_next = np.empty(4096, np.int64), np.empty(4096), np.empty(4096, np.int64)
+    pool_used, free = 1, -1
+    pool_item[0], pool_g[0], pool_next[0] = start, 0.0, -1
     node[start, 1], node[start, 2], node[start, 3] = 0.0, base, -1.0
     f0 = neutral * _octile(start // padded, start % padded, goal_r, goal_c) if use_heuristic else 0.0
-    size = _push(keys, ties, items, 0, f0, f0, start)
-    bucket, expanded, closed = 0, 0, base + 1
-    per_bucket = BUCKETS_PER_STEP / neutral
+    heads[0] = 0
+    bucket, pending, expanded, closed = 0, 1, 0, base + 1
+    goal_cost = 0.0 if start == goal else np.inf
     step_r = (-1, 1, 0, 0, -1, -1, 1, 1)
     step_c = (0, 0, -1, 1, -1, 1, -1, 1)
-    while True:
-        if size == 0:   # the current bucket is done: load the next non-empty one into the heap
-            bucket += 1
-            while bucket < heads.shape[0] and heads[bucket] < 0:
-                bucket += 1
-            if bucket >= heads.shape[0]:
-                return False, expanded
-            e, heads[bucket] = heads[bucket], -1
-            while e >= 0:
-                if size == keys.shape[0]:
-                    keys, ties, items = _grown(keys), _grown(ties), _grown(items)
-                size = _push(keys, ties, items, size, pool_key[e], pool_tie[e], pool_item[e])
-                after = pool_next[e]
-                pool_next[e], free = free, e
-                e = after
-            continue
-        u, size = _pop(keys, ties, items, size)
-        if node[u, 2] == closed:
-            continue   # a stale entry: expanded already at a lower cost
-        node[u, 2] = closed
-        expanded += 1
-        if u == goal:
-            return True, expanded
-        ur, uc = u // padded, u % padded
-        gu = node[u, 1]
-        up, down = node[u - padded, 0] >= 0.0, node[u + padded, 0] >= 0.0
-        left, right = node[u - 1, 0] >= 0.0, node[u + 1, 0] >= 0.0
-        for k in range(8):
-            if k == 0:
-                ok = up
-            elif k == 1:
-                ok = down
-            elif k == 2:
-                ok = left
-            elif k == 3:
-                ok = right
-            elif k == 4:   # a diagonal step needs both cells beside it passable
-                ok = up and left
-            elif k == 5:
-                ok = up and right
-            elif k == 6:
-                ok = down and left
-            else:
-                ok = down and right
-            if not ok:
-                continue
-            vr, vc = ur + step_r[k], uc + step_c[k]
-            v = vr * padded + vc
-            w, seen = node[v, 0], node[v, 2]
-            if w < 0.0 or seen == closed:
-                continue
-            candidate = gu + (w if k < 4 else w * 1.4142135623730951)
-            if seen == base and candidate >= node[v, 1]:
-                continue
-            node[v, 1], node[v, 2], node[v, 3] = candidate, base, u
-            h = neutral * _octile(vr, vc, goal_r, goal_c) if use_heuristic else 0.0
-            b = int((candidate + h - f0) * per_bucket)
-            if b <= bucket:
-                if size == keys.shape[0]:
-                    keys, ties, items = _grown(keys), _grown(ties), _grown(items)
-                size = _push(keys, ties, items, size, candidate + h, h, v)
-                continue
-            if b >= heads.shape[0]:
-                more = np.full(max(2 * heads.shape[0], b + 1), -1, np.int64)
-                more[:heads.shape[0]] = heads
-                heads = more
-            if free >= 0:
-                e, free = free, pool_next[free]
-            else:
-                if pool_used == pool_key.shape[0]:
-                    pool_key, pool_tie = _grown(pool_key), _grown(pool_tie)
-                    pool_item, pool_next = _grown(pool_item), _grown(pool_next)
-                e, pool_used = pool_used, pool_used + 1
-            pool_key[e], pool_tie[e], pool_item[e], pool_next[e] = candidate + h, h, v, heads[b]
-            heads[b] = e
+    while pending > 0:
+        slot = bucket % buckets
+        if f0 + (bucket - 1) / per_bucket >= goal_cost:   # (one bucket late: f's rounding)
+            break
+        while heads[slot] >= 0:
+            e = heads[slot]
+            u, gu = pool_item[e], pool_g[e]
+            heads[slot] = pool_next[e]
+            pool_next[e], free = free, e
+            pending -= 1
+            if gu != node[u, 1]:
+                continue   # a stale entry: a cheaper way to u came later
+            ur, uc = u // padded, u % padded
+            hu = neutral * _octile(ur, uc, goal_r, goal_c) if use_heuristic else 0.0
+            if gu + hu >= goal_cost:
+                continue   # cannot lead to a cheaper goal
+            node[u, 2] = closed
+            expanded += 1
+            up, down = node[u - padded, 0] >= 0.0, node[u + padded, 0] >= 0.0
+            left, right = node[u - 1, 0] >= 0.0, node[u + 1, 0] >= 0.0
+            for k in range(8):
+                if k == 0:
+                    ok = up
+                elif k == 1:
+                    ok = down
+                elif k == 2:
+                    ok = left
+                elif k == 3:
+                    ok = right
+                elif k == 4:   # a diagonal step needs both cells beside it passable
+                    ok = up and left
+                elif k == 5:
+                    ok = up and right
+                elif k == 6:
+                    ok = down and left
+                else:
+                    ok = down and right
+                if not ok:
+                    continue
+                vr, vc = ur + step_r[k], uc + step_c[k]
+                v = vr * padded + vc
+                w = node[v, 0]
+                if w < 0.0:
+                    continue
+                candidate = gu + (w if k < 4 else w * 1.4142135623730951)
+                if node[v, 2] >= base and candidate >= node[v, 1]:
+                    continue
+                node[v, 1], node[v, 3] = candidate, u
+                if node[v, 2] < base:
+                    node[v, 2] = base
+                if v == goal:
+                    goal_cost = candidate
+                    continue   # nothing beyond the goal can make it cheaper
+                h = neutral * _octile(vr, vc, goal_r, goal_c) if use_heuristic else 0.0
+                b = max(int((candidate + h - f0) * per_bucket), bucket)
+                if free >= 0:
+                    e, free = free, pool_next[free]
+                else:
+                    if pool_used == pool_item.shape[0]:
+                        pool_item, pool_g, pool_next = _grown(pool_item), _grown(pool_g), _grown(pool_next)
+                    e, pool_used = pool_used, pool_used + 1
+                target = b % buckets
+                pool_item[e], pool_g[e], pool_next[e] = v, candidate, heads[target]
+                heads[target] = e
+                pending += 1
+        bucket += 1
+    if goal_cost < np.inf or start == goal:
+        node[goal, 2] = closed
+        return True, expanded
+    return False, expanded
 
 
 @njit(cache=True)
@@ -310,8 +270,11 @@ def search(costs: np.ndarray, start: tuple[int, int], goal: tuple[int, int], par
     workspace = workspace or Workspace()
     base = workspace.prepare(costs, params)
     dijkstra = params.use_dijkstra if use_dijkstra is None else use_dijkstra
+    neutral = float(params.neutral_cost)
+    per_bucket = BUCKETS_PER_STEP / neutral
+    steepest = (neutral + params.cost_factor * (params.lethal_cost - 1) + neutral) * SQRT2   # f's largest rise
     found, expanded = _search(workspace.node, costs.shape[1] + 2, workspace.flat(*start), workspace.flat(*goal),
-                              float(params.neutral_cost), not dijkstra, base)
+                              neutral, not dijkstra, base, per_bucket, int(steepest * per_bucket) + 3)
     return Search(bool(found), int(expanded), workspace, base)
 
 
