@@ -44,31 +44,43 @@ SQRT2 = math.sqrt(2.0)
 # ---------------------------------------------------------------- the search kernel
 #
 # The search runs on a copy of the grid padded by one impassable cell all round, flattened, so a
-# neighbour is index + offset with no bounds checks. weights[i] is the cost of entering cell i per
-# cell length, or -1 where the cell is impassable.
+# neighbour is index + offset with no bounds checks. The copy holds one byte per cell, a code:
+# the cost itself where passable, lethal_cost - 1 for a passable unknown cell (it costs as that),
+# IMPASSABLE elsewhere; weights[code] is the cost of entering the cell per cell length. One byte a
+# cell keeps what a search reads of a building-sized map in the processor's cache.
+
+IMPASSABLE = 255   # never a passable cost's code: a passable cost is below lethal_cost <= 255
+
 
 @njit(cache=True)
-def _fill_weights(costs, neutral, factor, lethal, allow_unknown, outline, node):
+def _fill_codes(costs, lethal, allow_unknown, outline, codes):
     height, width = costs.shape
     padded = width + 2
-    weights = node[:, 0]
-    weights[:padded] = -1.0
-    weights[(height + 1) * padded:] = -1.0
-    unknown = neutral + factor * (lethal - 1) if allow_unknown else -1.0
+    codes[:padded] = IMPASSABLE
+    codes[(height + 1) * padded:] = IMPASSABLE
+    unknown = lethal - 1 if allow_unknown else IMPASSABLE
     for r in range(height):
         row = (r + 1) * padded
-        weights[row] = weights[row + padded - 1] = -1.0
+        codes[row] = codes[row + padded - 1] = IMPASSABLE
         for c in range(width):
             value = costs[r, c]
             if outline and (r == 0 or c == 0 or r == height - 1 or c == width - 1):
-                w = -1.0
+                code = IMPASSABLE
             elif value == 255:
-                w = unknown
+                code = unknown
             elif value < lethal:
-                w = neutral + factor * value
+                code = value
             else:
-                w = -1.0
-            weights[row + c + 1] = w
+                code = IMPASSABLE
+            codes[row + c + 1] = code
+
+
+def _weights(params: GlobalPlannerParams) -> np.ndarray:
+    """(256,) the cost of entering a cell per cell length, by its code."""
+    weights = params.neutral_cost + params.cost_factor * np.arange(256, dtype=np.float64)
+    weights[params.lethal_cost:] = -1.0
+    weights[IMPASSABLE] = -1.0
+    return weights
 
 
 @njit(cache=True, inline="always")
@@ -78,25 +90,26 @@ def _octile(r, c, goal_r, goal_c):
 
 
 @njit(cache=True)
-def _search(node, padded, start, goal, neutral, use_heuristic, base, per_bucket, buckets):
+def _search(codes, weights, g, parent, stamp, padded, start, goal, neutral, use_heuristic, base, per_bucket, buckets):
     """Best-first search over padded flat indices from `start` until the cost to `goal` is final
-    (True) or the reachable cells are exhausted (False). node rows are (weight, g, stamp, parent),
-    reused across searches: a cell is untouched while stamp < base, reached at base, expanded at
-    base + 1.
+    (True) or the reachable cells are exhausted (False). codes and weights as _fill_codes and
+    _weights; g (cost-to-come), parent and stamp are reused across searches: a cell is untouched
+    while stamp < base, reached at base, expanded at base + 1.
 
-    The queue is buckets of f, 1/per_bucket wide, in a ring of `buckets` (more than the largest
-    rise of f in one step spans), each a stack: no heap and no ordering within a bucket. Within a
+    The queue is buckets of f, 1/per_bucket wide, in a ring of `buckets` (a power of two, more than
+    the largest rise of f in one step spans), each a stack: no heap and no ordering within a bucket. Within a
     bucket a cell may be expanded before a slightly cheaper way to it is found (A*'s f may stay
     level along a step); it is then expanded again, so every cost-to-come is exact once no entry
     below it is left. The cost to the goal is final when the lowest bucket left starts above it:
     every entry with a lower f has been expanded. Returns (found, expansions)."""
     goal_r, goal_c = goal // padded, goal % padded
     heads = np.full(buckets, -1, np.int64)
+    ring, inverse = buckets - 1, 1.0 / padded
     # the entries: linked lists through a pool whose consumed entries are reused
     pool_item, pool_g, pool_next = np.empty(4096, np.int64), np.empty(4096), np.empty(4096, np.int64)
     pool_used, free = 1, -1
     pool_item[0], pool_g[0], pool_next[0] = start, 0.0, -1
-    node[start, 1], node[start, 2], node[start, 3] = 0.0, base, -1.0
+    g[start], stamp[start], parent[start] = 0.0, base, -1
     f0 = neutral * _octile(start // padded, start % padded, goal_r, goal_c) if use_heuristic else 0.0
     heads[0] = 0
     bucket, pending, expanded, closed = 0, 1, 0, base + 1
@@ -104,7 +117,7 @@ def _search(node, padded, start, goal, neutral, use_heuristic, base, per_bucket,
     step_r = (-1, 1, 0, 0, -1, -1, 1, 1)
     step_c = (0, 0, -1, 1, -1, 1, -1, 1)
     while pending > 0:
-        slot = bucket % buckets
+        slot = bucket & ring
         if f0 + (bucket - 1) / per_bucket >= goal_cost:   # (one bucket late: f's rounding)
             break
         while heads[slot] >= 0:
@@ -113,16 +126,21 @@ def _search(node, padded, start, goal, neutral, use_heuristic, base, per_bucket,
             heads[slot] = pool_next[e]
             pool_next[e], free = free, e
             pending -= 1
-            if gu != node[u, 1]:
+            if gu != g[u]:
                 continue   # a stale entry: a cheaper way to u came later
-            ur, uc = u // padded, u % padded
+            ur = int(u * inverse)   # u // padded without a division, corrected for rounding
+            uc = u - ur * padded
+            if uc < 0:
+                ur, uc = ur - 1, uc + padded
+            elif uc >= padded:
+                ur, uc = ur + 1, uc - padded
             hu = neutral * _octile(ur, uc, goal_r, goal_c) if use_heuristic else 0.0
             if gu + hu >= goal_cost:
                 continue   # cannot lead to a cheaper goal
-            node[u, 2] = closed
+            stamp[u] = closed
             expanded += 1
-            up, down = node[u - padded, 0] >= 0.0, node[u + padded, 0] >= 0.0
-            left, right = node[u - 1, 0] >= 0.0, node[u + 1, 0] >= 0.0
+            up, down = codes[u - padded] != IMPASSABLE, codes[u + padded] != IMPASSABLE
+            left, right = codes[u - 1] != IMPASSABLE, codes[u + 1] != IMPASSABLE
             for k in range(8):
                 if k == 0:
                     ok = up
@@ -144,15 +162,16 @@ def _search(node, padded, start, goal, neutral, use_heuristic, base, per_bucket,
                     continue
                 vr, vc = ur + step_r[k], uc + step_c[k]
                 v = vr * padded + vc
-                w = node[v, 0]
-                if w < 0.0:
+                code = codes[v]
+                if code == IMPASSABLE:
                     continue
+                w = weights[code]
                 candidate = gu + (w if k < 4 else w * 1.4142135623730951)
-                if node[v, 2] >= base and candidate >= node[v, 1]:
+                if stamp[v] >= base and candidate >= g[v]:
                     continue
-                node[v, 1], node[v, 3] = candidate, u
-                if node[v, 2] < base:
-                    node[v, 2] = base
+                g[v], parent[v] = candidate, u
+                if stamp[v] < base:
+                    stamp[v] = base
                 if v == goal:
                     goal_cost = candidate
                     continue   # nothing beyond the goal can make it cheaper
@@ -164,13 +183,13 @@ def _search(node, padded, start, goal, neutral, use_heuristic, base, per_bucket,
                     if pool_used == pool_item.shape[0]:
                         pool_item, pool_g, pool_next = _grown(pool_item), _grown(pool_g), _grown(pool_next)
                     e, pool_used = pool_used, pool_used + 1
-                target = b % buckets
+                target = b & ring
                 pool_item[e], pool_g[e], pool_next[e] = v, candidate, heads[target]
                 heads[target] = e
                 pending += 1
         bucket += 1
     if goal_cost < np.inf or start == goal:
-        node[goal, 2] = closed
+        stamp[goal] = closed
         return True, expanded
     return False, expanded
 
@@ -183,44 +202,50 @@ def _grown(array):
 
 
 @njit(cache=True)
-def _trace(node, goal):
+def _trace(parent, goal):
     """Padded indices from the start to `goal`, following parents."""
     count, u = 1, goal
-    while node[u, 3] >= 0:
-        u = int(node[u, 3])
+    while parent[u] >= 0:
+        u = parent[u]
         count += 1
     out = np.empty(count, np.int64)
     u = goal
     for i in range(count - 1, -1, -1):
         out[i] = u
-        u = int(node[u, 3])
+        u = parent[u]
     return out
 
 
 class Workspace:
     """The search's per-cell data, allocated once per costmap size and reused (allocating it for a
-    building-sized map would cost more than a typical search): one row of (weight, cost-to-come,
-    stamp, parent) per padded cell, so what a step reads about a cell lies together. The weights
-    are rebuilt only when the costs or the parameters differ from the last search's."""
+    building-sized map would cost more than a typical search): the padded cells' codes, and per
+    cell the cost-to-come, parent and stamp of the searches. The codes are rebuilt only when the
+    costs or the passability parameters differ from the last search's."""
 
     def __init__(self):
         self.shape: tuple[int, int] = (0, 0)
-        self.node = np.zeros((0, 4))
+        self.codes = np.zeros(0, np.uint8)
+        self.g = np.zeros(0)
+        self.parent = np.zeros(0, np.int32)
+        self.stamp = np.zeros(0, np.int32)
+        self.weights = np.zeros(256)
         self.base = 0
-        self._weights_for: tuple | None = None
+        self._codes_for: tuple | None = None
         self._costs: np.ndarray | None = None
 
     def prepare(self, costs: np.ndarray, params: GlobalPlannerParams) -> int:
         """Make the data fit `costs`; returns the stamp of a new search."""
         if costs.shape != self.shape:
             self.shape = costs.shape
-            self.node = np.zeros(((costs.shape[0] + 2) * (costs.shape[1] + 2), 4))
-            self.base, self._weights_for, self._costs = 0, None, None
-        key = (params.neutral_cost, params.cost_factor, params.lethal_cost, params.allow_unknown, params.outline_map)
-        if key != self._weights_for or not np.array_equal(costs, self._costs):
-            _fill_weights(costs, float(params.neutral_cost), float(params.cost_factor), int(params.lethal_cost),
-                          params.allow_unknown, params.outline_map, self.node)
-            self._weights_for, self._costs = key, costs.copy()
+            size = (costs.shape[0] + 2) * (costs.shape[1] + 2)
+            self.codes, self.g = np.empty(size, np.uint8), np.zeros(size)
+            self.parent, self.stamp = np.zeros(size, np.int32), np.zeros(size, np.int32)
+            self.base, self._codes_for, self._costs = 0, None, None
+        key = (params.lethal_cost, params.allow_unknown, params.outline_map)
+        if key != self._codes_for or not np.array_equal(costs, self._costs):
+            _fill_codes(costs, int(params.lethal_cost), params.allow_unknown, params.outline_map, self.codes)
+            self._codes_for, self._costs = key, costs.copy()
+        self.weights = _weights(params)
         self.base += 2
         return self.base
 
@@ -247,20 +272,20 @@ class Search:
 
     def path(self, cell: tuple[int, int]) -> np.ndarray:
         """(row, col) of the cells from the start to a reached cell."""
-        return self.workspace.cells(_trace(self.workspace.node, self.workspace.flat(*cell)))
+        return self.workspace.cells(_trace(self.workspace.parent, self.workspace.flat(*cell)))
 
     def expanded_mask(self) -> np.ndarray:
         """(H, W): the cells expanded; after an exhausted search, exactly the reachable cells."""
-        return self.workspace.unpad(self.workspace.node[:, 2] == self.base + 1)
+        return self.workspace.unpad(self.workspace.stamp == self.base + 1)
 
     def cost_to_come(self) -> np.ndarray:
         """(H, W) cost from the start (inf where the search never got)."""
-        node = self.workspace.node
-        return self.workspace.unpad(np.where(node[:, 2] >= self.base, node[:, 1], np.inf))
+        workspace = self.workspace
+        return workspace.unpad(np.where(workspace.stamp >= self.base, workspace.g, np.inf))
 
     def cost(self, cell: tuple[int, int]) -> float:
-        g, stamp = self.workspace.node[self.workspace.flat(*cell), 1:3]
-        return float(g) if stamp >= self.base else math.inf
+        index = self.workspace.flat(*cell)
+        return float(self.workspace.g[index]) if self.workspace.stamp[index] >= self.base else math.inf
 
 
 def search(costs: np.ndarray, start: tuple[int, int], goal: tuple[int, int], params: GlobalPlannerParams,
@@ -273,8 +298,9 @@ def search(costs: np.ndarray, start: tuple[int, int], goal: tuple[int, int], par
     neutral = float(params.neutral_cost)
     per_bucket = BUCKETS_PER_STEP / neutral
     steepest = (neutral + params.cost_factor * (params.lethal_cost - 1) + neutral) * SQRT2   # f's largest rise
-    found, expanded = _search(workspace.node, costs.shape[1] + 2, workspace.flat(*start), workspace.flat(*goal),
-                              neutral, not dijkstra, base, per_bucket, int(steepest * per_bucket) + 3)
+    found, expanded = _search(workspace.codes, workspace.weights, workspace.g, workspace.parent, workspace.stamp,
+                              costs.shape[1] + 2, workspace.flat(*start), workspace.flat(*goal), neutral, not dijkstra,
+                              base, per_bucket, 1 << (int(steepest * per_bucket) + 3).bit_length())
     return Search(bool(found), int(expanded), workspace, base)
 
 
