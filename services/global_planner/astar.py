@@ -13,7 +13,7 @@ paths keep away from walls as the inflation gradient asks.
 A* uses neutral_cost × the octile distance, which never exceeds the true remaining cost and is
 consistent, so A* and Dijkstra return paths of the same (optimal) cost. Both run in numba over a
 ring of buckets of f, stacks without any ordering inside (no heap): a cell reached more cheaply
-after its expansion is expanded again, so the costs stay exact (see _search).
+after its expansion is expanded again, so the costs stay exact up to rounding (see _search).
 
 A goal in an impassable cell moves to the nearest passable cell within default_tolerance that the
 start can reach; so does a goal the start cannot reach. Orientations along the path follow ROS's
@@ -39,6 +39,10 @@ OK, NO_PATH, GOAL_IN_OBSTACLE, OFF_MAP = "ok", "no_path", "goal_in_obstacle", "o
 NO_INFORMATION = 255
 BUCKETS_PER_STEP = 10   # queue buckets per neutral_cost of f; measured fastest on the Willow bench
 SQRT2 = math.sqrt(2.0)
+# a way to a cell counts as cheaper only below this fraction of the known one: ways whose costs
+# differ in the last bits only (the same steps summed in another order) are equal, else each
+# would expand the cell again (a quarter of A*'s expansions on the Willow bench)
+ROUNDING = 1.0 - 1e-15
 
 
 # ---------------------------------------------------------------- the search kernel
@@ -98,17 +102,17 @@ def _search(codes, weights, g, parent, stamp, padded, start, goal, neutral, use_
 
     The queue is buckets of f, 1/per_bucket wide, in a ring of `buckets` (a power of two, more than
     the largest rise of f in one step spans), each a stack: no heap and no ordering within a bucket. Within a
-    bucket a cell may be expanded before a slightly cheaper way to it is found (A*'s f may stay
-    level along a step); it is then expanded again, so every cost-to-come is exact once no entry
-    below it is left. The cost to the goal is final when the lowest bucket left starts above it:
+    bucket a cell may be expanded before a cheaper way to it is found (A*'s f may stay level along a
+    step); it is then opened and expanded again, so every cost-to-come is exact (up to ROUNDING)
+    once no entry below it is left; an entry of a cell expanded since it was made is skipped. The cost to the goal is final when the lowest bucket left starts above it:
     every entry with a lower f has been expanded. Returns (found, expansions)."""
     goal_r, goal_c = goal // padded, goal % padded
     heads = np.full(buckets, -1, np.int64)
     ring, inverse = buckets - 1, 1.0 / padded
-    # the entries: linked lists through a pool whose consumed entries are reused
-    pool_item, pool_g, pool_next = np.empty(4096, np.int64), np.empty(4096), np.empty(4096, np.int64)
+    # the entries (cells): linked lists through a pool whose consumed entries are reused
+    pool_item, pool_next = np.empty(4096, np.int64), np.empty(4096, np.int64)
     pool_used, free = 1, -1
-    pool_item[0], pool_g[0], pool_next[0] = start, 0.0, -1
+    pool_item[0], pool_next[0] = start, -1
     g[start], stamp[start], parent[start] = 0.0, base, -1
     f0 = neutral * _octile(start // padded, start % padded, goal_r, goal_c) if use_heuristic else 0.0
     heads[0] = 0
@@ -122,12 +126,13 @@ def _search(codes, weights, g, parent, stamp, padded, start, goal, neutral, use_
             break
         while heads[slot] >= 0:
             e = heads[slot]
-            u, gu = pool_item[e], pool_g[e]
+            u = pool_item[e]
             heads[slot] = pool_next[e]
             pool_next[e], free = free, e
             pending -= 1
-            if gu != g[u]:
-                continue   # a stale entry: a cheaper way to u came later
+            if stamp[u] == closed:
+                continue   # expanded already since this entry was made
+            gu = g[u]
             ur = int(u * inverse)   # u // padded without a division, corrected for rounding
             uc = u - ur * padded
             if uc < 0:
@@ -167,11 +172,9 @@ def _search(codes, weights, g, parent, stamp, padded, start, goal, neutral, use_
                     continue
                 w = weights[code]
                 candidate = gu + (w if k < 4 else w * 1.4142135623730951)
-                if stamp[v] >= base and candidate >= g[v]:
+                if stamp[v] >= base and candidate >= g[v] * ROUNDING:
                     continue
-                g[v], parent[v] = candidate, u
-                if stamp[v] < base:
-                    stamp[v] = base
+                g[v], parent[v], stamp[v] = candidate, u, base   # reached, or open again
                 if v == goal:
                     goal_cost = candidate
                     continue   # nothing beyond the goal can make it cheaper
@@ -181,10 +184,10 @@ def _search(codes, weights, g, parent, stamp, padded, start, goal, neutral, use_
                     e, free = free, pool_next[free]
                 else:
                     if pool_used == pool_item.shape[0]:
-                        pool_item, pool_g, pool_next = _grown(pool_item), _grown(pool_g), _grown(pool_next)
+                        pool_item, pool_next = _grown(pool_item), _grown(pool_next)
                     e, pool_used = pool_used, pool_used + 1
                 target = b & ring
-                pool_item[e], pool_g[e], pool_next[e] = v, candidate, heads[target]
+                pool_item[e], pool_next[e] = v, heads[target]
                 heads[target] = e
                 pending += 1
         bucket += 1
