@@ -2,7 +2,8 @@
 planner answering local_cmd every tick for the path it follows) and a toy global planner
 answering plan_request. Goal → plan_request → follow_path → cmd_vel_nav → succeeded; a failing
 planner → recoveries (costmap/clear) → aborted naming the reason; cancel; preemption; status on
-`get`; move_base parameter files; and `omninav run navigator` answering `get` over the bus."""
+`get`; with the real local planner, a map pose corrected off the goal after arrival is approached
+again; move_base parameter files; and `omninav run navigator` answering `get` over the bus."""
 import math
 
 import numpy as np
