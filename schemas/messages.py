@@ -261,7 +261,12 @@ class LocalCommand:
     linear_y: float = 0.0
     angular_z: float = 0.0
     ok: bool = True            # False: no valid command (the twist then brakes)
-    reason: str = ""           # why not, or what it did (e.g. "escape")
+    reason: str = ""           # why not, or what it did (e.g. "escape", GOAL_REACHED)
+
+
+# LocalCommand.reason while the robot stands at the followed path's end within the local planner's
+# tolerances; the navigator, which decides success, checks it against its own view of the robot
+GOAL_REACHED = "goal_reached"
 
 
 @message("Transform", 1)

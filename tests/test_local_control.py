@@ -1,7 +1,7 @@
 """The local planner's control core (services/local_planner/control.py) without any node: a robot
 facing away from its path turns on the spot, hands over to DWA, then to the final approach and
-arrives; a final approach whose line crosses an obstacle leaves the robot to the controller until
-the line is free; a shim turn that would sweep into a wall is not commanded; no path is idle, no
+arrives, and approaches again when its map pose is corrected off the goal; a final approach whose
+line crosses an obstacle leaves the robot to the controller until the line is free; a shim turn that would sweep into a wall is not commanded; no path is idle, no
 costmap brakes, an empty path stops. The node (node.py) publishes exactly the core's commands."""
 import math
 
@@ -10,7 +10,8 @@ import pytest
 
 from local_pipeline import KEYS, follow_path, polyline
 from omninav.schemas import decode
-from omninav.schemas.messages import Costmap, Header, LocalCommand, MapMetaData, Odometry, Path, Pose2D, Twist
+from omninav.schemas.messages import (GOAL_REACHED, Costmap, Header, LocalCommand, MapMetaData, Odometry, Path, Pose2D,
+                                      Transform, Twist)
 from omninav.geometry.frames import RobotFrames
 from omninav.geometry.se2 import integrate
 from omninav.services.local_planner.control import ControlInputs, LocalControl, LocalControlParams
@@ -80,6 +81,22 @@ def test_a_robot_facing_away_turns_on_the_spot_then_dwa_drives_then_the_final_ap
     # arrived: it stays arrived
     frames.set_odom(odometry(len(answers), pose))
     assert core.step(ControlInputs(np.zeros(3), frames, costmap(), None, len(answers) * DT)).reason == "goal_reached"
+
+
+def test_an_arrived_robot_whose_map_pose_is_corrected_off_the_goal_approaches_it_again():
+    # the stall of a shoved robot under AMCL: after the final approach had arrived, the localizer's
+    # correction (a new map→odom) put the robot 4 cm and 0.05 rad off the goal in the map; an arrival
+    # that held regardless answered goal_reached there for good
+    frames = RobotFrames("map", "odom")
+    core = LocalControl(LocalControlParams(), DT)
+    core.follow(follow_path(EAST), frames)
+    answers, pose = drive(core, frames, (0.0, 0.0, 0.0), costmap())
+    assert answers[-1].reason == GOAL_REACHED
+    frames.set_map_odom(Transform(Header(frame_id="map"), "odom", Pose2D(0.0, 0.04, 0.05)))
+    again, _ = drive(core, frames, pose, costmap())
+    assert again[0].counted == ("arrival_lost",) and phases(again) == ["final_approach", GOAL_REACHED]
+    x, y, yaw = frames.robot("map")
+    assert math.hypot(x - 2.4, y) <= 0.02 and abs(yaw - 0.6) <= 0.02
 
 
 def test_an_aligned_robot_is_not_shimmed_and_the_map_frame_goal_is_reached_through_map_odom():

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from omninav.schemas.messages import CancelGoal, Goal, Header, Pose2D
+from omninav.schemas.messages import GOAL_REACHED, CancelGoal, Goal, Header, Pose2D
 from omninav.services.navigator.core import (WAITING_FOR_CONFIDENT_POSE, ControlResult, Navigator, NavInputs,
                                              PlanResult, State)
 from omninav.services.navigator.params import NavigatorParams
@@ -42,16 +42,33 @@ def holonomic_controller(pose, path, turn=True):
     return ControlResult(True, (float(v[0]), float(v[1]), wz))
 
 
+class LatchedController:
+    """A local planner that drives at its plan's end and, once within latch_m of it, answers
+    goal_reached with zeros until it is given another plan (whatever the pose does meanwhile)."""
+
+    def __init__(self, latch_m: float):
+        self.latch_m, self.arrived_on = latch_m, None
+
+    def __call__(self, pose, path):
+        if path is not None and self.arrived_on is not path and math.hypot(*(path[-1, :2] - pose[:2])) <= self.latch_m:
+            self.arrived_on = path
+        if path is not None and self.arrived_on is path:
+            return ControlResult(True, (0.0, 0.0, 0.0), GOAL_REACHED)
+        return holonomic_controller(pose, path)
+
+
 def run(nav, steps, planner=straight_planner, controller=holonomic_controller, events=None, start=(0, 0, 0),
-        beam_fit=lambda k: None):
+        beam_fit=lambda k: None, jumps=None):
     """Close the loop: the planner answers a request one step later, the controller answers every
-    step from the pose the last command produced; beam_fit(k) is the localizer's news at step k.
+    step from the pose the last command produced; beam_fit(k) is the localizer's news at step k and
+    jumps[k] an offset (x, y, yaw) the pose takes before step k (a shove, or a corrected pose).
     Returns (log of actions, poses)."""
-    events = events or {}
+    events, jumps = events or {}, jumps or {}
     pose = np.array(start, dtype=float)
     path, plan, control = None, None, None
     log, poses = [], []
     for k in range(steps):
+        pose = pose + jumps.get(k, 0.0)
         g, c = events.get(k, (None, None))
         act = nav.step(k * DT, NavInputs(pose=pose, plan=plan, control=control, goal=g, cancel=c,
                                          beam_fit=beam_fit(k)))
@@ -381,3 +398,30 @@ def test_the_final_pose_counts_only_once_the_robot_has_stopped():
     assert nav.state is not State.SUCCEEDED          # at the pose, but still turning at 0.5 rad/s
     act = nav.step(DT, NavInputs(pose=(0.0, 0.0, 0.0), velocity=(0.0, 0.0, 0.05)))
     assert nav.state is State.SUCCEEDED and act.statuses[-1].status == "succeeded"
+
+
+def test_a_pose_corrected_off_the_goal_after_the_local_planner_arrived_is_approached_again():
+    # the pipeline's stall in small: the local planner answered goal_reached, the localizer then put the
+    # doubted pose 6 cm off the goal, and the local planner went on answering goal_reached there
+    nav = Navigator(NavigatorParams(xy_goal_tolerance=0.03))
+    log, poses = run(nav, 300, controller=LatchedController(0.02), events={0: (goal(2.0, 0.0, 0.0), None)},
+                     beam_fit=lambda k: 0.2, jumps={150: (0.0, 0.06, 0.0)})
+    assert log[149].statuses[-1].reason == WAITING_FOR_CONFIDENT_POSE
+    assert log[150].plan_request is not None and log[150].plan_request.start[1] == pytest.approx(0.06, abs=0.02)
+    assert not recoveries(log) and set(current_status(log)) == {"active"}
+    assert log[-1].statuses[-1].reason == WAITING_FOR_CONFIDENT_POSE
+    assert math.hypot(poses[-1][0] - 2.0, poses[-1][1]) <= 0.03
+
+
+def test_a_local_planner_that_stops_short_of_the_tolerance_replans_then_recovers_then_aborts():
+    # its goal_reached 8 cm from the goal, where the navigator wants 3 cm: the robot does not stand for good
+    params = NavigatorParams(xy_goal_tolerance=0.03, controller_patience=2.0, recovery_behaviors=("clear_costmaps",))
+    log, poses = run(Navigator(params), 600, controller=LatchedController(0.08), events={0: (goal(2.0, 0.0, 0.0), None)})
+    statuses = current_status(log)
+    end = statuses.index("aborted")
+    reached = next(k for k, a in enumerate(log) if a.cmd is not None and math.hypot(poses[k][0] - 2.0, poses[k][1]) <= 0.08)
+    assert [name for _, name in recoveries(log)] == ["clear_costmaps"]
+    assert sum(a.plan_request is not None for a in log[reached:end]) > 2     # stopped and replanned meanwhile
+    assert end * DT <= reached * DT + 2 * params.controller_patience + 1.0
+    reason = log[end].statuses[-1].reason
+    assert "no valid velocity command" in reason and GOAL_REACHED in reason and "0.08" in reason

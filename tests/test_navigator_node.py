@@ -2,7 +2,8 @@
 planner answering local_cmd every tick for the path it follows) and a toy global planner
 answering plan_request. Goal → plan_request → follow_path → cmd_vel_nav → succeeded; a failing
 planner → recoveries (costmap/clear) → aborted naming the reason; cancel; preemption; status on
-`get`; move_base parameter files; and `omninav run navigator` answering `get` over the bus."""
+`get`; with the real local planner, a map pose corrected off the goal after arrival is approached
+again; move_base parameter files; and `omninav run navigator` answering `get` over the bus."""
 import math
 
 import numpy as np
@@ -11,8 +12,10 @@ import pytest
 from conftest import wait_until
 from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
-from omninav.schemas.messages import CancelGoal, Goal, Header, LocalCommand, Odometry, Path, Pose2D
-from omninav.services.navigator.core import State
+from omninav.schemas.messages import (GOAL_REACHED, CancelGoal, Costmap, Goal, Header, LocalCommand, MapMetaData,
+                                      Odometry, Path, Pose2D, PoseFit, Transform)
+from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
+from omninav.services.navigator.core import WAITING_FOR_CONFIDENT_POSE, State
 from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.merge import StampMerger
@@ -33,17 +36,19 @@ def ns(seconds: float) -> int:
 
 class ToyRobot(Node):
     """A source: drives the last cmd_vel_nav, publishes odometry (odom = map) and, for the path it
-    was told to follow, a local_cmd towards the path's end (idle without one), every DT; publishes
-    scheduled goals and cancels."""
+    was told to follow, a local_cmd towards the path's end (idle without one; none at all without
+    local_planner, when a real one answers), every DT; publishes scheduled goals and cancels."""
     service = "toy_robot"
 
-    def __init__(self, events: dict[int, list[tuple[str, object]]], controller_ok: bool = True):
-        self.events, self.controller_ok = events, controller_ok
+    def __init__(self, events: dict[int, list[tuple[str, object]]], controller_ok: bool = True,
+                 local_planner: bool = True):
+        self.events, self.controller_ok, self.local_planner = events, controller_ok, local_planner
         super().__init__()
 
     def setup(self) -> None:
         self.step, self.pose, self.cmd, self.path = 0, np.zeros(3), np.zeros(3), None
-        self.odom_pub, self.cmd_pub = self.publisher("odom"), self.publisher("local_cmd")
+        self.odom_pub = self.publisher("odom")
+        self.cmd_pub = self.publisher("local_cmd") if self.local_planner else None
         self.event_pubs = {"goal": self.publisher("goal"), "cancel": self.publisher("cancel")}
         self.subscribe("cmd_vel_nav", self.on_cmd, synced=False)
         self.subscribe("follow_path", self.on_path, synced=False)
@@ -66,7 +71,8 @@ class ToyRobot(Node):
             self.event_pubs[topic].publish(msg)
         x, y, theta = (float(v) for v in self.pose)
         self.odom_pub.publish(Odometry(header=self.header("odom"), pose=Pose2D(x, y, theta)))
-        self.cmd_pub.publish(self.local_command())
+        if self.cmd_pub is not None:
+            self.cmd_pub.publish(self.local_command())
 
     def local_command(self) -> LocalCommand:
         if self.path is None:
@@ -205,6 +211,53 @@ def test_a_local_planner_that_lost_its_path_is_sent_it_again():
     assert again.goal_id == "g1" and np.array_equal(again.poses, first.poses)
     assert again.header.stamp_ns >= ns(30 * DT)                   # only once it answered idle
     assert math.hypot(robot.pose[0] - 2.0, robot.pose[1] - 1.0) <= 0.10
+
+
+class DoubtedRobot(ToyRobot):
+    """The toy robot for the real local planner: also a free local costmap (odom frame) and a low
+    beam fit (the localizer doubts its pose, so a goal stays active at the goal) every tick, and at
+    the steps of `corrections` a map→odom transform (the localizer moving its pose)."""
+
+    def __init__(self, events, corrections: dict[int, tuple[float, float, float]]):
+        self.corrections = corrections
+        super().__init__(events, local_planner=False)
+
+    def setup(self) -> None:
+        super().setup()
+        self.costmap_pub, self.fit_pub = self.publisher("costmap/local"), self.publisher("pose_fit")
+        self.map_odom_pub = self.publisher("tf/map_odom")
+        self.free = np.zeros((80, 120), np.uint8)     # 6 x 4 m around the start
+
+    def tick(self) -> None:
+        super().tick()
+        self.costmap_pub.publish(Costmap(self.header("odom"), MapMetaData(resolution=0.05, width=120, height=80,
+                                                                          origin=Pose2D(-3.0, -2.0)), self.free))
+        self.fit_pub.publish(PoseFit(self.header("map"), beam_fit=0.2, beams=100))
+        if self.step in self.corrections:
+            self.map_odom_pub.publish(Transform(self.header("map"), "odom", Pose2D(*self.corrections[self.step])))
+
+
+def test_a_pose_corrected_off_the_goal_after_arrival_is_approached_again_by_the_real_local_planner():
+    """The stall of tests/test_navigation_pipeline.py's shoved robot, in small: at the goal, waiting
+    for a pose the scans agree with, the localizer moves the robot's map pose 5 cm off the goal. The
+    local planner had answered goal_reached and went on answering it there, and the navigator waited
+    for good; now the robot goes back to the goal (in the map) and waits there."""
+    robot = DoubtedRobot({2: [("goal", goal(0.5, 0.0))]}, corrections={150: (0.0, 0.05, 0.0)})
+    local_planner = LocalPlannerNode(LocalPlannerNodeParams())
+    navigator = NavigatorNode(NavigatorNodeParams(xy_goal_tolerance=0.03, yaw_goal_tolerance=0.03))
+    runner = InProcessRunner([robot, ToyPlanner(), local_planner, navigator])
+    published = {"nav_status": [], "local_cmd": []}
+    topics = {KEYS.robot(t): t for t in published}
+    runner.tap(lambda key, payload, stamp: published[topics[key]].append(decode(payload)) if key in topics else None)
+    runner.run_until(lambda: robot.step == 149, 200)
+    assert navigator.core.reason == WAITING_FOR_CONFIDENT_POSE and abs(robot.pose[1]) <= 0.02
+    runner.run_until(lambda: False, 150)
+    runner.close()
+    assert navigator.core.reason == WAITING_FOR_CONFIDENT_POSE      # at the goal again, by the map pose
+    x, y = robot.pose[0], robot.pose[1] + 0.05
+    assert math.hypot(x - 0.5, y) <= 0.03
+    assert {s.status for s in published["nav_status"]} == {"active"} and not navigator.counters["recoveries/clear_costmaps"]
+    assert published["local_cmd"][-1].reason == GOAL_REACHED
 
 
 def test_before_any_goal_the_status_query_says_so_and_nothing_is_commanded():

@@ -11,8 +11,9 @@ cost 68 equally expensive (with the defaults); here the weight keeps growing wit
 paths keep away from walls as the inflation gradient asks.
 
 A* uses neutral_cost × the octile distance, which never exceeds the true remaining cost and is
-consistent, so A* and Dijkstra return paths of the same (optimal) cost; ties on f are broken
-towards the goal. Both run in numba over a binary heap.
+consistent, so A* and Dijkstra return paths of the same (optimal) cost. Both run in numba over a
+ring of buckets of f, stacks without any ordering inside (no heap): a cell reached more cheaply
+after its expansion is expanded again, so the costs stay exact up to rounding (see _search).
 
 A goal in an impassable cell moves to the nearest passable cell within default_tolerance that the
 start can reach; so does a goal the start cannot reach. Orientations along the path follow ROS's
@@ -36,38 +37,54 @@ from .path_smoother import smooth
 
 OK, NO_PATH, GOAL_IN_OBSTACLE, OFF_MAP = "ok", "no_path", "goal_in_obstacle", "off_map"
 NO_INFORMATION = 255
-BUCKETS_PER_STEP = 100   # queue buckets per neutral_cost of f; measured fastest on the Willow bench
+BUCKETS_PER_STEP = 10   # queue buckets per neutral_cost of f; measured fastest on the Willow bench
 SQRT2 = math.sqrt(2.0)
+# a way to a cell counts as cheaper only below this fraction of the known one: ways whose costs
+# differ in the last bits only (the same steps summed in another order) are equal, else each
+# would expand the cell again (a quarter of A*'s expansions on the Willow bench)
+ROUNDING = 1.0 - 1e-15
 
 
 # ---------------------------------------------------------------- the search kernel
 #
 # The search runs on a copy of the grid padded by one impassable cell all round, flattened, so a
-# neighbour is index + offset with no bounds checks. weights[i] is the cost of entering cell i per
-# cell length, or -1 where the cell is impassable.
+# neighbour is index + offset with no bounds checks. The copy holds one byte per cell, a code:
+# the cost itself where passable, lethal_cost - 1 for a passable unknown cell (it costs as that),
+# IMPASSABLE elsewhere; weights[code] is the cost of entering the cell per cell length. One byte a
+# cell keeps what a search reads of a building-sized map in the processor's cache.
+
+IMPASSABLE = 255   # never a passable cost's code: a passable cost is below lethal_cost <= 255
+
 
 @njit(cache=True)
-def _fill_weights(costs, neutral, factor, lethal, allow_unknown, outline, node):
+def _fill_codes(costs, lethal, allow_unknown, outline, codes):
     height, width = costs.shape
     padded = width + 2
-    weights = node[:, 0]
-    weights[:padded] = -1.0
-    weights[(height + 1) * padded:] = -1.0
-    unknown = neutral + factor * (lethal - 1) if allow_unknown else -1.0
+    codes[:padded] = IMPASSABLE
+    codes[(height + 1) * padded:] = IMPASSABLE
+    unknown = lethal - 1 if allow_unknown else IMPASSABLE
     for r in range(height):
         row = (r + 1) * padded
-        weights[row] = weights[row + padded - 1] = -1.0
+        codes[row] = codes[row + padded - 1] = IMPASSABLE
         for c in range(width):
             value = costs[r, c]
             if outline and (r == 0 or c == 0 or r == height - 1 or c == width - 1):
-                w = -1.0
+                code = IMPASSABLE
             elif value == 255:
-                w = unknown
+                code = unknown
             elif value < lethal:
-                w = neutral + factor * value
+                code = value
             else:
-                w = -1.0
-            weights[row + c + 1] = w
+                code = IMPASSABLE
+            codes[row + c + 1] = code
+
+
+def _weights(params: GlobalPlannerParams) -> np.ndarray:
+    """(256,) the cost of entering a cell per cell length, by its code."""
+    weights = params.neutral_cost + params.cost_factor * np.arange(256, dtype=np.float64)
+    weights[params.lethal_cost:] = -1.0
+    weights[IMPASSABLE] = -1.0
+    return weights
 
 
 @njit(cache=True, inline="always")
@@ -76,143 +93,108 @@ def _octile(r, c, goal_r, goal_c):
     return max(dr, dc) + (1.4142135623730951 - 1.0) * min(dr, dc)
 
 
-@njit(cache=True, inline="always")
-def _push(keys, ties, items, size, key, tie, item):
-    """Binary-heap insert (capacity ensured by the caller); returns the new size."""
-    hole = size
-    while hole > 0:
-        above = (hole - 1) // 2
-        if key < keys[above] or (key == keys[above] and tie < ties[above]):
-            keys[hole], ties[hole], items[hole] = keys[above], ties[above], items[above]
-            hole = above
-        else:
-            break
-    keys[hole], ties[hole], items[hole] = key, tie, item
-    return size + 1
-
-
-@njit(cache=True, inline="always")
-def _pop(keys, ties, items, size):
-    """Binary-heap removal of the least (key, tie); returns (item, new size)."""
-    top = items[0]
-    size -= 1
-    key, tie, item = keys[size], ties[size], items[size]
-    hole = 0
-    while True:
-        child = 2 * hole + 1
-        if child >= size:
-            break
-        if child + 1 < size and (keys[child + 1] < keys[child]
-                                 or (keys[child + 1] == keys[child] and ties[child + 1] < ties[child])):
-            child += 1
-        if keys[child] < key or (keys[child] == key and ties[child] < tie):
-            keys[hole], ties[hole], items[hole] = keys[child], ties[child], items[child]
-            hole = child
-        else:
-            break
-    keys[hole], ties[hole], items[hole] = key, tie, item
-    return top, size
-
-
 @njit(cache=True)
-def _search(node, padded, start, goal, neutral, use_heuristic, base):
-    """Best-first search over padded flat indices from `start` until `goal` is expanded (True) or
-    the reachable cells are exhausted (False). node rows are (weight, g, stamp, parent), reused
-    across searches: a cell is untouched while stamp < base, open at base, expanded at base + 1.
+def _search(codes, weights, g, parent, stamp, padded, start, goal, neutral, use_heuristic, base, per_bucket, buckets):
+    """Best-first search over padded flat indices from `start` until the cost to `goal` is final
+    (True) or the reachable cells are exhausted (False). codes and weights as _fill_codes and
+    _weights; g (cost-to-come), parent and stamp are reused across searches: a cell is untouched
+    while stamp < base, reached at base, expanded at base + 1.
 
-    The queue orders by f, then by h (on equal f, nearer the goal first). With a consistent
-    heuristic f never decreases along the search, so entries wait in buckets of f (a hundredth of
-    a free step wide) and only the current bucket is a binary heap: pops stay shallow while the
-    order stays exact. Returns (found, expanded)."""
+    The queue is buckets of f, 1/per_bucket wide, in a ring of `buckets` (a power of two, more than
+    the largest rise of f in one step spans), each a stack: no heap and no ordering within a bucket. Within a
+    bucket a cell may be expanded before a cheaper way to it is found (A*'s f may stay level along a
+    step); it is then opened and expanded again, so every cost-to-come is exact (up to ROUNDING)
+    once no entry below it is left; an entry of a cell expanded since it was made is skipped. The cost to the goal is final when the lowest bucket left starts above it:
+    every entry with a lower f has been expanded. Returns (found, expansions)."""
     goal_r, goal_c = goal // padded, goal % padded
-    keys, ties, items = np.empty(4096), np.empty(4096), np.empty(4096, np.int64)
-    # entries of later buckets: linked lists through a pool whose consumed entries are reused
-    pool_key, pool_tie, pool_item = np.empty(4096), np.empty(4096), np.empty(4096, np.int64)
-    pool_next = np.empty(4096, np.int64)
-    pool_used, free = 0, -1
-    heads = np.full(1024, -1, np.int64)
-    node[start, 1], node[start, 2], node[start, 3] = 0.0, base, -1.0
+    heads = np.full(buckets, -1, np.int64)
+    ring, inverse = buckets - 1, 1.0 / padded
+    # the entries (cells): linked lists through a pool whose consumed entries are reused
+    pool_item, pool_next = np.empty(4096, np.int64), np.empty(4096, np.int64)
+    pool_used, free = 1, -1
+    pool_item[0], pool_next[0] = start, -1
+    g[start], stamp[start], parent[start] = 0.0, base, -1
     f0 = neutral * _octile(start // padded, start % padded, goal_r, goal_c) if use_heuristic else 0.0
-    size = _push(keys, ties, items, 0, f0, f0, start)
-    bucket, expanded, closed = 0, 0, base + 1
-    per_bucket = BUCKETS_PER_STEP / neutral
+    heads[0] = 0
+    bucket, pending, expanded, closed = 0, 1, 0, base + 1
+    goal_cost = 0.0 if start == goal else np.inf
     step_r = (-1, 1, 0, 0, -1, -1, 1, 1)
     step_c = (0, 0, -1, 1, -1, 1, -1, 1)
-    while True:
-        if size == 0:   # the current bucket is done: load the next non-empty one into the heap
-            bucket += 1
-            while bucket < heads.shape[0] and heads[bucket] < 0:
-                bucket += 1
-            if bucket >= heads.shape[0]:
-                return False, expanded
-            e, heads[bucket] = heads[bucket], -1
-            while e >= 0:
-                if size == keys.shape[0]:
-                    keys, ties, items = _grown(keys), _grown(ties), _grown(items)
-                size = _push(keys, ties, items, size, pool_key[e], pool_tie[e], pool_item[e])
-                after = pool_next[e]
-                pool_next[e], free = free, e
-                e = after
-            continue
-        u, size = _pop(keys, ties, items, size)
-        if node[u, 2] == closed:
-            continue   # a stale entry: expanded already at a lower cost
-        node[u, 2] = closed
-        expanded += 1
-        if u == goal:
-            return True, expanded
-        ur, uc = u // padded, u % padded
-        gu = node[u, 1]
-        up, down = node[u - padded, 0] >= 0.0, node[u + padded, 0] >= 0.0
-        left, right = node[u - 1, 0] >= 0.0, node[u + 1, 0] >= 0.0
-        for k in range(8):
-            if k == 0:
-                ok = up
-            elif k == 1:
-                ok = down
-            elif k == 2:
-                ok = left
-            elif k == 3:
-                ok = right
-            elif k == 4:   # a diagonal step needs both cells beside it passable
-                ok = up and left
-            elif k == 5:
-                ok = up and right
-            elif k == 6:
-                ok = down and left
-            else:
-                ok = down and right
-            if not ok:
-                continue
-            vr, vc = ur + step_r[k], uc + step_c[k]
-            v = vr * padded + vc
-            w, seen = node[v, 0], node[v, 2]
-            if w < 0.0 or seen == closed:
-                continue
-            candidate = gu + (w if k < 4 else w * 1.4142135623730951)
-            if seen == base and candidate >= node[v, 1]:
-                continue
-            node[v, 1], node[v, 2], node[v, 3] = candidate, base, u
-            h = neutral * _octile(vr, vc, goal_r, goal_c) if use_heuristic else 0.0
-            b = int((candidate + h - f0) * per_bucket)
-            if b <= bucket:
-                if size == keys.shape[0]:
-                    keys, ties, items = _grown(keys), _grown(ties), _grown(items)
-                size = _push(keys, ties, items, size, candidate + h, h, v)
-                continue
-            if b >= heads.shape[0]:
-                more = np.full(max(2 * heads.shape[0], b + 1), -1, np.int64)
-                more[:heads.shape[0]] = heads
-                heads = more
-            if free >= 0:
-                e, free = free, pool_next[free]
-            else:
-                if pool_used == pool_key.shape[0]:
-                    pool_key, pool_tie = _grown(pool_key), _grown(pool_tie)
-                    pool_item, pool_next = _grown(pool_item), _grown(pool_next)
-                e, pool_used = pool_used, pool_used + 1
-            pool_key[e], pool_tie[e], pool_item[e], pool_next[e] = candidate + h, h, v, heads[b]
-            heads[b] = e
+    while pending > 0:
+        slot = bucket & ring
+        if f0 + (bucket - 1) / per_bucket >= goal_cost:   # (one bucket late: f's rounding)
+            break
+        while heads[slot] >= 0:
+            e = heads[slot]
+            u = pool_item[e]
+            heads[slot] = pool_next[e]
+            pool_next[e], free = free, e
+            pending -= 1
+            if stamp[u] == closed:
+                continue   # expanded already since this entry was made
+            gu = g[u]
+            ur = int(u * inverse)   # u // padded without a division, corrected for rounding
+            uc = u - ur * padded
+            if uc < 0:
+                ur, uc = ur - 1, uc + padded
+            elif uc >= padded:
+                ur, uc = ur + 1, uc - padded
+            hu = neutral * _octile(ur, uc, goal_r, goal_c) if use_heuristic else 0.0
+            if gu + hu >= goal_cost:
+                continue   # cannot lead to a cheaper goal
+            stamp[u] = closed
+            expanded += 1
+            up, down = codes[u - padded] != IMPASSABLE, codes[u + padded] != IMPASSABLE
+            left, right = codes[u - 1] != IMPASSABLE, codes[u + 1] != IMPASSABLE
+            for k in range(8):
+                if k == 0:
+                    ok = up
+                elif k == 1:
+                    ok = down
+                elif k == 2:
+                    ok = left
+                elif k == 3:
+                    ok = right
+                elif k == 4:   # a diagonal step needs both cells beside it passable
+                    ok = up and left
+                elif k == 5:
+                    ok = up and right
+                elif k == 6:
+                    ok = down and left
+                else:
+                    ok = down and right
+                if not ok:
+                    continue
+                vr, vc = ur + step_r[k], uc + step_c[k]
+                v = vr * padded + vc
+                code = codes[v]
+                if code == IMPASSABLE:
+                    continue
+                w = weights[code]
+                candidate = gu + (w if k < 4 else w * 1.4142135623730951)
+                if stamp[v] >= base and candidate >= g[v] * ROUNDING:
+                    continue
+                g[v], parent[v], stamp[v] = candidate, u, base   # reached, or open again
+                if v == goal:
+                    goal_cost = candidate
+                    continue   # nothing beyond the goal can make it cheaper
+                h = neutral * _octile(vr, vc, goal_r, goal_c) if use_heuristic else 0.0
+                b = max(int((candidate + h - f0) * per_bucket), bucket)
+                if free >= 0:
+                    e, free = free, pool_next[free]
+                else:
+                    if pool_used == pool_item.shape[0]:
+                        pool_item, pool_next = _grown(pool_item), _grown(pool_next)
+                    e, pool_used = pool_used, pool_used + 1
+                target = b & ring
+                pool_item[e], pool_next[e] = v, heads[target]
+                heads[target] = e
+                pending += 1
+        bucket += 1
+    if goal_cost < np.inf or start == goal:
+        stamp[goal] = closed
+        return True, expanded
+    return False, expanded
 
 
 @njit(cache=True)
@@ -223,44 +205,50 @@ def _grown(array):
 
 
 @njit(cache=True)
-def _trace(node, goal):
+def _trace(parent, goal):
     """Padded indices from the start to `goal`, following parents."""
     count, u = 1, goal
-    while node[u, 3] >= 0:
-        u = int(node[u, 3])
+    while parent[u] >= 0:
+        u = parent[u]
         count += 1
     out = np.empty(count, np.int64)
     u = goal
     for i in range(count - 1, -1, -1):
         out[i] = u
-        u = int(node[u, 3])
+        u = parent[u]
     return out
 
 
 class Workspace:
     """The search's per-cell data, allocated once per costmap size and reused (allocating it for a
-    building-sized map would cost more than a typical search): one row of (weight, cost-to-come,
-    stamp, parent) per padded cell, so what a step reads about a cell lies together. The weights
-    are rebuilt only when the costs or the parameters differ from the last search's."""
+    building-sized map would cost more than a typical search): the padded cells' codes, and per
+    cell the cost-to-come, parent and stamp of the searches. The codes are rebuilt only when the
+    costs or the passability parameters differ from the last search's."""
 
     def __init__(self):
         self.shape: tuple[int, int] = (0, 0)
-        self.node = np.zeros((0, 4))
+        self.codes = np.zeros(0, np.uint8)
+        self.g = np.zeros(0)
+        self.parent = np.zeros(0, np.int32)
+        self.stamp = np.zeros(0, np.int32)
+        self.weights = np.zeros(256)
         self.base = 0
-        self._weights_for: tuple | None = None
+        self._codes_for: tuple | None = None
         self._costs: np.ndarray | None = None
 
     def prepare(self, costs: np.ndarray, params: GlobalPlannerParams) -> int:
         """Make the data fit `costs`; returns the stamp of a new search."""
         if costs.shape != self.shape:
             self.shape = costs.shape
-            self.node = np.zeros(((costs.shape[0] + 2) * (costs.shape[1] + 2), 4))
-            self.base, self._weights_for, self._costs = 0, None, None
-        key = (params.neutral_cost, params.cost_factor, params.lethal_cost, params.allow_unknown, params.outline_map)
-        if key != self._weights_for or not np.array_equal(costs, self._costs):
-            _fill_weights(costs, float(params.neutral_cost), float(params.cost_factor), int(params.lethal_cost),
-                          params.allow_unknown, params.outline_map, self.node)
-            self._weights_for, self._costs = key, costs.copy()
+            size = (costs.shape[0] + 2) * (costs.shape[1] + 2)
+            self.codes, self.g = np.empty(size, np.uint8), np.zeros(size)
+            self.parent, self.stamp = np.zeros(size, np.int32), np.zeros(size, np.int32)
+            self.base, self._codes_for, self._costs = 0, None, None
+        key = (params.lethal_cost, params.allow_unknown, params.outline_map)
+        if key != self._codes_for or not np.array_equal(costs, self._costs):
+            _fill_codes(costs, int(params.lethal_cost), params.allow_unknown, params.outline_map, self.codes)
+            self._codes_for, self._costs = key, costs.copy()
+        self.weights = _weights(params)
         self.base += 2
         return self.base
 
@@ -287,20 +275,20 @@ class Search:
 
     def path(self, cell: tuple[int, int]) -> np.ndarray:
         """(row, col) of the cells from the start to a reached cell."""
-        return self.workspace.cells(_trace(self.workspace.node, self.workspace.flat(*cell)))
+        return self.workspace.cells(_trace(self.workspace.parent, self.workspace.flat(*cell)))
 
     def expanded_mask(self) -> np.ndarray:
         """(H, W): the cells expanded; after an exhausted search, exactly the reachable cells."""
-        return self.workspace.unpad(self.workspace.node[:, 2] == self.base + 1)
+        return self.workspace.unpad(self.workspace.stamp == self.base + 1)
 
     def cost_to_come(self) -> np.ndarray:
         """(H, W) cost from the start (inf where the search never got)."""
-        node = self.workspace.node
-        return self.workspace.unpad(np.where(node[:, 2] >= self.base, node[:, 1], np.inf))
+        workspace = self.workspace
+        return workspace.unpad(np.where(workspace.stamp >= self.base, workspace.g, np.inf))
 
     def cost(self, cell: tuple[int, int]) -> float:
-        g, stamp = self.workspace.node[self.workspace.flat(*cell), 1:3]
-        return float(g) if stamp >= self.base else math.inf
+        index = self.workspace.flat(*cell)
+        return float(self.workspace.g[index]) if self.workspace.stamp[index] >= self.base else math.inf
 
 
 def search(costs: np.ndarray, start: tuple[int, int], goal: tuple[int, int], params: GlobalPlannerParams,
@@ -310,8 +298,12 @@ def search(costs: np.ndarray, start: tuple[int, int], goal: tuple[int, int], par
     workspace = workspace or Workspace()
     base = workspace.prepare(costs, params)
     dijkstra = params.use_dijkstra if use_dijkstra is None else use_dijkstra
-    found, expanded = _search(workspace.node, costs.shape[1] + 2, workspace.flat(*start), workspace.flat(*goal),
-                              float(params.neutral_cost), not dijkstra, base)
+    neutral = float(params.neutral_cost)
+    per_bucket = BUCKETS_PER_STEP / neutral
+    steepest = (neutral + params.cost_factor * (params.lethal_cost - 1) + neutral) * SQRT2   # f's largest rise
+    found, expanded = _search(workspace.codes, workspace.weights, workspace.g, workspace.parent, workspace.stamp,
+                              costs.shape[1] + 2, workspace.flat(*start), workspace.flat(*goal), neutral, not dijkstra,
+                              base, per_bucket, 1 << (int(steepest * per_bucket) + 3).bit_length())
     return Search(bool(found), int(expanded), workspace, base)
 
 

@@ -93,6 +93,12 @@ class FinalApproach:
             return self.step(pose, dt) if self._follower is not None else self._turn_to_goal(yaw_error)
         return self._turn_to_goal(yaw_error)
 
+    def reached(self, pose) -> bool:
+        """Whether pose is within the tolerances of the goal, as an arrival needs."""
+        pose = np.asarray(pose, float)
+        return (math.hypot(*(self.goal[:2] - pose[:2])) <= self.xy_tolerance
+                and abs(float(wrap_angle(self.goal[2] - pose[2]))) <= self.yaw_tolerance)
+
     def _turn_to_goal(self, yaw_error: float) -> ApproachCommand:
         if abs(yaw_error) <= self.yaw_tolerance:
             return ApproachCommand(np.zeros(3), "arrived")

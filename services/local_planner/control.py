@@ -11,8 +11,12 @@ effect (`RobotFrames`, kept by the node). The final approach runs in the map fra
 carried into the map the same way, so the goal is reached where the localization says it is.
 
 One tick, in order:
-- no path (none yet, or an empty follow_path): ok, zero twist, reason "idle"; once arrived: ok,
-  zero twist, "goal_reached"; no costmap yet: a braking twist, not ok, "no_costmap: …".
+- no path (none yet, or an empty follow_path): ok, zero twist, reason "idle"; once arrived and as
+  long as the robot stays within the tolerances: ok, zero twist, "goal_reached" (GOAL_REACHED); no
+  costmap yet: a braking twist, not ok, "no_costmap: …".
+- An arrived robot that is no longer within the tolerances (pushed, or its map pose corrected by a
+  new map→odom) is approached again (counted arrival_lost): a latched arrival would leave it
+  standing off the goal for good, answering goal_reached while the navigator waits for it.
 - Within final_approach_distance of the path's end (straight-line) the FinalApproach (approach.py)
   takes over as long as the poses it will pass through are free on the costmap; when they are not,
   the controller carries on along the path (counted approach_blocked). It reports ok with a zero
@@ -34,7 +38,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ...schemas.messages import Costmap, Path, Tracks
+from ...schemas.messages import GOAL_REACHED, Costmap, Path, Tracks
 from ...geometry.footprint import DEFAULT_FOOTPRINT, STOP_PADDING, make_footprint
 from ...geometry.frames import RobotFrames
 from ...geometry.se2 import compose
@@ -180,9 +184,12 @@ class LocalControl:
         none = np.zeros((0, 3))
         if self.path is None:
             return Control(np.zeros(3), True, "idle", none)
-        if self.arrived:
-            return Control(np.zeros(3), True, "goal_reached", none)
         velocity, frames, costmap = inputs.velocity, inputs.frames, inputs.costmap
+        if self.arrived:
+            if self.approach.reached(frames.robot(frames.map_frame)):
+                return Control(np.zeros(3), True, GOAL_REACHED, none)
+            self.arrived, self.approach = False, None
+            self._counted.append("arrival_lost")
         if costmap is None:
             return Control(self._brake(velocity), False, "no_costmap: no local costmap yet", none)
         frame = costmap.header.frame_id
@@ -238,7 +245,7 @@ class LocalControl:
         command = self.approach.step(robot, self.dt)
         if command.phase == "arrived":
             self.arrived = True
-            return Control(np.zeros(3), True, "goal_reached", poses[-1:])
+            return Control(np.zeros(3), True, GOAL_REACHED, poses[-1:])
         return Control(command.twist, True, "final_approach", poses)
 
     def _rotate(self, velocity: np.ndarray, path: np.ndarray, robot: np.ndarray, costmap: Costmap) -> Control | None:

@@ -17,6 +17,12 @@ SUCCEEDED | ABORTED(reason) | CANCELED(reason). The move_base rules kept:
 - the local planner reporting no valid trajectory: within controller_patience, stop and replan
   (move_base's "go back to planning"); past it → recovery. A step without any answer from the
   local planner stops the robot and lets the patience run, but does not replan.
+- the local planner reporting the goal reached (GOAL_REACHED) while the robot is not within the
+  tolerances of the target as the navigator sees it (its pose corrected after the local planner
+  arrived, or the local planner's tolerances wider than these) counts as no valid command, as
+  above: replan from where the robot is, and past controller_patience recover. move_base lets the
+  local planner decide arrival; here the navigator does, and a disagreement must not leave the robot
+  standing with an active goal for good.
 - not moving oscillation_distance within oscillation_timeout while CONTROLLING → recovery.
 - recovery behaviours run in the configured order, each at most once per target (waypoint or
   goal): after one, the timers restart and planning resumes; the index goes back to the start
@@ -44,7 +50,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...schemas.messages import CancelGoal, Goal, Header, NavStatus
+from ...schemas.messages import GOAL_REACHED, CancelGoal, Goal, Header, NavStatus
 from ...geometry.se2 import wrap_angle
 from .params import NavigatorParams
 from .recovery import ZERO, Behaviour, Twist3, behaviour
@@ -241,24 +247,33 @@ class Navigator:
         self._last_failure = ""
 
     def _check_arrival(self, out: NavActions) -> None:
-        p = self.params
         self.reason = ""   # an active goal's only reason is the wait below, decided afresh each step
-        last = len(self.targets) - 1
         while True:
-            target = self.targets[self.target_index]
-            if math.hypot(*(target[:2] - self.pose[:2])) > p.xy_goal_tolerance:
+            if not self._at_target():
                 return
-            if self.target_index < last:
+            if self.target_index < len(self.targets) - 1:
                 self.target_index += 1
                 self._recovery_index = 0
                 self._begin_target()
                 continue
-            if abs(float(wrap_angle(target[2] - self.pose[2]))) <= p.yaw_goal_tolerance and self._stopped():
+            if self._stopped():
                 if self._pose_doubted():
                     self.reason = WAITING_FOR_CONFIDENT_POSE
                 else:
                     self._finish(State.SUCCEEDED, "", out)
             return
+
+    def _target_miss(self) -> tuple[float, float]:
+        """The robot's distance (m) and yaw error (rad) from the current target; a waypoint's yaw is
+        not checked (0)."""
+        target = self.targets[self.target_index]
+        final = self.target_index == len(self.targets) - 1
+        yaw_error = abs(float(wrap_angle(target[2] - self.pose[2]))) if final else 0.0
+        return math.hypot(*(target[:2] - self.pose[:2])), yaw_error
+
+    def _at_target(self) -> bool:
+        distance, yaw_error = self._target_miss()
+        return distance <= self.params.xy_goal_tolerance and yaw_error <= self.params.yaw_goal_tolerance
 
     def _pose_doubted(self) -> bool:
         return self.beam_fit is not None and self.beam_fit < self.params.min_pose_beam_fit
@@ -331,6 +346,10 @@ class Navigator:
             return
         if self._fresh_plan:
             return
+        if result is not None and result.ok and result.reason == GOAL_REACHED and not self._at_target():
+            distance, yaw_error = self._target_miss()
+            result = ControlResult(False, reason=f"the local planner reports {GOAL_REACHED} {distance:.3f} m and "
+                                                 f"{yaw_error:.3f} rad from the target")
         if result is not None and result.ok:
             out.cmd = tuple(float(v) for v in result.cmd)
             self._last_valid_control_s = now
