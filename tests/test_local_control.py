@@ -11,7 +11,7 @@ import pytest
 from local_pipeline import KEYS, follow_path, polyline
 from omninav.schemas import decode
 from omninav.schemas.messages import (GOAL_REACHED, Costmap, Header, LocalCommand, MapMetaData, Odometry, Path, Pose2D,
-                                      Transform, Twist)
+                                      Tracks, Transform, Twist)
 from omninav.geometry.frames import RobotFrames
 from omninav.geometry.se2 import integrate
 from omninav.services.local_planner.control import ControlInputs, LocalControl, LocalControlParams
@@ -141,6 +141,28 @@ def test_a_shim_turn_that_would_sweep_into_a_wall_is_left_to_the_controller():
     without_wall = LocalControl(LocalControlParams(), DT)
     without_wall.follow(follow_path(west), frames)
     assert without_wall.step(ControlInputs(np.zeros(3), frames, costmap(), None, 0.0)).reason == "rotate_to_heading"
+
+
+def tracks(t: float, *people) -> Tracks:
+    """Tracks (odom frame) stamped t of people given as (x, y, vx, vy)."""
+    return Tracks(header=Header(stamp_ns=round(t * NS_PER_S), frame_id="odom"), ids=np.arange(len(people)),
+                  states=np.array(people, float).reshape(-1, 4), covariances=np.zeros((len(people), 4, 4)),
+                  radii=np.full(len(people), 0.3))
+
+
+def test_a_shim_turn_with_a_person_coming_is_left_to_the_controller():
+    # its path behind it, a person walking up from behind along its lane: turned in place, the robot
+    # would stand in their way while the corners swing; someone far off or walking away changes nothing
+    west = EAST * (-1.0, 1.0, 1.0)
+    frames = RobotFrames("map", "odom")
+    frames.set_odom(odometry(0, (0.0, 0.0, 0.0)))
+    for person, turns in (((-1.6, 0.0, 1.2, 0.0), False), ((-5.0, 0.0, 1.2, 0.0), True), ((-1.6, 0.0, -1.2, 0.0), True)):
+        core = LocalControl(LocalControlParams(), DT)
+        core.follow(follow_path(west), frames)
+        answer = core.step(ControlInputs(np.zeros(3), frames, costmap(), tracks(0.0, person), 0.0))
+        assert (answer.reason == "rotate_to_heading") is turns, person
+        if not turns:
+            assert answer.counted == ("shim/blocked",)
 
 
 def test_no_path_is_idle_no_costmap_brakes_and_an_empty_path_stops():

@@ -47,6 +47,7 @@ from ...parameters.from_mapping import load_params
 from .approach import FinalApproach
 from .dwa import DwaPlanner, reachable
 from ...geometry.movers import Movers, movers_at
+from .dynamic import slack
 from .footprint_check import FootprintCheck, footprint_check_cost
 from .params import DwaParams, FollowerParams
 from .path_ahead import ahead_of
@@ -198,7 +199,7 @@ class LocalControl:
         approach = self._approach(velocity, frames, costmap)
         if approach is not None:
             return approach
-        rotation = self._rotate(velocity, path, robot, costmap)
+        rotation = self._rotate(velocity, path, robot, costmap, self._movers(inputs, frame))
         if rotation is not None:
             return rotation
         if self.params.controller == "follower":
@@ -248,17 +249,32 @@ class LocalControl:
             return Control(np.zeros(3), True, GOAL_REACHED, poses[-1:])
         return Control(command.twist, True, "final_approach", poses)
 
-    def _rotate(self, velocity: np.ndarray, path: np.ndarray, robot: np.ndarray, costmap: Costmap) -> Control | None:
+    def _rotate(self, velocity: np.ndarray, path: np.ndarray, robot: np.ndarray, costmap: Costmap,
+                movers: Movers | None) -> Control | None:
         """The rotation shim's turn towards a new path, or None when it is off or has handed over;
         it stays out within final_approach_distance of the goal, where the final approach turns."""
         if self.shim is None or not self.shim.armed \
                 or math.hypot(*(path[-1, :2] - robot[:2])) <= self.params.final_approach_distance:
             return None
-        command = self.shim.step(robot, velocity, path, lambda poses: self._legal(poses, costmap))
+        command = self.shim.step(robot, velocity, path,
+                                 lambda poses: self._legal(poses, costmap) & self._clear_of_movers(poses, movers))
         if command.phase != "rotate":
             self._counted.append(f"shim/{command.phase}")
             return None
         return Control(command.twist, True, "rotate_to_heading", command.poses)
+
+    def _clear_of_movers(self, poses: np.ndarray, movers: Movers | None) -> np.ndarray:
+        """(K,) whether the footprint at each pose of a turn on the spot stays dynamic_obstacle_margin
+        clear of every mover predicted over the shim's simulate_ahead_time. A turn is slow to leave a
+        person's way and swings the corners: with one coming (a person catching up from behind while
+        a replanned path turned the robot aside: generated head-on world, seed 2) the turn is not
+        commanded and DWA, which scores its rollouts against the movers, drives instead."""
+        if movers is None or not len(movers):
+            return np.ones(len(poses), bool)
+        steps = math.ceil(self.shim.params.simulate_ahead_time / self.dt) + 1
+        held = np.repeat(np.asarray(poses, np.float64)[:, None, :], steps, axis=1)   # each pose held over the time
+        hard, _ = slack(held, self.dt, self.footprint_check.footprint, movers, self.params.dynamic_obstacle_margin, 0.0)
+        return (hard >= 0).all(axis=1)
 
     def _follow_path(self, velocity: np.ndarray, path: np.ndarray, robot: np.ndarray, frames: RobotFrames,
                      costmap: Costmap) -> Control:
