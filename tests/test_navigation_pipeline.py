@@ -208,7 +208,8 @@ def test_the_navigator_does_not_succeed_on_a_pose_whose_scans_do_not_fit(min_pos
     sim, statuses = navigate(*GOAL, goal_id="doubted", max_sim_s=25.0, localizer=amcl_localizer(**NOT_RECOVERING),
                              after_step=after_step, min_pose_beam_fit=min_pose_beam_fit)
     truth = sim.last_truth.pose
-    assert shoved and math.hypot(truth.x - GOAL[0], truth.y - GOAL[1]) > 0.25     # truly not there
+    # truly not there: twice move_base's 0.10 m tolerance away (the 0.35 m shove less what the robot had left)
+    assert shoved and math.hypot(truth.x - GOAL[0], truth.y - GOAL[1]) > 0.2
     if min_pose_beam_fit > 0:
         assert statuses[-1].status == "active" and statuses[-1].reason == WAITING_FOR_CONFIDENT_POSE
     else:   # move_base's rule: the pose says it is there
