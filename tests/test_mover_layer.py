@@ -1,5 +1,5 @@
-"""The costmap's mover layer: where a tracked person will walk over the next seconds costs, all of
-it alike; nothing behind them or for a standing one, and the way is never closed; the costmap forgets the
+"""The costmap's mover layer: where a tracked person will walk over the next seconds and the lane
+they just walked cost, all of it alike; nothing behind them or for a standing one, and the way is never closed; the costmap forgets the
 sweep when the person is gone; a plan in a corridor moves aside from a person coming head-on; and
 the costmap service stamps the tracks it is sent, refuses tracks in the wrong frame and forgets
 stale ones."""
@@ -41,15 +41,16 @@ def cost_at(costs: np.ndarray, info: MapMetaData, x: float, y: float) -> int:
     return int(costs[r, c])
 
 
-def test_a_walking_persons_way_costs_alike_and_nothing_behind_them_or_around_a_standing_one():
-    info, params = free_grid(12.0, 4.0), MoverLayerParams(prediction_time=4.0, sweep_cost=180)
+def test_a_walking_persons_way_and_the_lane_just_walked_cost_alike_and_nothing_around_a_standing_one():
+    info, params = free_grid(12.0, 4.0), MoverLayerParams(prediction_time=4.0, behind_time=1.0, sweep_cost=180)
     out = np.full((info.height, info.width), NO_INFORMATION, np.uint8)
     box = sweep_costs(info, person(9.0, 2.0, -1.0, 0.0), 0.3, params, out)
     assert box is not None
     ahead = [cost_at(out, info, x, 2.0) for x in (8.5, 7.5, 6.5, 5.5, 4.5)]   # 0.5 … 4 s ahead (and the reach)
     assert ahead == [180] * 5 and 180 < INSCRIBED_INFLATED_OBSTACLE
     assert cost_at(out, info, 3.5, 2.0) == NO_INFORMATION                     # beyond the horizon and the reach
-    assert cost_at(out, info, 10.5, 2.0) == NO_INFORMATION                    # behind the person
+    assert cost_at(out, info, 10.5, 2.0) == 180                               # the lane just walked (1 s + the reach)
+    assert cost_at(out, info, 10.9, 2.0) == NO_INFORMATION                    # and no further
     reach = 0.3 + 0.3 + params.margin
     assert cost_at(out, info, 7.0, 2.0 + reach - 0.06) > 0 and cost_at(out, info, 7.0, 2.0 + reach + 0.06) == NO_INFORMATION
     assert (out[out != NO_INFORMATION] < INSCRIBED_INFLATED_OBSTACLE).all()   # dear, never closed

@@ -3,9 +3,12 @@
 People who do not give way walk on through where the robot would be; a costmap of where they
 stand now lets the plan run into their way, and the local planner sees them coming only within its
 rollouts' seconds. This layer stamps, for each track faster than min_speed, the way it sweeps over
-the next prediction_time seconds at constant velocity: every cell whose centre lies within the
-track's radius plus the robot's inscribed radius plus margin of the track's predicted centre at
-some τ in [0, prediction_time] costs sweep_cost, wherever along the way. Not less towards the far
+the next prediction_time seconds at constant velocity, and the behind_time seconds of it just
+walked: every cell whose centre lies within the track's radius plus the robot's inscribed radius
+plus margin of the track's centre at some τ in [−behind_time, prediction_time] costs sweep_cost,
+wherever along the way. People turn round: a robot that followed a person along their lane was
+in their way when they came back (generated head-on worlds, seeds 0–9: 4 of 10 without the lane
+behind, 7 of 10 with 2 s of it). Not less towards the far
 end: with costs falling over τ, plans crossed a slow person's way just ahead of them, where it was
 cheap, and then walked beside them (generated crossing world, seed 1: a contact); a way that costs
 the same everywhere is crossed behind the person, where it has no cost at all. Costs stay below
@@ -34,8 +37,8 @@ def sweep_costs(info: MapMetaData, movers: Movers, robot_radius: float, params: 
         if np.hypot(*v) < params.min_speed:
             continue
         reach = r + robot_radius + params.margin
-        end = p + v * horizon
-        lo, hi = np.minimum(p, end) - reach, np.maximum(p, end) + reach
+        begin, end = p - v * params.behind_time, p + v * horizon
+        lo, hi = np.minimum(begin, end) - reach, np.maximum(begin, end) + reach
         corners_r, corners_c = world_to_cell(info, np.array([lo[0], hi[0], lo[0], hi[0]]),
                                              np.array([lo[1], lo[1], hi[1], hi[1]]))   # the grid may be rotated
         r0, c0 = max(int(corners_r.min()), 0), max(int(corners_c.min()), 0)
@@ -44,7 +47,7 @@ def sweep_costs(info: MapMetaData, movers: Movers, robot_radius: float, params: 
             continue
         rows, cols = np.mgrid[r0:r1, c0:c1]
         x, y = cell_to_world(info, rows, cols)
-        tau = np.clip(((x - p[0]) * v[0] + (y - p[1]) * v[1]) / max(float(v @ v), 1e-12), 0.0, horizon)
+        tau = np.clip(((x - p[0]) * v[0] + (y - p[1]) * v[1]) / max(float(v @ v), 1e-12), -params.behind_time, horizon)
         near = np.hypot(x - (p[0] + v[0] * tau), y - (p[1] + v[1] * tau)) <= reach
         window = out[r0:r1, c0:c1]
         window[near & ((window == NO_INFORMATION) | (window < params.sweep_cost))] = params.sweep_cost

@@ -143,6 +143,7 @@ class MoverLayerParams(Parameters):
     prediction_time: float = param(5.0, gt=0)          # s of each track's way ahead that is stamped
     sweep_cost: int = param(200, ge=1, le=252)         # of every cell of that way (below 253: dear, not closed)
     margin: float = param(0.1, ge=0)                   # m beyond the track's radius plus the robot's inscribed radius
+    behind_time: float = param(2.0, ge=0)              # s of the way just walked that is stamped too (people turn round)
     min_speed: float = param(0.1, ge=0)                # m/s: slower tracks are left to the obstacle layer
 
 
