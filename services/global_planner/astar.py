@@ -30,7 +30,7 @@ import numpy as np
 from numba import njit
 
 from ...schemas.messages import MapMetaData
-from ...geometry.grid import cell_to_world, grid_coords, in_grid
+from ...geometry.grid import cell_to_world, grid_coords, in_grid, kernel_costs
 from .params import GlobalPlannerParams
 from .path_smoother import smooth
 
@@ -258,7 +258,7 @@ class Workspace:
             self.base, self._weights_for, self._costs = 0, None, None
         key = (params.neutral_cost, params.cost_factor, params.lethal_cost, params.allow_unknown, params.outline_map)
         if key != self._weights_for or not np.array_equal(costs, self._costs):
-            _fill_weights(costs, float(params.neutral_cost), float(params.cost_factor), int(params.lethal_cost),
+            _fill_weights(kernel_costs(costs), float(params.neutral_cost), float(params.cost_factor), int(params.lethal_cost),
                           params.allow_unknown, params.outline_map, self.node)
             self._weights_for, self._costs = key, costs.copy()
         self.base += 2
