@@ -67,7 +67,9 @@ def _evidence(pool, table, row, col, inv_l_occ):
     return min(max(value, 0.0), 1.0)
 
 
-@njit(cache=True, inline="always")
+# called, not inlined (nor _load_points): they run on a cache miss only, once per cell (block) and
+# particle map, and a copy at each call site of the inlined helpers above them cost seconds of compile
+@njit(cache=True, _nrt=False)
 def _node(pool, table, row, col, kernel, inv_l_occ):
     """The field at the centre of cell (row, col)."""
     k = (kernel.shape[0] - 1) // 2
@@ -144,7 +146,7 @@ def _cell_field(pool, table, u, v, kernel, inv_l_occ, cache):
     return s, ds_du, ds_dv
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _load_points(pool, hits, table, row0, col0, m, inv_l_occ, entries, first):
     """Evidence and mean hit point (grid coordinates) of each cell with evidence among the m × m
     from (row0, col0) on, row by row, into entries[first:]; returns how many. Most blocks lie
