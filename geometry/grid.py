@@ -39,6 +39,16 @@ def cell_to_world(info: MapMetaData, row, col) -> tuple[np.ndarray, np.ndarray]:
     return info.origin.x + c * lx - s * ly, info.origin.y + s * lx + c * ly
 
 
+def kernel_costs(costs: np.ndarray) -> np.ndarray:
+    """A uint8 cost grid as the numba kernels take it: C-contiguous and read-only (a view: no copy
+    where it already is). A grid decoded from a message is read-only, one computed in the process is
+    not, and numba compiles a kernel once for each: one variant, one compile (seconds each on the
+    cold cache of a fresh checkout)."""
+    view = np.ascontiguousarray(costs, np.uint8).view()
+    view.flags.writeable = False
+    return view
+
+
 def in_grid(info: MapMetaData, row, col) -> np.ndarray:
     row, col = np.asarray(row), np.asarray(col)
     return (row >= 0) & (row < info.height) & (col >= 0) & (col < info.width)

@@ -31,7 +31,7 @@ import numpy as np
 from numba import njit
 
 from ...schemas.messages import MapMetaData
-from ...geometry.grid import cell_to_world, grid_coords, in_grid
+from ...geometry.grid import cell_to_world, grid_coords, in_grid, kernel_costs
 from .params import GlobalPlannerParams
 from .path_smoother import smooth
 
@@ -246,7 +246,7 @@ class Workspace:
             self.base, self._codes_for, self._costs = 0, None, None
         key = (params.lethal_cost, params.allow_unknown, params.outline_map)
         if key != self._codes_for or not np.array_equal(costs, self._costs):
-            _fill_codes(costs, int(params.lethal_cost), params.allow_unknown, params.outline_map, self.codes)
+            _fill_codes(kernel_costs(costs), int(params.lethal_cost), params.allow_unknown, params.outline_map, self.codes)
             self._codes_for, self._costs = key, costs.copy()
         self.weights = _weights(params)
         self.base += 2

@@ -17,6 +17,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ...geometry.grid import kernel_costs
+
 _TIE = 1e-12   # a segment through a cell corner steps diagonally, touching neither side cell
 
 
@@ -94,5 +96,5 @@ def smooth(points: np.ndarray, costs: np.ndarray, weight_data: float = 0.2, weig
     rows = np.clip(np.floor(points[:, 1]).astype(np.int64), 0, costs.shape[0] - 1)
     cols = np.clip(np.floor(points[:, 0]).astype(np.int64), 0, costs.shape[1] - 1)
     bounds = costs[rows, cols].astype(np.int64)
-    return _smooth(points, bounds, np.ascontiguousarray(costs), float(weight_data), float(weight_smooth),
+    return _smooth(points, bounds, kernel_costs(costs), float(weight_data), float(weight_smooth),
                    int(max_iterations), float(tolerance))

@@ -40,7 +40,7 @@ from ...schemas.messages import MapMetaData
 from ...geometry.distance import nearest_cells
 from ...geometry.polygons import densify
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE
-from ...geometry.grid import in_grid, world_to_cell
+from ...geometry.grid import in_grid, kernel_costs, world_to_cell
 from .dynamic import Movers, critic, slack
 from .dynamic import warm_up as warm_up_movers
 from .footprint_check import FootprintCheck, PoseCheck, kernel_grid, trajectory_cost
@@ -353,7 +353,7 @@ class DwaPlanner:
         legal = np.empty(len(samples), np.bool_)
         check = check if check is not None else self.footprint_check.setup(pose, costs, info)
         _rollout(samples, np.asarray(velocity, np.float64), step_limit, not p.dwa, n, dt,
-                 np.asarray(pose, np.float64), np.ascontiguousarray(costs, np.uint8), check.near, check.skips,
+                 np.asarray(pose, np.float64), kernel_costs(costs), check.near, check.skips,
                  kernel_grid(info), check.outline, self.footprint_check.check_cost, check.centre_limit, poses, max_cost,
                  legal)
         return poses, max_cost, legal

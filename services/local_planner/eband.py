@@ -223,7 +223,8 @@ def _evaluate(x, start, goal, v_start, stop_at_goal, holonomic, limits, weights,
     grad = np.zeros((n_intervals, 3, 7))      # d vel / d (xi, yi, thi, xj, yj, thj, si)
     slots = np.full((n_intervals, 7), -1, np.int64)
     scratch = np.zeros(7)
-    row = 0
+    # not 0: a counter starting at a literal 0 has numba compile _put and _put_all once more, for Literal[int](0)
+    row = np.int64(0)
     for i in range(n_intervals):
         j = i + 1
         for k in range(3):

@@ -21,6 +21,7 @@ from numba import njit
 
 from ...schemas.messages import MapMetaData
 from ...geometry.footprint import pad
+from ...geometry.grid import kernel_costs
 from ...geometry.distance import nearest_cells
 from ...geometry.polygons import densify
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
@@ -196,7 +197,7 @@ class FootprintCheck:
         start = np.asarray(pose, np.float64).reshape(1, 3)
         for padding, margin in ((self.stop_padding + quarter, info.resolution), (quarter, 0.0), (0.0, 0.0)):
             clear = self._outline_check(clearance, skips, info.resolution, padding + margin, centre_limit)
-            _check_poses(start, costs, clear.near, skips, grid, clear.outline, self.check_cost, centre_limit, legal)
+            _check_poses(start, kernel_costs(costs), clear.near, skips, grid, clear.outline, self.check_cost, centre_limit, legal)
             if legal[0]:
                 return self._outline_check(clearance, skips, info.resolution, padding, centre_limit)
         return self._outline_check(clearance, skips, info.resolution, -self.footprint_padding, centre_limit)
@@ -208,7 +209,7 @@ class FootprintCheck:
         if len(poses) == 0:
             return legal
         check = self.setup(poses[0], costs, info)
-        _check_poses(poses, np.ascontiguousarray(costs, np.uint8), check.near, check.skips, kernel_grid(info),
+        _check_poses(poses, kernel_costs(costs), check.near, check.skips, kernel_grid(info),
                      check.outline, self.check_cost, check.centre_limit, legal)
         return legal
 

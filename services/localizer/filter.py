@@ -124,7 +124,8 @@ def _root(parent, i):
 @njit(cache=True)
 def _cluster_stats(poses, weights, n, keys, values, stamps, stamp, bin_key, parent, particle_bin, stats):
     """Cluster the particles by connected bins; fills stats[c] (see _STATS), returns the count."""
-    bins = 0
+    # not 0: a counter starting at a literal 0 has numba compile _insert once more, for Literal[int](0)
+    bins = np.int64(0)
     for i in range(n):
         key = _bin_key(poses[i, 0], poses[i, 1], poses[i, 2])
         b, new = _insert(keys, values, stamps, stamp, key, bins)
@@ -242,7 +243,7 @@ def _kld_count(poses, weights, n, w_diff, rng, free_xy, col_step, row_step, cent
 
     Only a draw's bin matters for the count, so the particles' weights are first summed per bin
     and the draws pick bins: the same distribution of occupied bins, for fewer steps per draw."""
-    bins = 0
+    bins = np.int64(0)     # not 0: see _cluster_stats
     for i in range(n):
         b, new = _insert(keys, values, stamps, stamp, _bin_key(poses[i, 0], poses[i, 1], poses[i, 2]), bins)
         if new:
@@ -256,7 +257,7 @@ def _kld_count(poses, weights, n, w_diff, rng, free_xy, col_step, row_step, cent
         bin_cum[b] = total
     ids = bins      # bins first met through a random pose get ids from here on
     occupied = 0
-    randoms = 0
+    randoms = np.int64(0)  # not 0: see _cluster_stats (for _recovery_pose and _random_pose)
     count = 0
     while count < max_particles:
         if w_diff > 0.0 and rng.random() < w_diff:

@@ -67,7 +67,9 @@ def _evidence(pool, table, row, col, inv_l_occ):
     return min(max(value, 0.0), 1.0)
 
 
-@njit(cache=True, inline="always")
+# called, not inlined (nor _load_points): they run on a cache miss only, once per cell (block) and
+# particle map, and a copy at each call site of the inlined helpers above them cost seconds of compile
+@njit(cache=True, _nrt=False)
 def _node(pool, table, row, col, kernel, inv_l_occ):
     """The field at the centre of cell (row, col)."""
     k = (kernel.shape[0] - 1) // 2
@@ -144,7 +146,7 @@ def _cell_field(pool, table, u, v, kernel, inv_l_occ, cache):
     return s, ds_du, ds_dv
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, _nrt=False)
 def _load_points(pool, hits, table, row0, col0, m, inv_l_occ, entries, first):
     """Evidence and mean hit point (grid coordinates) of each cell with evidence among the m × m
     from (row0, col0) on, row by row, into entries[first:]; returns how many. Most blocks lie
@@ -269,7 +271,7 @@ def refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, i
     pulled towards the pose `prior` with prior_weight (x, y, θ; per end point, see _linearize);
     returns (x, y, th, score)."""
     return _refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations, points, prior,
-                   prior_weight, field_cache(geo, px, py, _one_pose(x, y, th), NODE_MARGIN))
+                   prior_weight, field_cache(geo, px, py, _one_pose(x, y, th), np.int64(NODE_MARGIN)))
 
 
 NODE_MARGIN = 4  # cells around the end points at the start pose that a refinement keeps field values of
@@ -382,19 +384,22 @@ def _match_cells(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel
     """The match on the cell field: refinement, and the search when that scores below search_below.
     Returns (x, y, th, score) and the pose the winning refinement was pulled towards: `prior`, or
     the search's best (the odometry was off by more than refinement corrects)."""
+    # arguments of one type at every call (np.bool_, not a literal False; contiguous end points, not a
+    # strided view): each kernel below compiles once, not once per variant (_linearize about 20 s each
+    # on a cold cache, which every fresh checkout starts with)
     rx, ry, rth, score = _refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ, iterations,
-                                 False, prior, prior_weight, cache)
+                                 np.bool_(False), prior, prior_weight, cache)
     if score >= search_below or (window <= 0.0 and angle <= 0.0):
         return rx, ry, rth, score, prior
     stride = max(1, px.shape[0] // SEARCH_POINTS)
-    no_cache = field_cache(geo, px[:0], py[:0], np.empty((0, 3)), 0)
-    cx, cy, cth, _ = search(pool, table, geo, px[::stride], py[::stride], x, y, th, coarse_kernel, inv_l_occ,
-                            window, lstep, angle, astep, no_cache)
+    no_cache = field_cache(geo, px[:0], py[:0], np.empty((0, 3)), np.int64(0))
+    cx, cy, cth, _ = search(pool, table, geo, np.ascontiguousarray(px[::stride]), np.ascontiguousarray(py[::stride]),
+                            x, y, th, coarse_kernel, inv_l_occ, window, lstep, angle, astep, no_cache)
     cx, cy, cth, _ = search(pool, table, geo, px, py, cx, cy, cth, kernel, inv_l_occ,
                             lstep / 2, lstep / 2, astep / 2, astep / 4, cache)
     found = np.array([cx, cy, cth])
     sx, sy, sth, s_score = _refine(pool, hits, table, geo, px, py, cx, cy, cth, kernel, sigma, inv_l_occ,
-                                   iterations, False, found, prior_weight, cache)
+                                   iterations, np.bool_(False), found, prior_weight, cache)
     if s_score > score:
         return sx, sy, sth, s_score, found
     return rx, ry, rth, score, prior
@@ -423,7 +428,7 @@ def _match_one(pool, hits, table, geo, px, py, x, y, th, kernel, coarse_kernel, 
                                           prior, prior_weight, cache)
     if score >= search_below:
         x, y, th, _ = _refine(pool, hits, table, geo, px, py, x, y, th, kernel, sigma, inv_l_occ,
-                              min(iterations, POLISH_ITERATIONS), True, prior, prior_weight, cache)
+                              min(iterations, POLISH_ITERATIONS), np.bool_(True), prior, prior_weight, cache)
     return x, y, th, score
 
 
