@@ -6,15 +6,17 @@ rollouts' seconds. This layer stamps, for each track faster than min_speed, the 
 the next prediction_time seconds at constant velocity, and the behind_time seconds of it just
 walked: every cell whose centre lies within the track's radius plus the robot's inscribed radius
 plus margin of the track's centre at some τ in [−behind_time, prediction_time] costs sweep_cost,
-wherever along the way. People turn round: a robot that followed a person along their lane was
-in their way when they came back (generated head-on worlds, seeds 0–9: 4 of 10 without the lane
-behind, 7 of 10 with 2 s of it). Not less towards the far
-end: with costs falling over τ, plans crossed a slow person's way just ahead of them, where it was
-cheap, and then walked beside them (generated crossing world, seed 1: a contact); a way that costs
-the same everywhere is crossed behind the person, where it has no cost at all. Costs stay below
-INSCRIBED_INFLATED_OBSTACLE: the way is dear, not closed (a doorway the person walks through is
-still the only way). Like social_navigation_layers' passing and proxemic layers
-in ROS, it goes after the inflation layer and combines by maximum.
+wherever along the way.
+
+The lane behind, because people turn round: a robot that followed a person along their lane was in
+their way when they came back (generated head-on worlds, seeds 0–9: 4 of 10 without the lane
+behind, 7 of 10 with 2 s of it). The same cost all along, because with costs falling over τ plans
+crossed a slow person's way just ahead of them, where it was cheap, and then walked beside them
+(generated crossing world, seed 1: a contact); a way that costs the same everywhere is crossed
+behind the person, where it has no cost at all. Costs stay below INSCRIBED_INFLATED_OBSTACLE: the
+way is dear, not closed (a doorway the person walks through is still the only way). Like
+social_navigation_layers' passing and proxemic layers in ROS, it goes after the inflation layer
+and combines by maximum.
 """
 from __future__ import annotations
 
@@ -30,7 +32,7 @@ from .params import MoverLayerParams
 def sweep_costs(info: MapMetaData, movers: Movers, robot_radius: float, params: MoverLayerParams,
                 out: np.ndarray) -> Box | None:
     """Stamp the movers' sweeps into `out` (the costmap's geometry, NO_INFORMATION where nothing
-    walks), raising cells by maximum; returns the box of cells stamped."""
+    walks: every sweep has the one cost, so stamping overwrites); returns the box of cells stamped."""
     box = None
     horizon = params.prediction_time
     for p, v, r in zip(movers.positions, movers.velocities, movers.radii):
@@ -49,8 +51,7 @@ def sweep_costs(info: MapMetaData, movers: Movers, robot_radius: float, params: 
         x, y = cell_to_world(info, rows, cols)
         tau = np.clip(((x - p[0]) * v[0] + (y - p[1]) * v[1]) / max(float(v @ v), 1e-12), -params.behind_time, horizon)
         near = np.hypot(x - (p[0] + v[0] * tau), y - (p[1] + v[1] * tau)) <= reach
-        window = out[r0:r1, c0:c1]
-        window[near & ((window == NO_INFORMATION) | (window < params.sweep_cost))] = params.sweep_cost
+        out[r0:r1, c0:c1][near] = params.sweep_cost
         box = union(box, (r0, c0, r1, c1))
     return box
 

@@ -199,14 +199,14 @@ class LocalControl:
         approach = self._approach(velocity, frames, costmap)
         if approach is not None:
             return approach
-        rotation = self._rotate(velocity, path, robot, costmap, self._movers(inputs, frame))
+        movers = self._movers(inputs, frame)
+        rotation = self._rotate(velocity, path, robot, costmap, movers)
         if rotation is not None:
             return rotation
         if self.params.controller == "follower":
             return self._follow_path(velocity, path, robot, frames, costmap)
         if self.params.controller == "dwa":
-            result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path,
-                                             movers=self._movers(inputs, frame))
+            result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path, movers=movers)
         else:
             result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path)
         reason = result.status if result.status in ("ok", "escape") else f"{result.status}: {result.message}"
