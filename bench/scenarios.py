@@ -37,11 +37,13 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--timeout", type=float, default=120.0, metavar="S", help="sim s for the goal (default 120)")
     parser.add_argument("--workers", type=int, default=2, help="missions driven at once, one process each (default 2)")
     parser.add_argument("-o", "--out", help="folder for the worlds and maps (default out/scenarios-<kind>-<date>-<time>)")
+    parser.add_argument("--record", action="store_true",
+                        help="record each mission to run.mcap in its world's folder (to replay or read a failure)")
 
 
-def drive_world(job: tuple[str, int, str | None, str, float, str]) -> dict:
-    """One world: generate it, write it and its map, drive the mission; its row."""
-    kind, seed, drive, localization, timeout_s, out = job
+def drive_world(job: tuple[str, int, str | None, str, float, str, bool]) -> dict:
+    """One world: generate it, write it and its map, drive the mission (recorded when `record`); its row."""
+    kind, seed, drive, localization, timeout_s, out, record = job
     folder = Path(out) / f"{kind}-{seed}"
     folder.mkdir(parents=True, exist_ok=True)
     world_file = folder / "world.yaml"
@@ -51,7 +53,8 @@ def drive_world(job: tuple[str, int, str | None, str, float, str]) -> dict:
     compose = compose_for(world, world_file, map_for(world, world.name, folder), drive, localization,
                           folder / "run.mcap", seed, 1.0, "r1")
     began = time.monotonic()
-    run = run_mission(compose["services"], world, world.goals, timeout_s=timeout_s)
+    run = run_mission(compose["services"], world, world.goals, timeout_s=timeout_s,
+                      recording=folder / "run.mcap" if record else None)
     summary = run.summary.to_json()
     goal = summary["goals"][0] if summary["goals"] else {}
     return {"world": world.name, "seed": seed, "drive": drive, **{k: summary[k] for k in (
@@ -102,7 +105,7 @@ def main(args: argparse.Namespace) -> int:
                             f"{args.workers} and {args.seed}")
     out = Path(args.out or REPO / "out" / time.strftime(f"scenarios-{args.kind}-%Y%m%d-%H%M%S")).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(args.kind, seed, args.drive, args.localization, args.timeout, str(out))
+    jobs = [(args.kind, seed, args.drive, args.localization, args.timeout, str(out), args.record)
             for seed in range(args.seed, args.seed + args.count)]
     if not args.json:
         print(f"{args.count} {args.kind} worlds, {args.localization} localization, {args.workers} workers; in {out}")
