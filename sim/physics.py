@@ -28,9 +28,10 @@ correction). So a command acts in the very step it is applied, and with no conta
 the true motion is exactly what wheel odometry integrates.
 
 Collisions: a collision is the robot starting to touch an object it did not touch (the static
-world counts as one object, each mover as one). It is the robot's fault when it touched static
-geometry, or when its contact point moved towards the mover faster than `fault_speed` (by the
-velocity commanded for that step); otherwise the mover drove into a robot standing or leaving.
+world counts as one object, each mover as one). It is the robot's fault when its contact point
+moved towards what it touched faster than `fault_speed` (by the velocity commanded for that step),
+and when it touched static geometry without being in a mover's contact; otherwise a mover drove
+into a robot standing or leaving, or shoved it into a wall.
 
 Deterministic: everything random comes from the one Generator, drawn in a fixed order per step.
 """
@@ -79,7 +80,8 @@ class SimParams(Parameters):
     wheel_acc_limit: float = param(60.0, gt=0)      # rad/s^2, motor response
     contact_friction: float = param(0.3, ge=0)      # friction between the robot and whatever it touches
     # a contact is the robot's fault when its contact point moved towards what it touched faster
-    # than this (any static contact is); slower, a mover drove into a robot standing or leaving
+    # than this (a static contact also when no mover touched the robot); slower, a mover drove into
+    # a robot standing or leaving, or shoved it into the wall
     fault_speed: float = param(0.02, ge=0)          # m/s
     seed: int = param(0, ge=0)
 
@@ -250,7 +252,9 @@ class Simulation:
     def _on_begin(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:
         touched = self._touched(arbiter)
         if self._touching.get(touched, 0) == 0:
-            if touched == STATIC or self._robot_approach_speed(arbiter) > self.params.fault_speed:
+            shoved = touched == STATIC and any(n for k, n in self._touching.items() if k != STATIC)
+            own = self._robot_approach_speed(arbiter) > self.params.fault_speed
+            if own or (touched == STATIC and not shoved):
                 self.robot_fault_collisions += 1
             else:
                 self.mover_fault_collisions += 1

@@ -348,10 +348,20 @@ def test_who_moved_into_whom_decides_the_fault(tmp_path, robot_x, mover_from, mo
                                                                         else (0, sim.collisions))
 
 
-def test_every_wall_contact_is_the_robots_fault(wall_world):
+def test_every_wall_contact_the_robot_drives_into_is_its_fault(wall_world):
     sim = Simulation(wall_world, NO_NOISE)
     drive(sim, [(700, (0.8, 0.0, 0.0)), (300, (-0.5, 0.0, 0.0)), (700, (0.8, 0.0, 0.0))])
     assert sim.robot_fault_collisions == sim.collisions == 2 and sim.mover_fault_collisions == 0
+
+
+def test_a_parked_robot_shoved_into_a_wall_by_a_mover_is_the_movers_fault(tmp_path):
+    # the robot parked 0.13 m before a wall (face at x = 4.95), a mover walking into its back
+    world = make_world(tmp_path, "bounds: [8.0, 6.0]\nwalls: [[5.0, 0.5, 5.0, 5.5]]\nrobot: {start: [4.4, 3.0, 0.0]}\n"
+                                 "movers: [{radius: 0.3, speed: 0.8, path: [[1.0, 3.0], [7.0, 3.0]], loop: false}]\n")
+    sim = Simulation(world, NO_NOISE)
+    readings = drive(sim, [(700, (0.0, 0.0, 0.0))])
+    assert readings[-1].pose[0] > 4.4 + 0.05                    # shoved towards the wall
+    assert sim.mover_fault_collisions == sim.collisions == 2 and sim.robot_fault_collisions == 0
 
 
 def test_a_robot_behind_or_beside_a_yielding_mover_does_not_stop_it(tmp_path):
