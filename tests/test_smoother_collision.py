@@ -145,3 +145,23 @@ def test_a_person_close_behind_does_not_slow_a_robot_driving_away_but_a_wall_doe
     person = movers((-0.416 - 0.5, 0.0, 0.8, 0.0, 0.3))                      # a person right there, coming on
     result = monitor.check(cmd, behind, person)
     assert result.action == "none" and np.array_equal(result.twist, cmd)
+
+
+FRONT, LEFT = (0.416 + 0.3 + 0.03, 0.0), (0.3, 0.318 + 0.3 + 0.03)   # 3 cm off the footprint: in the stop zone
+
+
+@pytest.mark.parametrize("where, cmd, action", [
+    (FRONT, (0.05, 0.0, 0.0), "approach"),    # creeping on: the contact would be the robot's (sim fault_speed 0.02)
+    (LEFT, (0.0, 0.0, 0.3), "approach"),      # turning swings the left side towards the person
+    (FRONT, (-0.2, 0.0, 0.0), "none"),        # backing away
+    (FRONT, (0.0, 0.3, 0.0), "none"),         # strafing out of their way
+    (LEFT, (0.0, 0.0, -0.3), "none"),         # turning the other way
+])
+def test_a_person_already_in_the_stop_zone_is_not_closed_in_on(where, cmd, action):
+    # a person standing in the 5 cm stop zone: standing still the robot never touches them, so only
+    # what the command itself does to the gap can matter
+    monitor = CollisionMonitor(CollisionMonitorParams())
+    result = monitor.check(cmd, np.zeros((0, 2)), movers((*where, 0.0, 0.0, 0.3)))
+    assert result.action == action, result.reason
+    if action == "approach":
+        assert np.allclose(result.twist, 0.0)

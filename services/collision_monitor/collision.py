@@ -41,6 +41,9 @@ APPROACH_SCALES = (1.0, 0.75, 0.5, 0.25)   # of a command, tried in turn against
 TRACKED_POINT_MARGIN = 0.15   # m beyond a track's radius within which a scan point is that track's
 ZONE_BOX_MARGIN = 1e-6        # m around the zones' bounding box: far beyond rounding in the inside test
 APPROACH_TOLERANCE = 0.01     # m deeper into the stop zone than standing that a command may bring a track
+# ... and no sooner than this rate allows: just before a contact, a command closing in on a person
+# faster than the simulator's fault_speed (0.02 m/s) makes the contact the robot's
+APPROACH_TOLERANCE_SPEED = 0.01   # m/s
 
 
 @dataclass(frozen=True)
@@ -128,12 +131,17 @@ class CollisionMonitor:
 
     def _worse_than_standing(self, twist: np.ndarray, movers: Movers, standing: np.ndarray) -> bool:
         """Whether driving twist brings a track into the stop zone, deeper than standing still would
-        at the same time (by more than APPROACH_TOLERANCE), until standing is met: beyond, the
-        prediction has a person walk through the robot."""
+        at the same time (by more than APPROACH_TOLERANCE, or APPROACH_TOLERANCE_SPEED × the time
+        ahead when that is less), until standing would have the track touch the footprint itself
+        (stop_padding into the zone): beyond, the prediction has a person walk through the robot. At
+        least the next step is compared: a person already in the stop zone is no licence to close in."""
+        p = self.params
         moving = self.gaps(twist, movers)
-        met = np.flatnonzero(standing < 0)
-        until = met[0] + 1 if len(met) else len(standing)
-        return bool(np.any((moving[:until] < 0) & (moving[:until] < standing[:until] - APPROACH_TOLERANCE)))
+        touching = np.flatnonzero(standing < -p.stop_padding)
+        until = max(touching[0] + 1 if len(touching) else len(standing), 2)
+        taus = np.arange(until) * p.simulation_time_step
+        allowed = np.minimum(APPROACH_TOLERANCE, APPROACH_TOLERANCE_SPEED * taus)
+        return bool(np.any((moving[:until] < 0) & (moving[:until] < standing[:until] - allowed)))
 
     def _check_movers(self, result: MonitorResult, movers: Movers) -> MonitorResult:
         standing = self.gaps(np.zeros(3), movers)
