@@ -181,9 +181,15 @@ def localization_service(kind: str, start: dict, map_file: Path, seed: int, foll
                        "initial_cov_xx": 0.0025, "initial_cov_yy": 0.0025, "initial_cov_aa": 0.0025}}
 
 
+HOLONOMIC_STRAFE = 0.3     # m/s: as far as base_local_planner's y_vels reach; dwa's ±0.1 leaves a person's way too slowly
+
+
 def drive_params(drive: str) -> dict:
-    """The local planner's settings for the drive: a differential drive cannot strafe."""
-    return {} if drive != "diff" else {"holonomic_robot": False, "max_vel_y": 0.0, "min_vel_y": 0.0, "y_vels": []}
+    """The local planner's settings for the drive: a differential drive cannot strafe, the
+    holonomic drives strafe out of a person's way at up to HOLONOMIC_STRAFE (docs/scenarios.md)."""
+    if drive == "diff":
+        return {"holonomic_robot": False, "max_vel_y": 0.0, "min_vel_y": 0.0, "y_vels": []}
+    return {"max_vel_y": HOLONOMIC_STRAFE, "min_vel_y": -HOLONOMIC_STRAFE}
 
 
 def robot_params(profile: Profile | None) -> dict[str, dict]:
