@@ -58,8 +58,8 @@ def drive_world(job: tuple[str, int, str | None, str, float, str, bool]) -> dict
     summary = run.summary.to_json()
     goal = summary["goals"][0] if summary["goals"] else {}
     return {"world": world.name, "seed": seed, "drive": drive, **{k: summary[k] for k in (
-        "success", "collisions", "robot_fault_collisions", "mover_fault_collisions", "min_mover_clearance_m",
-        "min_clearance_m", "time_s", "path_length_m", "plan_length_m", "final_xy_error_m")},
+        "success", "collisions", "robot_fault_collisions", "mover_fault_collisions", "shoved_collisions",
+        "min_mover_clearance_m", "min_clearance_m", "time_s", "path_length_m", "plan_length_m", "final_xy_error_m")},
         "status": goal.get("status", "none"), "reached": goal.get("reached", False), "within_1m_s": goal.get("within_1m_s"),
         "wall_s": round(time.monotonic() - began, 1)}
 
@@ -90,6 +90,7 @@ def overall(rows: list[dict]) -> dict:
     return {"worlds": len(rows), "success_rate": sum(r["success"] for r in rows) / len(rows),
             "robot_fault_collisions": sum(r["robot_fault_collisions"] or 0 for r in rows),
             "mover_fault_collisions": sum(r["mover_fault_collisions"] or 0 for r in rows),
+            "shoved_collisions": sum(r["shoved_collisions"] or 0 for r in rows),
             "worlds_with_robot_fault": sum(bool(r["robot_fault_collisions"]) for r in rows),
             "false_arrivals": sum(r["status"] == "succeeded" and not r["reached"] for r in rows),
             "closest_mover_approach_m": min(approaches) if approaches else None,
@@ -118,7 +119,8 @@ def main(args: argparse.Namespace) -> int:
     else:
         print(f"success {figures['success_rate']:.0%} ({sum(r['success'] for r in rows)}/{len(rows)}), collisions: "
               f"{figures['robot_fault_collisions']} the robot's fault (in {figures['worlds_with_robot_fault']} worlds), "
-              f"{figures['mover_fault_collisions']} a mover's; closest to a mover "
+              f"{figures['mover_fault_collisions']} a mover's ({figures['shoved_collisions']} of them the robot "
+              f"shoved into a wall); closest to a mover "
               f"{_fmt(figures['closest_mover_approach_m'], '.3f')} m; median {figures['median_time_s']:.1f} sim s, "
               f"path/plan {_fmt(figures['median_path_over_plan'], '.2f')}")
     return 0 if figures["success_rate"] == 1.0 and figures["robot_fault_collisions"] == 0 else 1

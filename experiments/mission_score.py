@@ -102,8 +102,9 @@ class MissionSummary:
     final_xy_error_m: float | None
     final_yaw_error_deg: float | None
     collisions: int | None          # None: the recording holds no sim Diagnostic
-    robot_fault_collisions: int | None   # the robot moved towards what it touched (every static contact)
+    robot_fault_collisions: int | None   # the robot moved towards what it touched (a static contact unless shoved)
     mover_fault_collisions: int | None   # a mover drove into the robot standing still or moving away
+    shoved_collisions: int | None        # of those, static contacts while a mover shoved the robot
     min_clearance_m: float
     min_mover_clearance_m: float | None     # the closest the footprint came to a mover; None: no movers
     recording: str
@@ -290,8 +291,8 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
     poses = record.truth_poses[span] if span.any() else record.truth_poses[-1:]
     stamps = record.truth_stamps[span] if span.any() else record.truth_stamps[-1:]
     reached = sum(o.reached for o in outcomes)
-    collisions, robot_fault, mover_fault = (_sim_count(record, name) for name in (
-        "collisions", "robot_fault_collisions", "mover_fault_collisions"))
+    collisions, robot_fault, mover_fault, shoved = (_sim_count(record, name) for name in (
+        "collisions", "robot_fault_collisions", "mover_fault_collisions", "shoved_collisions"))
     if robot_fault is None:
         robot_fault = collisions
     plan_lengths = [o.plan_length_m for o in outcomes if o.plan_length_m is not None]
@@ -305,7 +306,7 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
         final_xy_error_m=outcomes[-1].xy_error_m if outcomes else None,
         final_yaw_error_deg=outcomes[-1].yaw_error_deg if outcomes else None,
         collisions=collisions, robot_fault_collisions=robot_fault, mover_fault_collisions=mover_fault,
-        min_clearance_m=clearance, min_mover_clearance_m=mover_clearance if math.isfinite(mover_clearance) else None,
+        shoved_collisions=shoved, min_clearance_m=clearance, min_mover_clearance_m=mover_clearance if math.isfinite(mover_clearance) else None,
         recording=recording, goals=outcomes, restarts=dict(record.restarts))
 
 
@@ -316,7 +317,8 @@ def summary_lines(summary: MissionSummary) -> list[str]:
 
     lines = [f"{'SUCCESS' if summary.success else 'FAILED'}: {summary.goals_reached}/{summary.goals_total} goals "
              f"reached, {num(summary.collisions, 'd')} collisions ({num(summary.robot_fault_collisions, 'd')} "
-             f"the robot's fault, {num(summary.mover_fault_collisions, 'd')} a mover's)",
+             f"the robot's fault, {num(summary.mover_fault_collisions, 'd')} a mover's, of which "
+             f"{num(summary.shoved_collisions, 'd')} shoved into a wall)",
              f"time {summary.time_s:.1f} sim s, driven {summary.path_length_m:.2f} m "
              f"(first global plans {num(summary.plan_length_m, '.2f')} m), min clearance {summary.min_clearance_m:.3f} m"
              + (f" ({summary.min_mover_clearance_m:.3f} m to a mover)" if summary.min_mover_clearance_m is not None else ""),

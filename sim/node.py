@@ -132,7 +132,8 @@ class SimNode(Node):
     def diagnostic(self) -> Diagnostic:
         diag = super().diagnostic()
         diag.values.update(collisions=self.sim.collisions, robot_fault_collisions=self.sim.robot_fault_collisions,
-                           mover_fault_collisions=self.sim.mover_fault_collisions, contact_steps=self.sim.contact_steps,
+                           mover_fault_collisions=self.sim.mover_fault_collisions,
+                           shoved_collisions=self.sim.shoved_collisions, contact_steps=self.sim.contact_steps,
                            min_clearance_m=self.sim.min_clearance, world=str(self.world.source),
                            drive=self.sim.drive)
         rejected = sorted(k for k in self.counters if k.startswith("rejected/"))

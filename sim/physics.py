@@ -172,6 +172,7 @@ class Simulation:
         self.steps = 0
         self.robot_fault_collisions = 0       # contacts begun while the robot moved towards what it hit
         self.mover_fault_collisions = 0       # a mover drove into a robot standing still or moving away
+        self.shoved_collisions = 0            # of those, static contacts while a mover shoved the robot
         self.contact_steps = 0                # steps in which it touched something
         self.clearance_queries = 0            # poses whose exact clearance was computed
         self._touching: dict[int, int] = {}   # object touched (STATIC or mover index) -> robot shapes on it
@@ -258,6 +259,7 @@ class Simulation:
                 self.robot_fault_collisions += 1
             else:
                 self.mover_fault_collisions += 1
+                self.shoved_collisions += shoved
         self._touching[touched] = self._touching.get(touched, 0) + 1
 
     def _on_separate(self, arbiter: pymunk.Arbiter, space: pymunk.Space, data) -> None:

@@ -185,7 +185,7 @@ def test_a_goal_declared_reached_far_from_the_truth_is_a_false_arrival(box_world
 
 
 @pytest.mark.parametrize("values, success", [
-    ({"collisions": 2, "robot_fault_collisions": 0, "mover_fault_collisions": 2}, True),
+    ({"collisions": 2, "robot_fault_collisions": 0, "mover_fault_collisions": 2, "shoved_collisions": 1}, True),
     ({"collisions": 3, "robot_fault_collisions": 1, "mover_fault_collisions": 2}, False),
     ({"collisions": 1}, False),                 # a sim that does not split: the robot's fault
 ])
@@ -197,6 +197,7 @@ def test_only_collisions_that_were_the_robots_fault_fail_a_mission(box_world, va
     assert s.success == success and s.collisions == values["collisions"]
     assert s.robot_fault_collisions == values.get("robot_fault_collisions", values["collisions"])
     assert s.mover_fault_collisions == values.get("mover_fault_collisions")
+    assert s.shoved_collisions == values.get("shoved_collisions")
     assert f"{values['collisions']} collisions ({s.robot_fault_collisions} the robot's fault" in summary_lines(s)[0]
 
 

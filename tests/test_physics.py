@@ -362,6 +362,7 @@ def test_a_parked_robot_shoved_into_a_wall_by_a_mover_is_the_movers_fault(tmp_pa
     readings = drive(sim, [(700, (0.0, 0.0, 0.0))])
     assert readings[-1].pose[0] > 4.4 + 0.05                    # shoved towards the wall
     assert sim.mover_fault_collisions == sim.collisions == 2 and sim.robot_fault_collisions == 0
+    assert sim.shoved_collisions == 1
 
 
 def test_a_robot_behind_or_beside_a_yielding_mover_does_not_stop_it(tmp_path):

@@ -125,7 +125,7 @@ def test_collisions_show_in_the_diagnostic(tmp_path):
         node.tick()
     diag = node.diagnostic()
     assert diag.values["collisions"] == 1 and diag.values["contact_steps"] > 0
-    assert (diag.values["robot_fault_collisions"], diag.values["mover_fault_collisions"]) == (1, 0)   # a wall
+    assert (diag.values["robot_fault_collisions"], diag.values["mover_fault_collisions"], diag.values["shoved_collisions"]) == (1, 0, 0)   # a wall
     assert diag.values["min_clearance_m"] == 0.0 and diag.level == 0
 
 
