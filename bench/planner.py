@@ -6,10 +6,15 @@ footprint; the time to inflate the whole map is measured first. Then 20 fixed pa
 free cells (seeded; both in the largest 4-connected region of known passable cells, so a path
 exists) are planned with A* (use_dijkstra: false) and with Dijkstra (ROS's default); each pair is
 planned 3 times and the fastest counts, so other load on the machine inflates the figures less.
-Times are of GlobalPlanner.plan: search, smoothing and orientations.
+Times are of GlobalPlanner.plan: search, smoothing and orientations, in CPU time of the planning
+thread (nothing here runs in another thread), which other processes on a shared machine disturb
+far less than the wall clock.
 
 Reference: scipy.sparse.csgraph.dijkstra on the same graph (same passability, weights and corner
 rule), single-source from the start, on the first pairs; its cost to the goal must equal ours.
+With `--navfn DIR` (navfn's sources, not part of omninav: bench/navfn_reference.py) also ROS navfn
+on the same costmap and pairs, timed as navfn_ros plans (setCostmap + the search and path), fastest
+of the same number of runs: the ratio per pair of our time to navfn's, and its median.
 """
 from __future__ import annotations
 
@@ -36,6 +41,7 @@ from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..services.global_planner.astar import GlobalPlanner, passable, warm_up
 from ..services.global_planner.reference import graph
 from ..services.global_planner.params import GlobalPlannerParams
+from .navfn_reference import build as build_navfn, plan_times as navfn_plan_times
 
 MAP = "maps/willow-full-0.05.yaml"
 PAIRS, SEED, MIN_APART_M, RUNS = 20, 6, 25.0, 3
@@ -46,6 +52,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--map", default=None, help=f"map YAML (default: the shared data folder's {MAP})")
     parser.add_argument("--reference-pairs", type=int, default=3, metavar="N",
                         help="pairs also solved by scipy's Dijkstra (default 3; a few hundred ms each)")
+    parser.add_argument("--navfn", metavar="DIR", default=None,
+                        help="also time ROS navfn, compiled from its sources in DIR (navfn.cpp, navfn/navfn.h), "
+                             "on the same costmap and pairs")
 
 
 def pick_pairs(costs: np.ndarray, resolution: float, params: GlobalPlannerParams) -> list[tuple]:
@@ -82,18 +91,35 @@ def inflated_costmap(grid: OccupancyGrid) -> Costmap:
 
 
 def timed(fn, runs: int = 1):
-    """fn()'s result and the fastest of `runs` calls in wall-clock ms (other load inflates it less)."""
+    """fn()'s result and the fastest of `runs` calls in ms of this thread's CPU time (other load
+    inflates it less than the wall clock)."""
     best, out = np.inf, None
     for _ in range(runs):
-        start = time.perf_counter()
+        start = time.thread_time()
         out = fn()
-        best = min(best, time.perf_counter() - start)
+        best = min(best, time.thread_time() - start)
     return out, best * 1e3
+
+
+def navfn_figures(folder: str, costs: np.ndarray, pairs: list[tuple], rows: list[dict]) -> dict:
+    """ROS navfn on the same costmap and pairs: its medians and our time over its, per pair."""
+    times = navfn_plan_times(build_navfn(Path(folder)), costs, pairs, RUNS)
+    for row, t in zip(rows, times):
+        row["navfn"] = {"ok": t.ok, "astar_ms": t.astar_ms, "astar_search_ms": t.astar_search_ms,
+                        "dijkstra_ms": t.dijkstra_ms, "dijkstra_search_ms": t.dijkstra_search_ms}
+    return {"navfn_pairs_ok": sum(t.ok for t in times),
+            "navfn_astar_median_ms": statistics.median(t.astar_ms for t in times),
+            "navfn_astar_search_median_ms": statistics.median(t.astar_search_ms for t in times),
+            "navfn_dijkstra_median_ms": statistics.median(t.dijkstra_ms for t in times),
+            "astar_over_navfn": statistics.median(r["astar"]["ms"] / t.astar_ms for r, t in zip(rows, times)),
+            "dijkstra_over_navfn": statistics.median(r["dijkstra"]["ms"] / t.dijkstra_ms for r, t in zip(rows, times))}
 
 
 @exits_2_on_user_error("bench planner")
 def main(args: argparse.Namespace) -> int:
     path, grid = load_bench_map(args.map)
+    if args.navfn:
+        build_navfn(Path(args.navfn))        # a bad folder or a failed build is said before the minutes of planning
     costmap_layers.warm_up()
     warm_up()
     costmap = inflated_costmap(grid)
@@ -147,6 +173,7 @@ def main(args: argparse.Namespace) -> int:
         "reference_median_ms": statistics.median(r["ms"] for r in reference) if reference else None,
         "reference_cost_diff": max(r["diff"] for r in reference) if reference else None,
         "bars": {"median_ms": BAR_PLAN_MS, "inflate_ms": BAR_INFLATE_MS},
+        **(navfn_figures(args.navfn, costs, pairs, rows) if args.navfn else {}),
         "per_pair": rows,
     }
     if args.json:
@@ -168,4 +195,10 @@ def main(args: argparse.Namespace) -> int:
         print(f"  reference {figures['reference']} (graph built in {build_ms:.0f} ms): median "
               f"{figures['reference_median_ms']:.0f} ms over {len(reference)} pairs; costs equal to A*'s "
               f"within {figures['reference_cost_diff']:.1e} (relative)")
+    if args.navfn:
+        print(f"  ROS navfn (setCostmap + search + path, as navfn_ros plans; {figures['navfn_pairs_ok']}/{len(rows)} "
+              f"found): A* median {figures['navfn_astar_median_ms']:.1f} ms (search alone "
+              f"{figures['navfn_astar_search_median_ms']:.1f}), Dijkstra {figures['navfn_dijkstra_median_ms']:.1f} ms; "
+              f"ours over navfn's, median per pair: A* {figures['astar_over_navfn']:.2f}, "
+              f"Dijkstra {figures['dijkstra_over_navfn']:.2f}")
     return 0
