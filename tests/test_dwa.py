@@ -287,3 +287,16 @@ def test_a_robot_pushed_within_its_padding_of_a_wall_drives_on_with_its_own_outl
     trace, results = drive(planner, costs, info, straight(-2.5, 0.0, 2.5, 0.0), start, 200)
     assert not any(footprint_hits_lethal(costs, info, p) for p in trace)
     assert trace[-1, 0] > 1.5, "drove along the corridor"
+
+
+def test_a_footprint_check_set_up_again_gives_what_a_fresh_one_gives_as_the_grid_changes():
+    open_room, info, check = costmap()
+    with_box, _, _ = costmap(boxes=[(0.3, -0.4, 0.7, 0.4)])
+    reused = FootprintCheck(FOOTPRINT.points, check, stop_padding=0.05)
+    for costs in (open_room, open_room, with_box, with_box, open_room):
+        got = reused.setup((0.0, 0.0, 0.0), costs, info)
+        fresh = FootprintCheck(FOOTPRINT.points, check, stop_padding=0.05).setup((0.0, 0.0, 0.0), costs, info)
+        assert np.array_equal(got.near, fresh.near) and np.array_equal(got.skips, fresh.skips)
+        assert np.array_equal(got.outline, fresh.outline) and got.centre_limit == fresh.centre_limit
+    assert not np.array_equal(reused.setup((0.0, 0.0, 0.0), with_box, info).near,
+                              reused.setup((0.0, 0.0, 0.0), open_room, info).near)     # the grids differ where it matters
