@@ -48,6 +48,7 @@ from ..services.chassis.kinematics import DRIVES
 from ..services.map_server.mapio import MapError, load_map, save_map
 from ..experiments.mission_score import TERMINAL, MissionError, load_mission, summarize_mission, summary_lines
 from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
+from ..services.runtime.child import call_in_child
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..experiments.lockstep_mission import GoalSequencer
 from ..services.runtime.live import LiveRunner, tokens_present
@@ -55,7 +56,6 @@ from ..services.runtime.lockstep import Lockstep
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.zenoh_config import ROUTER_ENV, free_loopback_endpoint, open_client, router_endpoint
 from ..sim.node import open_world
-from ..experiments.reachability import mission_problems
 from ..sim.world import World, WorldError, world_path
 from .goal_args import add_goal_argument
 from .profile import Profile, load_profile
@@ -329,7 +329,11 @@ def mission_goals(args: argparse.Namespace, world: World) -> np.ndarray:
 
 
 def check_goals(map_file: Path, world: World, goals: np.ndarray) -> None:
-    """NavigateError naming every goal (or the start) in an obstacle or out of reach on the map."""
+    """NavigateError naming every goal (or the start) in an obstacle or out of reach on the map.
+    navigate runs it in a child process (services/runtime/child.py): its A* and distance transform
+    import numba and scipy, 90 MB that navigate would hold for the whole mission."""
+    from ..experiments.reachability import mission_problems
+
     try:
         grid = load_map(map_file)
     except MapError as exc:
@@ -521,7 +525,7 @@ def main(args: argparse.Namespace) -> int:
         (lambda text: print(f"navigate: {text}", file=sys.stderr if args.json else sys.stdout, flush=True))
 
     map_file = map_for(world, args.world, out)
-    check_goals(map_file, world, goals)
+    call_in_child(check_goals, map_file, world, goals)
     say(f"{len(goals)} goal(s) checked on the map {map_file.name}: free for the footprint and reachable from the start")
     state_dir = None if args.in_process else out / "state"      # in one process nothing is restarted
     if state_dir is not None:

@@ -12,7 +12,7 @@ from omninav.services.chassis.kinematics import Kinematics
 from omninav.services.chassis.node import ChassisNode, ChassisNodeParams
 from omninav.services.recorder.mcap_io import Record
 from omninav.services.replay.into import replay_into
-from omninav.services.runtime.live import LiveRunner
+from omninav.services.runtime.live import LiveRunner, Received
 from omninav.services.runtime.node import NS_PER_S
 from omninav.parameters.declare import ParamError
 from omninav.parameters.from_mapping import load_params
@@ -246,10 +246,10 @@ def _live(params, states, commands, lag_steps):
     index = {inp.key: i for i, inp in enumerate(node.inputs)}
     pending = list(commands)
     for k, state in enumerate(states):
-        runner._handle(("msg", index[WHEEL_STATE], encode(state), WHEEL_STATE, None))
+        runner._handle(("msg", index[WHEEL_STATE], Received(encode(state), WHEEL_STATE), None))
         runner._release()
         while pending and pending[0].header.stamp_ns + lag_steps * STEP_NS <= state.header.stamp_ns:
-            runner._handle(("msg", index[CMD_VEL], encode(pending.pop(0)), CMD_VEL, None))
+            runner._handle(("msg", index[CMD_VEL], Received(encode(pending.pop(0)), CMD_VEL), None))
             runner._release()
     return node, out
 

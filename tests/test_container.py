@@ -7,15 +7,20 @@ import signal
 import subprocess
 import sys
 import textwrap
+import threading
 
 import pytest
 import zenoh
 
+from omninav.schemas import encode
 from omninav.schemas.keys import ALL, KeyLayout
+from omninav.schemas.messages import Chatter, Header
 from omninav.services.recorder.mcap_io import read_records
 from omninav.services.runtime.acl import TOOL, access_control, write_credentials
 from omninav.services.runtime.compose import ComposeError, load_compose
+from omninav.services.runtime.container import Container
 from omninav.services.runtime.launcher import identities
+from omninav.services.runtime.node import Node
 from omninav.services.runtime.zenoh_config import free_loopback_endpoint, open_client, open_router
 
 from conftest import REPO, wait_alive, wait_until
@@ -170,3 +175,34 @@ def test_a_killed_container_is_restarted_as_a_whole_by_its_services_policy(up, e
     assert up.procs.stop(launcher) == 0
     log = up.procs.log_of(launcher)
     assert "[up] demo ended with signal SIGKILL" in log and "restarting in 0.5s (restart 1)" in log
+
+
+class _Taker(Node):
+    """Keeps every chatter message it is handed."""
+    service = "taker"
+
+    def setup(self) -> None:
+        self.taken = []
+        self.subscribe("chatter", self.taken.append, synced=False)
+
+
+def test_a_container_takes_each_payload_once_from_the_bus_for_all_its_nodes_and_decodes_it_once():
+    endpoint = free_loopback_endpoint()
+    nodes = [_Taker(name="first"), _Taker(name="second")]
+    container = Container(nodes, endpoint)
+    with open_router(endpoint), open_client(endpoint) as other:
+        thread = threading.Thread(target=container.run)
+        thread.start()
+        try:
+            wait_alive(endpoint, ["first", "second"], timeout=60)
+            pub = other.declare_publisher(CHATTER, congestion_control=zenoh.CongestionControl.BLOCK)
+            pub.put(b"not msgpack")
+            for k in range(5):
+                pub.put(encode(Chatter(header=Header(stamp_ns=k + 1, seq=k + 1), text=f"m{k}", value=k)))
+            wait_until(lambda: all(len(n.taken) == 5 for n in nodes), 30, what="both nodes to take five messages")
+        finally:
+            container.stop()
+            thread.join(60)
+    assert [m.text for m in nodes[0].taken] == [f"m{k}" for k in range(5)]
+    assert all(a is b for a, b in zip(nodes[0].taken, nodes[1].taken))     # one message, not one per node
+    assert all(n.counters[f"malformed/{CHATTER}"] == 1 for n in nodes)

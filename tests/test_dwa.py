@@ -8,11 +8,14 @@ from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.costmap.costmap import Costmap
 from omninav.geometry.footprint import make_footprint
 from omninav.services.costmap.params import CostmapParams, InflationLayerParams, StaticLayerParams
-from omninav.services.local_planner.reference import reference_pose_cost, reference_rollout
-from omninav.services.local_planner.dwa import DwaPlanner, dynamic_window, path_maps, sample_velocities
+from omninav.services.local_planner.reference import reference_path_distance, reference_pose_cost, reference_rollout
+from omninav.services.local_planner.dwa import DistanceCache, DwaPlanner, dynamic_window, path_maps, sample_velocities
 from omninav.services.local_planner.footprint_check import FootprintCheck, footprint_check_cost
 from omninav.services.local_planner.params import DwaParams
 from omninav.geometry.se2 import integrate, wrap_angle
+from omninav.geometry.grid import world_to_cell
+from omninav.geometry.polygons import densify
+from omninav.services.costmap.layers import INSCRIBED_INFLATED_OBSTACLE
 
 RES = 0.05
 SQUARE = ((0.2, 0.2), (-0.2, 0.2), (-0.2, -0.2), (0.2, -0.2))   # a small robot, 0.4 m square
@@ -182,6 +185,38 @@ def test_path_maps_measure_metres_to_the_local_path_and_goal():
     assert np.isclose(maps.goal_dist[60, goal_col - 30], 1.5, atol=0.051)
 
 
+def test_path_distances_around_obstacles_are_dijkstras_over_the_same_moves():
+    costs, info, _ = costmap(boxes=[(-1.0, -2.0, -0.6, 1.5), (0.5, -0.5, 0.9, 3.0), (-2.5, 1.8, -1.5, 2.2)])
+    path = np.vstack([straight(-2.5, -2.5, -2.5, 2.5), straight(-2.5, 2.5, 2.5, -1.0)])   # bends round the boxes
+    maps = path_maps(path, (-2.5, -2.5, 0.0), info, costs)
+    points = densify(maps.path, RES / 2)
+    rows, cols = world_to_cell(info, points[:, 0], points[:, 1])
+    on_path = np.zeros(costs.shape, bool)
+    on_path[rows, cols] = True
+    expected = reference_path_distance(on_path, costs < INSCRIBED_INFLATED_OBSTACLE, RES)
+    reached = np.isfinite(expected)
+    assert 0.5 < reached.mean() < 1.0 and expected[reached].max() > 2.0      # obstacles and long ways round
+    assert np.allclose(maps.path_dist[reached], expected[reached], rtol=1e-6, atol=1e-6)
+    assert np.all(maps.path_dist[~reached] > 0)
+
+
+def test_distance_cache_hands_out_the_maps_a_fresh_flood_gives():
+    cache = DistanceCache()
+    open_room, info, _ = costmap()
+    with_box, _, _ = costmap(boxes=[(0.5, -0.5, 0.9, 0.5)])
+    cycles = [(open_room, (-2.0, 0.0, 0.0)), (open_room, (-2.0, 0.0, 0.0)), (with_box, (-2.0, 0.0, 0.0)),
+              (with_box, (-1.0, 0.0, 0.0)), (open_room, (-1.0, 0.0, 0.0))]
+    previous = None
+    for costs, pose in cycles:
+        path = straight(-2.5, 0.0, 2.5, 0.0, n=101)
+        fresh, cached = path_maps(path, pose, info, costs), path_maps(path, pose, info, costs, cache)
+        assert np.array_equal(fresh.path_dist, cached.path_dist) and np.array_equal(fresh.goal_dist, cached.goal_dist)
+        if previous is not None and previous[0] is costs and previous[1] == pose:
+            assert cached.path_dist is previous[2].path_dist      # the same cycle again: not flooded again
+        previous = (costs, pose, cached)
+    assert not cached.path_dist.flags.writeable
+
+
 def test_batch_rollout_matches_a_per_trajectory_python_loop():
     costs, info, check = costmap(boxes=[(0.4, -0.5, 0.7, 0.1), (-1.0, 0.6, 0.5, 0.9)])
     rng = np.random.default_rng(3)
@@ -252,3 +287,16 @@ def test_a_robot_pushed_within_its_padding_of_a_wall_drives_on_with_its_own_outl
     trace, results = drive(planner, costs, info, straight(-2.5, 0.0, 2.5, 0.0), start, 200)
     assert not any(footprint_hits_lethal(costs, info, p) for p in trace)
     assert trace[-1, 0] > 1.5, "drove along the corridor"
+
+
+def test_a_footprint_check_set_up_again_gives_what_a_fresh_one_gives_as_the_grid_changes():
+    open_room, info, check = costmap()
+    with_box, _, _ = costmap(boxes=[(0.3, -0.4, 0.7, 0.4)])
+    reused = FootprintCheck(FOOTPRINT.points, check, stop_padding=0.05)
+    for costs in (open_room, open_room, with_box, with_box, open_room):
+        got = reused.setup((0.0, 0.0, 0.0), costs, info)
+        fresh = FootprintCheck(FOOTPRINT.points, check, stop_padding=0.05).setup((0.0, 0.0, 0.0), costs, info)
+        assert np.array_equal(got.near, fresh.near) and np.array_equal(got.skips, fresh.skips)
+        assert np.array_equal(got.outline, fresh.outline) and got.centre_limit == fresh.centre_limit
+    assert not np.array_equal(reused.setup((0.0, 0.0, 0.0), with_box, info).near,
+                              reused.setup((0.0, 0.0, 0.0), open_room, info).near)     # the grids differ where it matters

@@ -83,25 +83,47 @@ _MOVES = np.array([(dr, dc) for dr in range(-2, 3) for dc in range(-2, 3)
                    if (dr, dc) != (0, 0) and max(abs(dr), abs(dc)) <= 2 and math.gcd(abs(dr), abs(dc)) == 1])
 
 
-@njit(cache=True, inline="always")
-def _relax(distance, passable, moves, lengths, row, col) -> bool:
-    """Lower the cell's distance through the moves that end in it; whether it changed. The grids'
-    borders (two cells) are unreached and impassable, so no move leaves them."""
-    best = distance[row, col]
+@njit(cache=True)
+def _move_table(moves, width):
+    """The moves on a grid flattened by rows of `width`: (offsets, lengths, between) where a move
+    ends at cell i from cell i - offsets[m], is lengths[m] long and, a knight's move, passes between
+    the cells i - between[m, 0] and i - between[m, 1] (0, 0 for the others)."""
+    offsets = moves[:, 0] * width + moves[:, 1]
+    lengths = np.sqrt((moves[:, 0] ** 2 + moves[:, 1] ** 2).astype(np.float64))
+    between = np.zeros((moves.shape[0], 2), np.int64)
     for m in range(moves.shape[0]):
         dr, dc = moves[m, 0], moves[m, 1]
-        r, c = row - dr, col - dc          # the move from (r, c) ends here
-        if distance[r, c] + lengths[m] >= best:
-            continue
-        if abs(dr) == 2 and not (passable[r + dr // 2, c] and passable[r + dr // 2, col]):
-            continue    # a knight's move: the two cells it passes between
-        if abs(dc) == 2 and not (passable[r, c + dc // 2] and passable[row, c + dc // 2]):
-            continue
-        best = distance[r, c] + lengths[m]
-    if best < distance[row, col]:
-        distance[row, col] = best
-        return True
-    return False
+        if abs(dr) == 2:
+            between[m, 0], between[m, 1] = (dr // 2) * width + dc, (dr // 2) * width
+        elif abs(dc) == 2:
+            between[m, 0], between[m, 1] = dr * width + dc // 2, dc // 2
+    return offsets, lengths, between
+
+
+@njit(cache=True, _nrt=False)
+def _sweep(distance, passable, offsets, lengths, between, row_start, row_stop, col_start, col_stop, step, width):
+    """One raster sweep over the flattened grids (rows and, within each, columns in the direction
+    of step): each passable cell's distance lowered through the moves that end in it. Returns the
+    first and the last row it changed in sweep order (-1, -1: none)."""
+    first, last = -1, -1
+    for row in range(row_start, row_stop, step):
+        base = row * width
+        for i in range(base + col_start, base + col_stop, step):
+            if not passable[i]:
+                continue
+            best = distance[i]
+            for m in range(offsets.shape[0]):
+                candidate = distance[i - offsets[m]] + lengths[m]
+                if candidate >= best:
+                    continue
+                if between[m, 0] != 0 and not (passable[i - between[m, 0]] and passable[i - between[m, 1]]):
+                    continue
+                best = candidate
+            if best < distance[i]:
+                distance[i] = best
+                first = row if first < 0 else first
+                last = row
+    return first, last
 
 
 @njit(cache=True)
@@ -109,10 +131,13 @@ def _flood(sources, passable, moves):
     """Cells from the nearest source cell through passable cells, by the moves (each its straight
     length); inf where not reached. Sources count whether passable or not. Raster sweeps forwards
     and backwards until one changes nothing (a chamfer transform with obstacles: one pair of sweeps
-    per bend the shortest ways take, far cheaper here than a priority queue)."""
+    per bend the shortest ways take, far cheaper here than a priority queue). The grids are
+    flattened with a border of two unreached impassable cells (the longest move), so no move
+    leaves them and a move is one offset."""
     height, width = passable.shape
-    border = 2     # the longest move: around the grid, unreached impassable cells
-    distance = np.full((height + 2 * border, width + 2 * border), np.inf)
+    border = 2
+    padded = width + 2 * border
+    distance = np.full((height + 2 * border, padded), np.inf)
     open_ = np.zeros(distance.shape, np.bool_)
     for row in range(height):
         for col in range(width):
@@ -120,28 +145,19 @@ def _flood(sources, passable, moves):
             open_[row + border, col + border] = passable[row, col]
     # a sweep uses the moves from the cells it has already passed
     ahead = (moves[:, 0] > 0) | ((moves[:, 0] == 0) & (moves[:, 1] > 0))
-    forward, backward = moves[ahead], moves[~ahead]
-    forward_lengths = np.sqrt((forward[:, 0] ** 2 + forward[:, 1] ** 2).astype(np.float64))
-    backward_lengths = np.sqrt((backward[:, 0] ** 2 + backward[:, 1] ** 2).astype(np.float64))
+    forward, backward = _move_table(moves[ahead], padded), _move_table(moves[~ahead], padded)
+    flat, flat_open = distance.reshape(-1), open_.reshape(-1)
     # a sweep leaves every cell settled against the cells before it; once a sweep changes nothing, the
     # other direction's last sweep holds too. A forward sweep only needs to start at the first row
     # the backward sweep before it changed, a backward one at the last row the forward one changed.
     top, bottom = border, height + border - 1
     sweeps = 0
     while True:
-        first, last = -1, -1
         if sweeps % 2 == 0:
-            for row in range(top, height + border):
-                for col in range(border, width + border):
-                    if open_[row, col] and _relax(distance, open_, forward, forward_lengths, row, col):
-                        first = row if first < 0 else first
-                        last = row
+            first, last = _sweep(flat, flat_open, *forward, top, height + border, border, width + border, 1, padded)
         else:
-            for row in range(bottom, border - 1, -1):
-                for col in range(width + border - 1, border - 1, -1):
-                    if open_[row, col] and _relax(distance, open_, backward, backward_lengths, row, col):
-                        last = row if last < 0 else last
-                        first = row
+            last, first = _sweep(flat, flat_open, *backward, bottom, border - 1, width + border - 1, border - 1, -1,
+                                 padded)
         sweeps += 1
         if first < 0 and sweeps > 1:
             break
@@ -170,9 +186,35 @@ def _distances_to(masks, passable: np.ndarray, resolution: float) -> list[np.nda
     return result
 
 
-def path_maps(path: np.ndarray, pose, info: MapMetaData, costs: np.ndarray | None = None) -> PathMaps | None:
+class DistanceCache:
+    """The last cycle's distance maps (_distances_to), handed out again for the same grid and mask:
+    the local costmap comes at its own rate and the local goal stays where the path leaves the
+    window, so most control cycles would flood the very same grids again. The maps are read-only."""
+
+    def __init__(self):
+        self._passable: np.ndarray | None = None
+        self._resolution = 0.0
+        self._known: list[tuple[np.ndarray, np.ndarray]] = []     # (mask, metres) on that grid
+
+    def distances_to(self, masks, passable: np.ndarray, resolution: float) -> list[np.ndarray]:
+        if not (resolution == self._resolution and self._passable is not None
+                and np.array_equal(passable, self._passable)):
+            self._passable, self._resolution, self._known = passable.copy(), resolution, []
+        found = [next((metres for known, metres in self._known if np.array_equal(mask, known)), None)
+                 for mask in masks]
+        computed = iter(_distances_to([m for m, f in zip(masks, found) if f is None], passable, resolution))
+        result = [f if f is not None else next(computed) for f in found]
+        for metres in result:
+            metres.flags.writeable = False
+        self._known = [(mask.copy(), metres) for mask, metres in zip(masks, result)]
+        return result
+
+
+def path_maps(path: np.ndarray, pose, info: MapMetaData, costs: np.ndarray | None = None,
+              cache: DistanceCache | None = None) -> PathMaps | None:
     """The distance maps of one cycle, or None when no path point lies on the grid. With costs,
-    distances go around the cells the robot's centre may not enter (inscribed, lethal, unknown)."""
+    distances go around the cells the robot's centre may not enter (inscribed, lethal, unknown);
+    `cache` keeps the maps of the last cycle to reuse."""
     local = local_path(path, pose, info)
     if len(local) == 0:
         return None
@@ -185,7 +227,8 @@ def path_maps(path: np.ndarray, pose, info: MapMetaData, costs: np.ndarray | Non
     at_goal = np.zeros(shape, bool)
     at_goal[rows[keep][-1], cols[keep][-1]] = True
     passable = np.ones(shape, np.bool_) if costs is None else np.asarray(costs) < INSCRIBED_INFLATED_OBSTACLE
-    return PathMaps(local, *_distances_to((on_path, at_goal), passable, info.resolution))
+    distances = (cache or DistanceCache()).distances_to((on_path, at_goal), passable, info.resolution)
+    return PathMaps(local, *distances)
 
 
 # ---------------------------------------------------------------- rollout kernel
@@ -332,6 +375,7 @@ class DwaPlanner:
     def __init__(self, params: DwaParams, footprint_check: FootprintCheck):
         self.params = params
         self.footprint_check = footprint_check
+        self.distances = DistanceCache()
 
     def n_steps(self, samples: np.ndarray) -> int:
         """Poses per rollout: the fastest sample moves at most sim_granularity (m, or rad) per step."""
@@ -381,7 +425,7 @@ class DwaPlanner:
         """One cycle: pose (x, y, yaw) and path (N, 3) in the costmap's frame, velocity (vx, vy, wz)
         in the robot frame. `maps` may be passed when already computed for this cycle; `movers`
         (dynamic.py), the tracks predicted from the cycle's time, are scored along each rollout."""
-        maps = maps if maps is not None else path_maps(path, pose, info, costs)
+        maps = maps if maps is not None else path_maps(path, pose, info, costs, self.distances)
         low, high = reachable(self.params, velocity)
         brake = np.clip(0.0, low, high)   # as hard as the acceleration limits allow
         if not self.params.holonomic_robot:

@@ -160,6 +160,19 @@ class FootprintCheck:
         self.stop_padding = float(stop_padding)
         self.footprint_padding = float(footprint_padding)
         self._outlines: dict[tuple[float, float], tuple[np.ndarray, float]] = {}
+        # the last grid's (blocked cells, resolution, clearance, skips): the local costmap comes at its
+        # own rate, while a control cycle sets up a check once or more (DWA, the shim, the approach)
+        self._last_grid: tuple[np.ndarray, float, np.ndarray, np.ndarray] | None = None
+
+    def _clearance(self, costs: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+        """(clearance, skips) of a grid: m from each cell's centre to the nearest lethal or unknown
+        cell's, and outline_skips; the last grid's again while its blocked cells are the same."""
+        blocked = costs >= LETHAL_OBSTACLE
+        last = self._last_grid
+        if last is None or last[1] != resolution or not np.array_equal(last[0], blocked):
+            clearance = np.sqrt(nearest_cells(blocked)[0]) * resolution
+            self._last_grid = last = blocked, resolution, clearance, outline_skips(clearance, resolution)
+        return last[2], last[3]
 
     def _outline_check(self, clearance: np.ndarray, skips: np.ndarray, resolution: float, padding: float = 0.0,
                centre_limit: int = INSCRIBED_INFLATED_OBSTACLE) -> PoseCheck:
@@ -189,9 +202,7 @@ class FootprintCheck:
         row, col = _cell(float(pose[0]), float(pose[1]), grid, costs.shape[0], costs.shape[1])
         centre_limit = (LETHAL_OBSTACLE if row >= 0 and costs[row, col] == INSCRIBED_INFLATED_OBSTACLE
                         else INSCRIBED_INFLATED_OBSTACLE)
-        blocked = costs >= LETHAL_OBSTACLE
-        clearance = np.sqrt(nearest_cells(blocked)[0]) * info.resolution
-        skips = outline_skips(clearance, info.resolution)
+        clearance, skips = self._clearance(costs, info.resolution)
         quarter = info.resolution / 4
         legal = np.empty(1, np.bool_)
         start = np.asarray(pose, np.float64).reshape(1, 3)

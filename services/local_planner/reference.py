@@ -1,7 +1,10 @@
-"""The DWA rollout and footprint check written the slow, obvious way (a Python loop per trajectory,
-every outline point looked up), the oracle tests/test_dwa.py and `omninav bench local` hold the
-batched kernels in dwa.py and footprint_check.py to."""
+"""The DWA rollout, footprint check and path distances written the slow, obvious way (a Python loop
+per trajectory, every outline point looked up, Dijkstra with a heap), the oracle tests/test_dwa.py
+and `omninav bench local` hold the batched kernels in dwa.py and footprint_check.py to."""
 from __future__ import annotations
+
+import heapq
+import math
 
 import numpy as np
 
@@ -51,3 +54,32 @@ def reference_rollout(planner: DwaPlanner, twist, n: int, pose, velocity, costs:
             return np.array(poses), worst, False
         worst = max(worst, cost)
     return np.array(poses), worst, True
+
+
+def reference_path_distance(on_path: np.ndarray, passable: np.ndarray, resolution: float) -> np.ndarray:
+    """Metres from the nearest on_path cell through passable cells, the obvious way: Dijkstra with a
+    heap over the 16 moves of a cell (a knight's move only between two passable cells); inf where
+    not reached."""
+    moves = [(dr, dc) for dr in range(-2, 3) for dc in range(-2, 3)
+             if (dr, dc) != (0, 0) and math.gcd(abs(dr), abs(dc)) == 1]
+    height, width = passable.shape
+    distance = np.full(passable.shape, np.inf)
+    heap = [(0.0, int(r), int(c)) for r, c in zip(*np.nonzero(on_path))]
+    for _, r, c in heap:
+        distance[r, c] = 0.0
+    while heap:
+        d, r, c = heapq.heappop(heap)
+        if d > distance[r, c]:
+            continue
+        for dr, dc in moves:
+            row, col = r + dr, c + dc
+            if not (0 <= row < height and 0 <= col < width and passable[row, col]):
+                continue
+            if abs(dr) == 2 and not (passable[r + dr // 2, c] and passable[r + dr // 2, col]):
+                continue
+            if abs(dc) == 2 and not (passable[r, c + dc // 2] and passable[row, c + dc // 2]):
+                continue
+            if d + math.hypot(dr, dc) < distance[row, col]:
+                distance[row, col] = d + math.hypot(dr, dc)
+                heapq.heappush(heap, (distance[row, col], row, col))
+    return distance * resolution

@@ -7,7 +7,9 @@ process imports numpy, numba and zenoh and opens a session once. A message one o
 is handed straight to the inboxes of the others that take its key (no network, no router) and is
 also put on the bus with destination "remote", so the recorder, the view and the services of other
 processes see it and the container's own nodes do not get it twice. Each node still merges its
-inputs by stamp (merge.py), so a service replays byte for byte whichever way it was run.
+inputs by stamp (merge.py), so a service replays byte for byte whichever way it was run. The
+container subscribes once per key for all its nodes that take it, and a payload is decoded once
+for all of them (live.Received), whether it came from the bus or from a node beside them.
 
 The process has one identity: the union of what its services declare (launcher.identities).
 Services with their own session (the recorder, the view: run_live) run in a thread beside them.
@@ -22,7 +24,7 @@ import threading
 import time
 
 from .compose import ComposeError, load_compose
-from .live import LiveRunner, tokens_present
+from .live import LiveRunner, deliver, received_from, tokens_present
 from .node import Node
 from ...parameters.declare import ParamError
 from .service_registry import UnknownService
@@ -37,13 +39,13 @@ class Container:
     def __init__(self, nodes: list[Node], router: str | None = None, *, sync_timeout_s: float = 1.0):
         self.router = router
         self.runners = [LiveRunner(node, router, sync_timeout_s=sync_timeout_s) for node in nodes]
-        routes: dict[str, list[tuple[LiveRunner, int]]] = {}
+        self.routes: dict[str, list[tuple[LiveRunner, int]]] = {}
         for runner in self.runners:
             if not hasattr(runner.node, "run_live"):
                 for index, inp in enumerate(runner.node.inputs):
-                    routes.setdefault(inp.key, []).append((runner, index))
+                    self.routes.setdefault(inp.key, []).append((runner, index))
         for runner in self.runners:
-            runner.local = routes
+            runner.local = self.routes
         self.stopping = threading.Event()
         self.failed: list[str] = []      # services whose thread ended on an error
 
@@ -57,6 +59,9 @@ class Container:
         reverse order, each finished (its last inputs processed, its final Diagnostic out) before the
         next is asked."""
         with open_client(self.router) as session:
+            # before any node declares its token: whoever sees it may publish to it at once
+            subscribers = [session.declare_subscriber(key, lambda s, takers=takers: deliver(takers, *received_from(s)))
+                           for key, takers in self.routes.items()]
             threads = {id(runner): threading.Thread(target=self._serve, args=(runner, session), name=runner.node.name)
                        for runner in self.runners}
             first = [r for r in self.runners if r.node.pace_s() is None]
@@ -77,6 +82,8 @@ class Container:
                 runner.stop()
                 if threads[id(runner)].is_alive():
                     threads[id(runner)].join(STOP_TIMEOUT_S)
+            for subscriber in subscribers:
+                subscriber.undeclare()
 
     def _serve(self, runner: LiveRunner, session) -> None:
         node = runner.node

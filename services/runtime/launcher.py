@@ -9,11 +9,16 @@ Every run gets fresh identities (acl.py): one per service, plus the tool, teleop
 for processes started by hand, written to a folder only this user can read; each service finds
 its own through $OMNINAV_CREDENTIALS, and the router admits only those users and lets each do
 only what its Node declares.
+
+The compose file is loaded and every Node built (to read what it declares) in a child process
+(`prepare`, child.py), which hands over plain data and ends: its imports — numba, scipy, pymunk —
+with the maps and JIT caches the Nodes load are over 100 MB this process would hold for the run.
 """
 from __future__ import annotations
 
 import argparse
 import collections
+import dataclasses
 import os
 import signal
 import subprocess
@@ -29,6 +34,7 @@ import zenoh
 from ...schemas.keys import KeyLayout
 from .acl import (CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, union, write_passwords,
                   write_puts)
+from .child import Child, ChildDied
 from .compose import Compose, ComposeError, ProcessSpec, load_compose
 from ...parameters.declare import ParamError
 from .service_registry import UnknownService
@@ -266,6 +272,39 @@ def identities(compose: Compose, nodes: dict[str, Node] | None = None) -> dict[s
     return grants
 
 
+@dataclasses.dataclass(frozen=True)
+class Loaded:
+    """A compose file as `up` runs it, plain data: the specs without their Node classes, and what
+    the classes tell (lockstep_participants, each process's start_wave and stop timeout)."""
+    compose: Compose
+    participants: list[str]
+    waves: dict[str, int]
+    stop_timeouts: dict[str, float]
+
+
+@dataclasses.dataclass(frozen=True)
+class Declared:
+    """What the built Nodes declare: every identity's rights and each process's start_wave."""
+    grants: dict[str, Grants]
+    waves: dict[str, int]
+
+
+def prepare(compose_path: Path):
+    """Yields the compose file Loaded, then, the Nodes built, what they Declared (ComposeError
+    naming what is wrong): `up` runs it in a child process, starting the first processes between."""
+    compose = load_compose(compose_path)
+    classes = {p.name: [s.node_type for s in p.services] for p in compose.processes}
+    plain = tuple(dataclasses.replace(s, node_type=None) for s in compose.services)
+    processes = tuple(dataclasses.replace(p, services=tuple(dataclasses.replace(s, node_type=None) for s in p.services))
+                      for p in compose.processes)
+    yield Loaded(dataclasses.replace(compose, services=plain, processes=processes), lockstep_participants(compose),
+                 {name: start_wave(types) for name, types in classes.items()},
+                 {name: max(c.stop_timeout_s for c in types) for name, types in classes.items()})
+    nodes = build_nodes(compose)
+    yield Declared(identities(compose, nodes),
+                   {p.name: start_wave([nodes[s.name] for s in p.services]) for p in compose.processes})
+
+
 def lockstep_participants(compose: Compose) -> list[str]:
     """The services that report their progress in a lockstep run: all but the coordinator (the sim)
     and those that talk to Zenoh themselves (the recorder, the view), which nothing waits for."""
@@ -289,16 +328,23 @@ def identity_names(compose: Compose) -> list[str]:
 
 def main(args: argparse.Namespace) -> int:
     out = Output()
-    try:
-        compose = load_compose(args.compose)
-        endpoint = router_endpoint(args.router or compose.router)
-        users = identity_names(compose)
-        if args.lockstep is not None:
-            also = service_names(args.lockstep)
-            os.environ[LOCKSTEP_ENV] = Lockstep((*lockstep_participants(compose), *also)).env_value()
-    except (ComposeError, UnknownService, ValueError) as exc:
-        out.say(f"error: {exc}", sys.stderr)
-        return 2
+    with Child(prepare, Path(args.compose)) as child:
+        try:
+            loaded: Loaded = child.next()
+            compose = loaded.compose
+            endpoint = router_endpoint(args.router or compose.router)
+            users = identity_names(compose)
+            if args.lockstep is not None:
+                also = service_names(args.lockstep)
+                os.environ[LOCKSTEP_ENV] = Lockstep((*loaded.participants, *also)).env_value()
+        except (ComposeError, UnknownService, ValueError, ChildDied) as exc:
+            out.say(f"error: {exc}", sys.stderr)
+            return 2
+        return _launch(args, out, child, loaded, endpoint, users)
+
+
+def _launch(args: argparse.Namespace, out: Output, child: Child, loaded: Loaded, endpoint: str, users: list[str]) -> int:
+    compose = loaded.compose
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
@@ -309,27 +355,26 @@ def main(args: argparse.Namespace) -> int:
         except OSError as exc:
             out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
             return 1
-        classes = {spec.name: [s.node_type for s in spec.services] for spec in compose.processes}
-        services = [Supervised(spec, endpoint, Path(params_dir), credentials, out, start_wave(classes[spec.name]),
-                               max(c.stop_timeout_s for c in classes[spec.name]))
+        services = [Supervised(spec, endpoint, Path(params_dir), credentials, out, loaded.waves[spec.name],
+                               loaded.stop_timeouts[spec.name])
                     for spec in compose.processes]
-        # the processes that set no pace start now: they import and build their nodes while this
-        # process builds them too (for the rights), and connect once the router is open
+        # the processes that set no pace start now: they import and build their nodes while the child
+        # builds them too (for the rights), and connect once the router is open
         early = [s for s in services if s.wave < SOURCES_WAVE]
         for service in early:
             service.start()
         try:
-            nodes = build_nodes(compose)
-            grants = identities(compose, nodes)
-            write_puts(credentials, grants)
-            router = open_router(endpoint, dictionary, access_control(grants))
-        except (ComposeError, OSError, zenoh.ZError) as exc:
+            declared: Declared = child.next()
+            child.close()
+            write_puts(credentials, declared.grants)
+            router = open_router(endpoint, dictionary, access_control(declared.grants))
+        except (ComposeError, ChildDied, OSError, zenoh.ZError) as exc:
             for service in reversed(early):
                 service.stop()
             return _not_started(exc, credentials, endpoint, out)
         for service in services:
             if service.runs == 0:
-                service.wave = start_wave([nodes[s.name] for s in service.spec.services])
+                service.wave = declared.waves[service.name]
         with router:
             out.say(f"router listening on {endpoint}")
             out.say(f"identities in {credentials} (tools: {CREDENTIALS_ENV}={credentials / TOOL})")
@@ -340,6 +385,9 @@ def _not_started(exc: Exception, credentials: Path, endpoint: str, out: Output) 
     if isinstance(exc, ComposeError):       # a service's setup failed
         out.say(f"error: {exc}", sys.stderr)
         return 2
+    if isinstance(exc, ChildDied):
+        out.say(f"error: {exc}", sys.stderr)
+        return 1
     if isinstance(exc, OSError):
         out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
     else:

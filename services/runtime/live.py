@@ -1,5 +1,9 @@
 """Drive a Node from Zenoh: callbacks only enqueue; one thread decodes, merges by stamp, processes.
 
+What a callback enqueues is a Received payload, which every node of a process that takes it shares
+and decodes once (per message type) — in a container (container.py) the seven services that take
+odometry would otherwise decode each of its 100 messages a second seven times.
+
 The wait bound (sync_timeout_s, wall time) exists only so a dead input stream cannot stall the
 service forever; when it is hit the service counts it in its Diagnostic, because that run is no
 longer exactly replayable.
@@ -48,8 +52,42 @@ def _seq_of(sample) -> int | None:
     return None if envelope is None else envelope.seq
 
 
+class Received:
+    """A payload on a key, shared by the nodes of this process that take it: decoded on the first
+    node's thread that asks for its type, then the one message handed to each (read-only, as
+    InProcessRunner shares one). Thread-safe; a payload that does not decode gives the MessageError
+    to everyone who asks."""
+    __slots__ = ("payload", "key", "_decoded", "_lock")
+
+    def __init__(self, payload: bytes, key: str):
+        self.payload, self.key = payload, key
+        self._decoded: dict[type, object] = {}
+        self._lock = threading.Lock()
+
+    def message(self, msg_type: type):
+        """The decoded message, or the MessageError saying why there is none."""
+        with self._lock:
+            if msg_type not in self._decoded:
+                try:
+                    self._decoded[msg_type] = decode(self.payload, msg_type, key=self.key)
+                except MessageError as exc:
+                    self._decoded[msg_type] = exc
+            return self._decoded[msg_type]
+
+
+def received_from(sample) -> tuple[Received, int | None]:
+    """A Zenoh sample's payload as Received and the sequence number in its attachment (None without)."""
+    return Received(sample.payload.to_bytes(), str(sample.key_expr)), _seq_of(sample)
+
+
 class PayloadTooLarge(ValueError):
     """A message over what the transport carries; inside a handler the node's guard logs and counts it."""
+
+
+def deliver(takers, received: Received, seq: int | None) -> None:
+    """Into the inbox of each (runner, input index) that takes the payload's key."""
+    for runner, index in takers:
+        runner._inbox.put(("msg", index, received, seq))
 
 
 class LiveRunner:
@@ -76,7 +114,8 @@ class LiveRunner:
         # service's runs apart in one recording (wall time: diagnostics are never compared)
         self.started_ns = time.time_ns()
         # in a container (container.py): key -> the (runner, input index) of this process that take it;
-        # those get a published message straight into their inbox, the bus carries it to the others
+        # those get a published message straight into their inbox, the bus carries it to the others,
+        # and the container subscribes once per key for all of them
         self.local: dict[str, list[tuple[LiveRunner, int]]] | None = None
 
     def stop(self) -> None:
@@ -95,8 +134,7 @@ class LiveRunner:
                                   f"({MAX_MESSAGE_SIZE}); not sent")
         self._zpubs[pub.key].put(payload, attachment=pack_attachment(pub.seq, stamp_ns, pub.type_name))
         if self.local is not None:
-            for runner, index in self.local.get(pub.key, ()):
-                runner._inbox.put(("msg", index, payload, pub.key, pub.seq))
+            deliver(self.local.get(pub.key, ()), Received(payload, pub.key), pub.seq)
 
     def _declare(self, session: zenoh.Session) -> list:
         handles = []
@@ -111,10 +149,10 @@ class LiveRunner:
         self._zpubs[diag.key] = session.declare_publisher(diag.key, congestion_control=zenoh.CongestionControl.BLOCK,
                                                           allowed_destination=destination)
         diag.sink = self._sink
-        for index, inp in enumerate(self.node.inputs):
-            handles.append(session.declare_subscriber(
-                inp.key, lambda s, i=index: self._inbox.put(("msg", i, s.payload.to_bytes(), str(s.key_expr),
-                                                             _seq_of(s)))))
+        if self.local is None:      # a container subscribes for its nodes
+            for index, inp in enumerate(self.node.inputs):
+                handles.append(session.declare_subscriber(
+                    inp.key, lambda s, i=index: self._inbox.put(("msg", i, *received_from(s)))))
         for key in self.node.queryables:
             handles.append(session.declare_queryable(key, lambda q: self._inbox.put(("query", q))))
         if self.lockstep is not None:
@@ -256,14 +294,14 @@ class LiveRunner:
         if item[0] == "left":
             self.barrier.leave(item[1])
             return
-        _, index, payload, key, seq = item
+        _, index, received, seq = item
+        key = received.key
         if seq is not None:
             self._received[key] = seq
         inp = self.node.inputs[index]
-        try:
-            msg = decode(payload, inp.msg_type, key=key)
-        except MessageError as exc:
-            self.node.reject(key, exc)
+        msg = received.message(inp.msg_type)
+        if isinstance(msg, MessageError):
+            self.node.reject(key, msg)
             return
         stamp = msg.header.stamp_ns
         in_order = self._merger.push(index, stamp, (index, msg), time.monotonic())
