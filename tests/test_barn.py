@@ -126,7 +126,7 @@ def test_a_barn_world_is_driven_through_without_a_map_or_a_collision():
 
 @pytest.mark.parametrize("argv, message", [
     (["--worlds", "/no/such/folder"], "no such folder"),
-    (["--range", "9-2"], "expected FIRST-LAST"),
+    (["--range", "9-2", "--worlds", "{tmp}"], "expected FIRST-LAST"),     # a folder that is there: the range is at fault
     (["--range", "0-1", "--worlds", "{tmp}"], "world_0.world: no such file"),
 ])
 def test_bench_barn_input_errors_are_one_line_and_exit_2(argv, message, tmp_path, capsys):

@@ -20,7 +20,9 @@ from omninav.experiments.mapping import build_map, compare_with_truth, explored_
 from omninav.sim.node import open_world
 
 RES = 0.1
-SMALL_MAZE_SEED = 195     # a 7.2 m × 5.3 m maze of 3 × 2 rooms (the bench reports on seeds from 0)
+# a 7.1 m × 5.4 m maze of 3 × 2 rooms (the bench reports on seeds from 0), of the smallest the generator
+# makes; explored in 62 s of sim with 6 frontier goals (seed 195's 7.2 m × 5.3 m one took 101 s)
+SMALL_MAZE_SEED = 142
 FREE, OCC, UNKNOWN = 0, 100, -1
 
 
@@ -281,6 +283,9 @@ def test_a_goal_is_given_up_without_progress_by_the_straight_line_and_along_the_
 
 
 def test_exploring_a_small_generated_maze_maps_its_reachable_free_space_without_collision(tmp_path):
+    """Explore, slam and the navigation stack in one process until no frontier is left. The smallest
+    mazes have six rooms (3 × 2) whatever the seed, so several frontier goals through openings are
+    still needed; SMALL_MAZE_SEED is one of them that is explored in fewer sim seconds."""
     path = tmp_path / "maze.yaml"
     path.write_text(yaml.safe_dump(generate_maze(np.random.default_rng(SMALL_MAZE_SEED))))
     world = open_world(str(path))

@@ -14,7 +14,7 @@ from omninav.experiments.lockstep_mission import run_mission
 from omninav.services.recorder.mcap_io import read_records
 from omninav.sim.world import load_world, world_path
 
-GOAL = np.array([[3.2, 0.9, math.radians(30.0)]])
+GOAL = np.array([[2.3, 0.9, math.radians(30.0)]])     # 1.1 m ahead of the start, turned: a whole mission, short
 
 
 def _outputs(path):

@@ -20,7 +20,7 @@ from omninav.services.costmap.params import load_costmap_params
 from omninav.services.global_planner.node import PlannerNode, PlannerNodeParams
 from omninav.services.global_planner.path_smoother import segment_max_cost
 from omninav.services.map_server.mapio import save_map
-from omninav.geometry.grid import cell_to_world, grid_coords
+from omninav.geometry.grid import cell_to_world, grid_coords, kernel_costs
 from omninav.services.runtime.merge import order_key
 from omninav.services.runtime.node import NS_PER_S, QueryError
 from omninav.parameters.declare import ParamError
@@ -69,7 +69,8 @@ def capture(node) -> list[Path]:
 def worst_crossed(costmap: CostmapMsg, poses: np.ndarray) -> int:
     """The highest cost of any cell the path's straight segments cross."""
     u, v = grid_coords(costmap.info, poses[:, 0], poses[:, 1])
-    return max(int(segment_max_cost(costmap.data, u[i], v[i], u[i + 1], v[i + 1])) for i in range(len(u) - 1))
+    costs = kernel_costs(costmap.data)      # as the smoother passes it: no second compiled variant of the kernel
+    return max(int(segment_max_cost(costs, u[i], v[i], u[i + 1], v[i + 1])) for i in range(len(u) - 1))
 
 
 def planner_with(costmap: CostmapMsg, **params) -> PlannerNode:

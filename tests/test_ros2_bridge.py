@@ -332,12 +332,13 @@ def stack_args(**values):
 
 def test_bridge_ros2_sets_the_robots_values_in_every_service():
     from omninav.cli.bridge import stack
-    data = stack(stack_args(domain=3, router="tcp/127.0.0.1:7500", map=str(MAP), laser=[0.285, 0.0, 0.1],
+    room_map = REPO / "compose" / "maps" / "room.yaml"     # shipped: the test needs no ../shared/data
+    data = stack(stack_args(domain=3, router="tcp/127.0.0.1:7500", map=str(room_map), laser=[0.285, 0.0, 0.1],
                             initial_pose=[0.7, -0.3, 1.2]))
     services = {s["name"]: s for s in data["services"]}
     assert services["ros2_bridge"]["params"]["domain"] == 3
     assert services["ros2_bridge"]["params"]["ros_router"] == "tcp/127.0.0.1:7500"
-    assert services["map_server"]["params"]["yaml_filename"] == str(MAP.resolve())
+    assert services["map_server"]["params"]["yaml_filename"] == str(room_map.resolve())
     mounted = [s for s in services.values() if "laser_x" in s.get("params", {})]
     assert {s["name"] for s in mounted} == {"localizer", "costmap", "collision_monitor", "ros2_bridge"}
     assert all(s["params"]["laser_yaw"] == 0.1 for s in mounted)

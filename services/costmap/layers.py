@@ -300,7 +300,7 @@ class ObstacleLayer:
             if not (0.0 <= u0 < info.width and 0.0 <= v0 < info.height):
                 continue   # ROS: a sensor off the map cannot raytrace
             us, vs = grid_coords(info, obs.points[:, 0], obs.points[:, 1])
-            max_cells = max(0.0, math.ceil(spec.raytrace_range / info.resolution))
+            max_cells = float(max(0, math.ceil(spec.raytrace_range / info.resolution)))   # float: as warm_up's
             changed = _raytrace(self.costs, u0, v0, np.ascontiguousarray(us), np.ascontiguousarray(vs),
                                 max_cells, EDGE_MARGIN / info.resolution, FREE_SPACE)
             box = union(box, changed)

@@ -69,8 +69,10 @@ def slack(poses: np.ndarray, dt: float, footprint: np.ndarray, movers: Movers, m
     the same less sigmas standard deviations of the mover's predicted position."""
     poses = np.ascontiguousarray(poses, np.float64)
     hard, soft = np.empty(poses.shape[:2]), np.empty(poses.shape[:2])
-    _slack(poses, float(dt), np.ascontiguousarray(footprint, np.float64), movers.positions, movers.velocities,
-           movers.radii, movers.variance, float(margin), float(sigmas), hard, soft)
+    # contiguous (movers_at's positions are a column slice): one compiled variant, as warm_up's
+    _slack(poses, float(dt), np.ascontiguousarray(footprint, np.float64), np.ascontiguousarray(movers.positions),
+           np.ascontiguousarray(movers.velocities), movers.radii, movers.variance, float(margin), float(sigmas),
+           hard, soft)
     return hard, soft
 
 
