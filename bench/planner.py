@@ -101,9 +101,9 @@ def timed(fn, runs: int = 1):
     return out, best * 1e3
 
 
-def navfn_figures(folder: str, costs: np.ndarray, pairs: list[tuple], rows: list[dict]) -> dict:
-    """ROS navfn on the same costmap and pairs: its medians and our time over its, per pair."""
-    times = navfn_plan_times(build_navfn(Path(folder)), costs, pairs, RUNS)
+def navfn_figures(binary: Path, costs: np.ndarray, pairs: list[tuple], rows: list[dict]) -> dict:
+    """ROS navfn (its built driver) on the same costmap and pairs: its medians and our time over its, per pair."""
+    times = navfn_plan_times(binary, costs, pairs, RUNS)
     for row, t in zip(rows, times):
         row["navfn"] = {"ok": t.ok, "astar_ms": t.astar_ms, "astar_search_ms": t.astar_search_ms,
                         "dijkstra_ms": t.dijkstra_ms, "dijkstra_search_ms": t.dijkstra_search_ms}
@@ -118,8 +118,8 @@ def navfn_figures(folder: str, costs: np.ndarray, pairs: list[tuple], rows: list
 @exits_2_on_user_error("bench planner")
 def main(args: argparse.Namespace) -> int:
     path, grid = load_bench_map(args.map)
-    if args.navfn:
-        build_navfn(Path(args.navfn))        # a bad folder or a failed build is said before the minutes of planning
+    # a bad folder or a failed build is said before the minutes of planning
+    navfn = build_navfn(Path(args.navfn)) if args.navfn else None
     costmap_layers.warm_up()
     warm_up()
     costmap = inflated_costmap(grid)
@@ -173,7 +173,7 @@ def main(args: argparse.Namespace) -> int:
         "reference_median_ms": statistics.median(r["ms"] for r in reference) if reference else None,
         "reference_cost_diff": max(r["diff"] for r in reference) if reference else None,
         "bars": {"median_ms": BAR_PLAN_MS, "inflate_ms": BAR_INFLATE_MS},
-        **(navfn_figures(args.navfn, costs, pairs, rows) if args.navfn else {}),
+        **(navfn_figures(navfn, costs, pairs, rows) if navfn else {}),
         "per_pair": rows,
     }
     if args.json:
@@ -195,7 +195,7 @@ def main(args: argparse.Namespace) -> int:
         print(f"  reference {figures['reference']} (graph built in {build_ms:.0f} ms): median "
               f"{figures['reference_median_ms']:.0f} ms over {len(reference)} pairs; costs equal to A*'s "
               f"within {figures['reference_cost_diff']:.1e} (relative)")
-    if args.navfn:
+    if navfn:
         print(f"  ROS navfn (setCostmap + search + path, as navfn_ros plans; {figures['navfn_pairs_ok']}/{len(rows)} "
               f"found): A* median {figures['navfn_astar_median_ms']:.1f} ms (search alone "
               f"{figures['navfn_astar_search_median_ms']:.1f}), Dijkstra {figures['navfn_dijkstra_median_ms']:.1f} ms; "
