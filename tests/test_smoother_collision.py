@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 from omninav.schemas.messages import LaserScan
-from omninav.services.collision_monitor.collision import CollisionMonitor, robot_frame_points
+from omninav.services.collision_monitor.collision import (APPROACH_TOLERANCE_SPEED, CollisionMonitor, distance_to_outline,
+                                                          robot_frame_points)
+from omninav.geometry.se2 import integrate
 from omninav.geometry.movers import Movers
 from omninav.services.collision_monitor.collision import CollisionMonitorParams
 from omninav.services.velocity_smoother.smoother import VelocitySmootherParams
@@ -165,3 +167,30 @@ def test_a_person_already_in_the_stop_zone_is_not_closed_in_on(where, cmd, actio
     assert result.action == action, result.reason
     if action == "approach":
         assert np.allclose(result.twist, 0.0)
+
+
+@pytest.mark.parametrize("gap, track_off", [(0.03, 0.10), (0.2, 0.12)])   # the stop zone; the slowdown zone
+@pytest.mark.parametrize("cmd, action", [
+    ((0.02, 0.0, 0.0), "approach"),       # creeping on at the simulator's fault_speed
+    ((0.0, 0.0, 0.15), "approach"),       # turning swings the front edge into them
+    ((0.0, 0.3, 0.0), "none"),            # strafing out of their way
+    ((-0.2, 0.0, 0.0), "none"),           # backing away
+])
+def test_a_person_pressing_on_is_not_closed_in_on_where_their_track_is_off(gap, track_off, cmd, action):
+    # the scan shows the person `gap` off the front edge, across its whole width; their track puts
+    # them `track_off` farther on: by the track alone a slow creep would not reach them in time
+    monitor = CollisionMonitor(CollisionMonitorParams())
+    edge = 0.416 + gap
+    surface = [(edge, y) for y in np.linspace(-0.15, 0.15, 13)]
+    person = movers((edge + 0.3 + track_off, 0.0, 0.0, 0.0, 0.3))
+    assert monitor.check(cmd, np.zeros((0, 2)), person).action == "none"     # the track alone lets it pass
+    result = monitor.check(cmd, surface, person)
+    assert result.action == action, result.reason
+    if action == "approach":      # what is left of the command closes in slower than the tolerance (but on noise)
+        step = monitor.params.approach_check_s
+        dx, dy, dtheta = integrate((0.0, 0.0, 0.0), result.twist, step)
+        c, s = math.cos(dtheta), math.sin(dtheta)
+        moved = [(c * (x - dx) + s * (y - dy), -s * (x - dx) + c * (y - dy)) for x, y in surface]
+        footprint = np.asarray(monitor.params.footprint)
+        closing = distance_to_outline(np.asarray(surface), footprint) - distance_to_outline(np.asarray(moved), footprint)
+        assert np.count_nonzero(closing > APPROACH_TOLERANCE_SPEED * step + 1e-9) < monitor.params.min_points
