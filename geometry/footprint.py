@@ -29,6 +29,7 @@ class Footprint:
     points: np.ndarray              # (P, 2) padded polygon in the robot frame, m
     inscribed_radius: float         # m
     circumscribed_radius: float     # m
+    body: np.ndarray                # (P, 2) the polygon without the padding: the robot itself, m
 
 
 def _sign0(value: float) -> float:
@@ -70,7 +71,7 @@ def make_footprint(polygon=(), robot_radius: float = 0.46, padding: float = 0.01
     raw = np.asarray(polygon, np.float64).reshape(-1, 2) if len(polygon) else circle_polygon(robot_radius)
     points = pad(raw, padding)
     inscribed, circumscribed = radii(points)
-    return Footprint(points=points, inscribed_radius=inscribed, circumscribed_radius=circumscribed)
+    return Footprint(points=points, inscribed_radius=inscribed, circumscribed_radius=circumscribed, body=raw)
 
 
 def transform(points: np.ndarray, pose) -> np.ndarray:

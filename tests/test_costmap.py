@@ -342,6 +342,19 @@ def test_footprint_clearing_and_clear():
     assert (costmap.costs == 0).all()
 
 
+def test_footprint_clearing_spares_what_lies_within_the_padding():
+    # the robot (a 0.2 m square, padded by 0.15 m) stands with a hit 0.1 m off its side, inside the
+    # padded footprint but not under the robot: that is an obstacle, and it stays one
+    costmap = Costmap(CostmapParams(width=4.0, height=4.0, footprint=SQUARE, footprint_padding=0.15,
+                                    layers=(ObstacleLayerParams(observation_sources=(ObservationSource("scan"),)),)))
+    costmap.add_scan(scan([0.72, 0.5], angle_min=0.0, increment=math.pi), (2.0, 2.0, 0.0))
+    costmap.update(robot_pose=(2.5, 2.0, 0.0))
+    assert costmap.cost_at(2.72, 2.0) == LETHAL_OBSTACLE                        # 0.22 m ahead of the centre
+    assert costmap.cost_at(1.5, 2.0) == LETHAL_OBSTACLE
+    costmap.update(robot_pose=(1.5, 2.0, 0.0))                                  # standing on the other hit
+    assert costmap.cost_at(1.5, 2.0) == 0 and costmap.cost_at(2.72, 2.0) == LETHAL_OBSTACLE
+
+
 # ---------------------------------------------------------------- incremental updates
 
 def _random_scan(rng, beams=90, stamp_ns=0):

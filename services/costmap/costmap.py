@@ -70,7 +70,7 @@ class Costmap:
         if isinstance(p, StaticLayerParams):
             return StaticLayer(p)
         if isinstance(p, ObstacleLayerParams):
-            return ObstacleLayer(p, self.params.track_unknown_space, self.footprint.points)
+            return ObstacleLayer(p, self.params.track_unknown_space, self.footprint.body)
         if isinstance(p, InflationLayerParams):
             return InflationLayer(p, self.footprint.inscribed_radius, self.params.resolution)
         if isinstance(p, KeepoutLayerParams):
