@@ -145,8 +145,8 @@ def _search(codes, weights, records, padded, start, goal, neutral, use_heuristic
             if records[u, STAMP] == closed:
                 continue   # expanded already since this entry was made
             gu = records[u, G]
-            hu = _heuristic(u, inverse, padded, goal_r, goal_c, neutral) if use_heuristic else 0.0
-            if gu + hu >= goal_cost:
+            if goal_cost < np.inf and gu + (_heuristic(u, inverse, padded, goal_r, goal_c, neutral)
+                                            if use_heuristic else 0.0) >= goal_cost:
                 continue   # cannot lead to a cheaper goal
             records[u, STAMP] = closed
             expanded += 1
