@@ -9,7 +9,7 @@ from omninav.schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.costmap.costmap import Costmap
 from omninav.services.costmap.params import (CostmapParams, InflationLayerParams, KeepoutLayerParams,
                                              StaticLayerParams)
-from omninav.services.global_planner.astar import (GOAL_IN_OBSTACLE, NO_PATH, OFF_MAP, OK, GlobalPlanner,
+from omninav.services.global_planner.astar import (GOAL_IN_OBSTACLE, NO_PATH, OFF_MAP, OK, GlobalPlanner, Workspace,
                                                    orientations, search)
 from omninav.services.global_planner.reference import graph
 from omninav.services.global_planner.params import GlobalPlannerParams
@@ -88,6 +88,22 @@ def test_astar_cost_equals_dijkstra_and_scipy_on_random_maps():
         assert astar_cost == pytest.approx(expected, rel=1e-12)
         checked += 1
     assert checked >= 10
+
+
+def test_a_reused_workspace_answers_as_a_fresh_one_also_after_its_stamps_run_out():
+    # the workspace's one-byte stamps last about 127 searches, then it clears them: searches past
+    # that must not see the cells of earlier ones as reached
+    rng = np.random.default_rng(3)
+    costs = random_costs(rng, (20, 24))
+    free = np.argwhere(costs < 200)
+    workspace = Workspace()
+    for _ in range(300):
+        start, goal = (tuple(int(v) for v in free[i]) for i in rng.integers(len(free), size=2))
+        reused = search(costs, start, goal, ASTAR, workspace=workspace)
+        fresh = search(costs, start, goal, ASTAR)
+        assert reused.found == fresh.found and reused.expanded == fresh.expanded
+        np.testing.assert_array_equal(reused.cost_to_come(), fresh.cost_to_come())
+        np.testing.assert_array_equal(reused.expanded_mask(), fresh.expanded_mask())
 
 
 def test_the_path_is_a_chain_of_allowed_steps_that_adds_up_to_its_cost():

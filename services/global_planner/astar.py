@@ -100,18 +100,13 @@ def _heuristic(v, inverse, padded, goal_r, goal_c, neutral):
     return neutral * (max(dr, dc) + (SQRT2 - 1.0) * min(dr, dc))
 
 
-# a cell's record in the workspace: its cost-to-come and its stamp side by side, so a relaxation
-# reads one cache line (three arrays of g, stamp and parent made it three misses)
-G, STAMP = 0, 1
-
-
 @njit(cache=True)
-def _search(codes, weights, records, padded, start, goal, neutral, use_heuristic, base, per_bucket, buckets):
+def _search(codes, weights, g, stamp, padded, start, goal, neutral, use_heuristic, base, per_bucket, buckets):
     """Best-first search over padded flat indices from `start` until the cost to `goal` is final
     (True) or the reachable cells are exhausted (False). codes and weights as _fill_codes and
-    _weights; records (N, 2) holds each cell's cost-to-come and stamp, reused across searches: a cell
-    is untouched while its stamp < base, reached at base, expanded at base + 1. No parents are
-    kept: the path is read off the costs-to-come afterwards (_descend).
+    _weights; g (cost-to-come) and stamp are reused across searches: a cell is untouched while its
+    stamp < base, reached at base, expanded at base + 1; g is read only where the stamp says it is
+    this search's. No parents are kept: the path is read off g afterwards (_descend).
 
     The queue is buckets of f, 1/per_bucket wide, in a ring of `buckets` (a power of two, more than
     the largest rise of f in one step spans), each a stack: no heap and no ordering within a bucket. Within a
@@ -126,8 +121,8 @@ def _search(codes, weights, records, padded, start, goal, neutral, use_heuristic
     pool = np.empty((4096, 2), np.int64)
     pool_used, free = 1, -1
     pool[0, 0], pool[0, 1] = start, -1
-    reached, closed = float(base), float(base + 1)
-    records[start, G], records[start, STAMP] = 0.0, reached
+    reached, closed = base, base + 1
+    g[start], stamp[start] = 0.0, reached
     f0 = _heuristic(start, inverse, padded, goal_r, goal_c, neutral) if use_heuristic else 0.0
     heads[0] = 0
     bucket, pending, expanded = 0, 1, 0
@@ -142,13 +137,13 @@ def _search(codes, weights, records, padded, start, goal, neutral, use_heuristic
             heads[slot] = pool[e, 1]
             pool[e, 1], free = free, e
             pending -= 1
-            if records[u, STAMP] == closed:
+            if stamp[u] == closed:
                 continue   # expanded already since this entry was made
-            gu = records[u, G]
+            gu = g[u]
             if goal_cost < np.inf and gu + (_heuristic(u, inverse, padded, goal_r, goal_c, neutral)
                                             if use_heuristic else 0.0) >= goal_cost:
                 continue   # cannot lead to a cheaper goal
-            records[u, STAMP] = closed
+            stamp[u] = closed
             expanded += 1
             if pool_used + 8 > pool.shape[0]:   # room for this expansion's entries
                 pool = _grown(pool)
@@ -173,9 +168,9 @@ def _search(codes, weights, records, padded, start, goal, neutral, use_heuristic
                     continue
                 w = weights[code]
                 candidate = gu + (w if k < 4 else w * SQRT2)
-                if records[v, STAMP] >= reached and candidate >= records[v, G] * ROUNDING:
+                if stamp[v] >= reached and candidate >= g[v] * ROUNDING:
                     continue
-                records[v, G], records[v, STAMP] = candidate, reached   # reached, or open again
+                g[v], stamp[v] = candidate, reached   # reached, or open again
                 if v == goal:
                     goal_cost = candidate
                     continue   # nothing beyond the goal can make it cheaper
@@ -191,7 +186,7 @@ def _search(codes, weights, records, padded, start, goal, neutral, use_heuristic
                 pending += 1
         bucket += 1
     if goal_cost < np.inf or start == goal:
-        records[goal, STAMP] = closed
+        stamp[goal] = closed
         return True, expanded
     return False, expanded
 
@@ -204,13 +199,13 @@ def _grown(pool):
 
 
 @njit(cache=True)
-def _descend(codes, weights, records, padded, start, goal, reached, neutral):
+def _descend(codes, weights, g, stamp, padded, start, goal, reached, neutral):
     """Padded indices from the start to `goal` (reached by the last search): from the goal, step
     to the neighbour whose cost-to-come plus the step into the current cell is least, until the
     start. That neighbour is the one the search came from (or one as cheap): the cost-to-come of
     a cell the path passes is final, so the costs fall strictly along it (every step costs at
     least neutral_cost) down to the start's 0."""
-    out = np.empty(int(records[goal, G] / neutral) + 2, np.int64)   # every step costs at least neutral
+    out = np.empty(int(g[goal] / neutral) + 2, np.int64)   # every step costs at least neutral
     out[0], count, u = goal, 1, goal
     while u != start:
         up, down = codes[u - padded] != IMPASSABLE, codes[u + padded] != IMPASSABLE
@@ -228,10 +223,10 @@ def _descend(codes, weights, records, padded, start, goal, reached, neutral):
                     continue
                 v = u + (-padded if k < 6 else padded) + (-1 if k % 2 == 0 else 1)
                 step = w * SQRT2
-            if records[v, STAMP] < reached or (codes[v] == IMPASSABLE and v != start):
+            if stamp[v] < reached or (codes[v] == IMPASSABLE and v != start):
                 continue
-            if records[v, G] + step < best_cost:
-                best, best_cost = v, records[v, G] + step
+            if g[v] + step < best_cost:
+                best, best_cost = v, g[v] + step
         out[count], count, u = best, count + 1, best
     return out[:count][::-1].copy()
 
@@ -239,13 +234,16 @@ def _descend(codes, weights, records, padded, start, goal, reached, neutral):
 class Workspace:
     """The search's per-cell data, allocated once per costmap size and reused (allocating it for a
     building-sized map would cost more than a typical search): the padded cells' codes, and per
-    cell the record (cost-to-come, stamp) of the searches. The codes are rebuilt only when the
+    cell the cost-to-come and the stamp of the searches. The stamp is one byte (it fits the
+    processor's second-level cache with the codes, and a relaxation of a cell not yet reached reads
+    nothing else); when its values run out it is cleared. The codes are rebuilt only when the
     costs or the passability parameters differ from the last search's."""
 
     def __init__(self):
         self.shape: tuple[int, int] = (0, 0)
         self.codes = np.zeros(0, np.uint8)
-        self.records = np.zeros((0, 2))
+        self.g = np.zeros(0)
+        self.stamp = np.zeros(0, np.uint8)
         self.weights = np.zeros(256)
         self.base = 0
         self._codes_for: tuple | None = None
@@ -256,13 +254,16 @@ class Workspace:
         if costs.shape != self.shape:
             self.shape = costs.shape
             size = (costs.shape[0] + 2) * (costs.shape[1] + 2)
-            self.codes, self.records = np.empty(size, np.uint8), np.zeros((size, 2))
+            self.codes, self.g, self.stamp = np.empty(size, np.uint8), np.zeros(size), np.zeros(size, np.uint8)
             self.base, self._codes_for, self._costs = 0, None, None
         key = (params.lethal_cost, params.allow_unknown, params.outline_map)
         if key != self._codes_for or not np.array_equal(costs, self._costs):
             _fill_codes(kernel_costs(costs), int(params.lethal_cost), params.allow_unknown, params.outline_map, self.codes)
             self._codes_for, self._costs = key, costs.copy()
         self.weights = _weights(params)
+        if self.base + 3 > np.iinfo(self.stamp.dtype).max:   # no stamps left: every cell untouched again
+            self.stamp[:] = 0
+            self.base = 0
         self.base += 2
         return self.base
 
@@ -292,23 +293,21 @@ class Search:
     def path(self, cell: tuple[int, int]) -> np.ndarray:
         """(row, col) of the cells from the start to a reached cell."""
         workspace = self.workspace
-        return workspace.cells(_descend(workspace.codes, workspace.weights, workspace.records, workspace.shape[1] + 2,
-                                        self.start, workspace.flat(*cell), float(self.base), self.neutral))
+        return workspace.cells(_descend(workspace.codes, workspace.weights, workspace.g, workspace.stamp, workspace.shape[1] + 2,
+                                        self.start, workspace.flat(*cell), self.base, self.neutral))
 
     def expanded_mask(self) -> np.ndarray:
         """(H, W): the cells expanded; after an exhausted search, exactly the reachable cells."""
-        return self.workspace.unpad(self.workspace.records[:, STAMP] == self.base + 1)
+        return self.workspace.unpad(self.workspace.stamp == self.base + 1)
 
     def cost_to_come(self) -> np.ndarray:
         """(H, W) cost from the start (inf where the search never got)."""
         workspace = self.workspace
-        records = workspace.records
-        return workspace.unpad(np.where(records[:, STAMP] >= self.base, records[:, G], np.inf))
+        return workspace.unpad(np.where(workspace.stamp >= self.base, workspace.g, np.inf))
 
     def cost(self, cell: tuple[int, int]) -> float:
         index = self.workspace.flat(*cell)
-        records = self.workspace.records
-        return float(records[index, G]) if records[index, STAMP] >= self.base else math.inf
+        return float(self.workspace.g[index]) if self.workspace.stamp[index] >= self.base else math.inf
 
 
 def search(costs: np.ndarray, start: tuple[int, int], goal: tuple[int, int], params: GlobalPlannerParams,
@@ -322,7 +321,7 @@ def search(costs: np.ndarray, start: tuple[int, int], goal: tuple[int, int], par
     per_bucket = BUCKETS_PER_STEP / neutral
     steepest = (neutral + params.cost_factor * (params.lethal_cost - 1) + neutral) * SQRT2   # f's largest rise
     origin = workspace.flat(*start)
-    found, expanded = _search(workspace.codes, workspace.weights, workspace.records, costs.shape[1] + 2, origin,
+    found, expanded = _search(workspace.codes, workspace.weights, workspace.g, workspace.stamp, costs.shape[1] + 2, origin,
                               workspace.flat(*goal), neutral, not dijkstra, base, per_bucket,
                               1 << (int(steepest * per_bucket) + 3).bit_length())
     return Search(bool(found), int(expanded), workspace, base, origin, neutral)
