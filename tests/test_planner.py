@@ -124,6 +124,15 @@ def test_the_path_is_a_chain_of_allowed_steps_that_adds_up_to_its_cost():
     assert total == pytest.approx(result.cost((0, 29)))
 
 
+def test_a_path_is_asked_only_to_a_reached_cell():
+    costs = np.zeros((5, 7), np.uint8)
+    costs[:, 3] = 254                                   # a wall: the right half is out of reach
+    result = search(costs, (2, 1), (2, 5), GlobalPlannerParams(outline_map=False))
+    assert not result.found and tuple(result.path((2, 0))[-1]) == (2, 0)
+    with pytest.raises(ValueError, match="not reached"):
+        result.path((2, 5))
+
+
 # ---------------------------------------------------------------- safety
 
 def test_paths_never_enter_lethal_or_inscribed_cells():

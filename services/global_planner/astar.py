@@ -292,9 +292,12 @@ class Search:
 
     def path(self, cell: tuple[int, int]) -> np.ndarray:
         """(row, col) of the cells from the start to a reached cell."""
+        if self.cost(cell) == math.inf:   # the descent needs this search's cost-to-come at its start
+            raise ValueError(f"cell {cell} was not reached by the search")
         workspace = self.workspace
-        return workspace.cells(_descend(workspace.codes, workspace.weights, workspace.g, workspace.stamp, workspace.shape[1] + 2,
-                                        self.start, workspace.flat(*cell), self.base, self.neutral))
+        return workspace.cells(_descend(workspace.codes, workspace.weights, workspace.g, workspace.stamp,
+                                        workspace.shape[1] + 2, self.start, workspace.flat(*cell), self.base,
+                                        self.neutral))
 
     def expanded_mask(self) -> np.ndarray:
         """(H, W): the cells expanded; after an exhausted search, exactly the reachable cells."""
