@@ -9,7 +9,7 @@ from omninav.schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
 from omninav.services.costmap.costmap import Costmap
 from omninav.services.costmap.params import (CostmapParams, InflationLayerParams, KeepoutLayerParams,
                                              StaticLayerParams)
-from omninav.services.global_planner.astar import (GOAL_IN_OBSTACLE, NO_PATH, OFF_MAP, OK, GlobalPlanner,
+from omninav.services.global_planner.astar import (GOAL_IN_OBSTACLE, NO_PATH, OFF_MAP, OK, GlobalPlanner, Workspace,
                                                    orientations, search)
 from omninav.services.global_planner.reference import graph
 from omninav.services.global_planner.params import GlobalPlannerParams
@@ -90,6 +90,22 @@ def test_astar_cost_equals_dijkstra_and_scipy_on_random_maps():
     assert checked >= 10
 
 
+def test_a_reused_workspace_answers_as_a_fresh_one_also_after_its_stamps_run_out():
+    # the workspace's one-byte stamps last about 127 searches, then it clears them: searches past
+    # that must not see the cells of earlier ones as reached
+    rng = np.random.default_rng(3)
+    costs = random_costs(rng, (20, 24))
+    free = np.argwhere(costs < 200)
+    workspace = Workspace()
+    for _ in range(300):
+        start, goal = (tuple(int(v) for v in free[i]) for i in rng.integers(len(free), size=2))
+        reused = search(costs, start, goal, ASTAR, workspace=workspace)
+        fresh = search(costs, start, goal, ASTAR)
+        assert reused.found == fresh.found and reused.expanded == fresh.expanded
+        np.testing.assert_array_equal(reused.cost_to_come(), fresh.cost_to_come())
+        np.testing.assert_array_equal(reused.expanded_mask(), fresh.expanded_mask())
+
+
 def test_the_path_is_a_chain_of_allowed_steps_that_adds_up_to_its_cost():
     rng = np.random.default_rng(5)
     costs = random_costs(rng, (30, 30))
@@ -106,6 +122,15 @@ def test_the_path_is_a_chain_of_allowed_steps_that_adds_up_to_its_cost():
             assert costs[r0, c1] < 253 and costs[r1, c0] < 253
         total += (50 + 3.0 * costs[r1, c1]) * (math.sqrt(2) if r1 != r0 and c1 != c0 else 1.0)
     assert total == pytest.approx(result.cost((0, 29)))
+
+
+def test_a_path_is_asked_only_to_a_reached_cell():
+    costs = np.zeros((5, 7), np.uint8)
+    costs[:, 3] = 254                                   # a wall: the right half is out of reach
+    result = search(costs, (2, 1), (2, 5), GlobalPlannerParams(outline_map=False))
+    assert not result.found and tuple(result.path((2, 0))[-1]) == (2, 0)
+    with pytest.raises(ValueError, match="not reached"):
+        result.path((2, 5))
 
 
 # ---------------------------------------------------------------- safety

@@ -88,17 +88,25 @@ def _weights(params: GlobalPlannerParams) -> np.ndarray:
 
 
 @njit(cache=True, inline="always")
-def _octile(r, c, goal_r, goal_c):
+def _heuristic(v, inverse, padded, goal_r, goal_c, neutral):
+    """neutral_cost × the octile distance from padded index v to the goal's (row, column)."""
+    r = int(v * inverse)   # v // padded without a division, corrected for rounding
+    c = v - r * padded
+    if c < 0:
+        r, c = r - 1, c + padded
+    elif c >= padded:
+        r, c = r + 1, c - padded
     dr, dc = abs(r - goal_r), abs(c - goal_c)
-    return max(dr, dc) + (1.4142135623730951 - 1.0) * min(dr, dc)
+    return neutral * (max(dr, dc) + (SQRT2 - 1.0) * min(dr, dc))
 
 
 @njit(cache=True)
-def _search(codes, weights, g, parent, stamp, padded, start, goal, neutral, use_heuristic, base, per_bucket, buckets):
+def _search(codes, weights, g, stamp, padded, start, goal, neutral, use_heuristic, base, per_bucket, buckets):
     """Best-first search over padded flat indices from `start` until the cost to `goal` is final
     (True) or the reachable cells are exhausted (False). codes and weights as _fill_codes and
-    _weights; g (cost-to-come), parent and stamp are reused across searches: a cell is untouched
-    while stamp < base, reached at base, expanded at base + 1.
+    _weights; g (cost-to-come) and stamp are reused across searches: a cell is untouched while its
+    stamp < base, reached at base, expanded at base + 1; g is read only where the stamp says it is
+    this search's. No parents are kept: the path is read off g afterwards (_descend).
 
     The queue is buckets of f, 1/per_bucket wide, in a ring of `buckets` (a power of two, more than
     the largest rise of f in one step spans), each a stack: no heap and no ordering within a bucket. Within a
@@ -109,85 +117,71 @@ def _search(codes, weights, g, parent, stamp, padded, start, goal, neutral, use_
     goal_r, goal_c = goal // padded, goal % padded
     heads = np.full(buckets, -1, np.int64)
     ring, inverse = buckets - 1, 1.0 / padded
-    # the entries (cells): linked lists through a pool whose consumed entries are reused
-    pool_item, pool_next = np.empty(4096, np.int64), np.empty(4096, np.int64)
+    # the entries (cell, next entry): linked lists through a pool whose consumed entries are reused
+    pool = np.empty((4096, 2), np.int64)
     pool_used, free = 1, -1
-    pool_item[0], pool_next[0] = start, -1
-    g[start], stamp[start], parent[start] = 0.0, base, -1
-    f0 = neutral * _octile(start // padded, start % padded, goal_r, goal_c) if use_heuristic else 0.0
+    pool[0, 0], pool[0, 1] = start, -1
+    reached, closed = base, base + 1
+    g[start], stamp[start] = 0.0, reached
+    f0 = _heuristic(start, inverse, padded, goal_r, goal_c, neutral) if use_heuristic else 0.0
     heads[0] = 0
-    bucket, pending, expanded, closed = 0, 1, 0, base + 1
+    bucket, pending, expanded = 0, 1, 0
     goal_cost = 0.0 if start == goal else np.inf
-    step_r = (-1, 1, 0, 0, -1, -1, 1, 1)
-    step_c = (0, 0, -1, 1, -1, 1, -1, 1)
     while pending > 0:
         slot = bucket & ring
         if f0 + (bucket - 1) / per_bucket >= goal_cost:   # (one bucket late: f's rounding)
             break
         while heads[slot] >= 0:
             e = heads[slot]
-            u = pool_item[e]
-            heads[slot] = pool_next[e]
-            pool_next[e], free = free, e
+            u = pool[e, 0]
+            heads[slot] = pool[e, 1]
+            pool[e, 1], free = free, e
             pending -= 1
             if stamp[u] == closed:
                 continue   # expanded already since this entry was made
             gu = g[u]
-            ur = int(u * inverse)   # u // padded without a division, corrected for rounding
-            uc = u - ur * padded
-            if uc < 0:
-                ur, uc = ur - 1, uc + padded
-            elif uc >= padded:
-                ur, uc = ur + 1, uc - padded
-            hu = neutral * _octile(ur, uc, goal_r, goal_c) if use_heuristic else 0.0
-            if gu + hu >= goal_cost:
+            if goal_cost < np.inf and gu + (_heuristic(u, inverse, padded, goal_r, goal_c, neutral)
+                                            if use_heuristic else 0.0) >= goal_cost:
                 continue   # cannot lead to a cheaper goal
             stamp[u] = closed
             expanded += 1
-            up, down = codes[u - padded] != IMPASSABLE, codes[u + padded] != IMPASSABLE
-            left, right = codes[u - 1] != IMPASSABLE, codes[u + 1] != IMPASSABLE
+            if pool_used + 8 > pool.shape[0]:   # room for this expansion's entries
+                pool = _grown(pool)
+            up, down, left, right = codes[u - padded], codes[u + padded], codes[u - 1], codes[u + 1]
             for k in range(8):
                 if k == 0:
-                    ok = up
+                    v, code = u - padded, up
                 elif k == 1:
-                    ok = down
+                    v, code = u + padded, down
                 elif k == 2:
-                    ok = left
+                    v, code = u - 1, left
                 elif k == 3:
-                    ok = right
-                elif k == 4:   # a diagonal step needs both cells beside it passable
-                    ok = up and left
-                elif k == 5:
-                    ok = up and right
-                elif k == 6:
-                    ok = down and left
-                else:
-                    ok = down and right
-                if not ok:
-                    continue
-                vr, vc = ur + step_r[k], uc + step_c[k]
-                v = vr * padded + vc
-                code = codes[v]
+                    v, code = u + 1, right
+                else:   # a diagonal step needs both cells beside it passable
+                    vertical = up if k < 6 else down
+                    side = left if k % 2 == 0 else right
+                    if vertical == IMPASSABLE or side == IMPASSABLE:
+                        continue
+                    v = u + (-padded if k < 6 else padded) + (-1 if k % 2 == 0 else 1)
+                    code = codes[v]
                 if code == IMPASSABLE:
                     continue
                 w = weights[code]
-                candidate = gu + (w if k < 4 else w * 1.4142135623730951)
-                if stamp[v] >= base and candidate >= g[v] * ROUNDING:
+                candidate = gu + (w if k < 4 else w * SQRT2)
+                if stamp[v] >= reached and candidate >= g[v] * ROUNDING:
                     continue
-                g[v], parent[v], stamp[v] = candidate, u, base   # reached, or open again
+                g[v], stamp[v] = candidate, reached   # reached, or open again
                 if v == goal:
                     goal_cost = candidate
                     continue   # nothing beyond the goal can make it cheaper
-                h = neutral * _octile(vr, vc, goal_r, goal_c) if use_heuristic else 0.0
+                h = _heuristic(v, inverse, padded, goal_r, goal_c, neutral) if use_heuristic else 0.0
                 b = max(int((candidate + h - f0) * per_bucket), bucket)
                 if free >= 0:
-                    e, free = free, pool_next[free]
+                    e, free = free, pool[free, 1]
                 else:
-                    if pool_used == pool_item.shape[0]:
-                        pool_item, pool_next = _grown(pool_item), _grown(pool_next)
                     e, pool_used = pool_used, pool_used + 1
                 target = b & ring
-                pool_item[e], pool_next[e] = v, heads[target]
+                pool[e, 0], pool[e, 1] = v, heads[target]
                 heads[target] = e
                 pending += 1
         bucket += 1
@@ -198,39 +192,58 @@ def _search(codes, weights, g, parent, stamp, padded, start, goal, neutral, use_
 
 
 @njit(cache=True)
-def _grown(array):
-    out = np.empty(2 * array.shape[0], array.dtype)
-    out[:array.shape[0]] = array
+def _grown(pool):
+    out = np.empty((2 * pool.shape[0], pool.shape[1]), pool.dtype)
+    out[:pool.shape[0]] = pool
     return out
 
 
 @njit(cache=True)
-def _trace(parent, goal):
-    """Padded indices from the start to `goal`, following parents."""
-    count, u = 1, goal
-    while parent[u] >= 0:
-        u = parent[u]
-        count += 1
-    out = np.empty(count, np.int64)
-    u = goal
-    for i in range(count - 1, -1, -1):
-        out[i] = u
-        u = parent[u]
-    return out
+def _descend(codes, weights, g, stamp, padded, start, goal, reached, neutral):
+    """Padded indices from the start to `goal` (reached by the last search): from the goal, step
+    to the neighbour whose cost-to-come plus the step into the current cell is least, until the
+    start. That neighbour is the one the search came from (or one as cheap): the cost-to-come of
+    a cell the path passes is final, so the costs fall strictly along it (every step costs at
+    least neutral_cost) down to the start's 0."""
+    out = np.empty(int(g[goal] / neutral) + 2, np.int64)   # every step costs at least neutral
+    out[0], count, u = goal, 1, goal
+    while u != start:
+        up, down = codes[u - padded] != IMPASSABLE, codes[u + padded] != IMPASSABLE
+        left, right = codes[u - 1] != IMPASSABLE, codes[u + 1] != IMPASSABLE
+        w = weights[codes[u]]
+        best, best_cost = -1, np.inf
+        for k in range(8):
+            if k < 4:
+                v = u + (-padded, padded, -1, 1)[k]
+                step = w
+            else:   # the corner rule holds both ways: the same two cells lie beside the step
+                vertical = up if k < 6 else down
+                side = left if k % 2 == 0 else right
+                if not (vertical and side):
+                    continue
+                v = u + (-padded if k < 6 else padded) + (-1 if k % 2 == 0 else 1)
+                step = w * SQRT2
+            if stamp[v] < reached or (codes[v] == IMPASSABLE and v != start):
+                continue
+            if g[v] + step < best_cost:
+                best, best_cost = v, g[v] + step
+        out[count], count, u = best, count + 1, best
+    return out[:count][::-1].copy()
 
 
 class Workspace:
     """The search's per-cell data, allocated once per costmap size and reused (allocating it for a
     building-sized map would cost more than a typical search): the padded cells' codes, and per
-    cell the cost-to-come, parent and stamp of the searches. The codes are rebuilt only when the
+    cell the cost-to-come and the stamp of the searches. The stamp is one byte (it fits the
+    processor's second-level cache with the codes, and a relaxation of a cell not yet reached reads
+    nothing else); when its values run out it is cleared. The codes are rebuilt only when the
     costs or the passability parameters differ from the last search's."""
 
     def __init__(self):
         self.shape: tuple[int, int] = (0, 0)
         self.codes = np.zeros(0, np.uint8)
         self.g = np.zeros(0)
-        self.parent = np.zeros(0, np.int32)
-        self.stamp = np.zeros(0, np.int32)
+        self.stamp = np.zeros(0, np.uint8)
         self.weights = np.zeros(256)
         self.base = 0
         self._codes_for: tuple | None = None
@@ -241,14 +254,16 @@ class Workspace:
         if costs.shape != self.shape:
             self.shape = costs.shape
             size = (costs.shape[0] + 2) * (costs.shape[1] + 2)
-            self.codes, self.g = np.empty(size, np.uint8), np.zeros(size)
-            self.parent, self.stamp = np.zeros(size, np.int32), np.zeros(size, np.int32)
+            self.codes, self.g, self.stamp = np.empty(size, np.uint8), np.zeros(size), np.zeros(size, np.uint8)
             self.base, self._codes_for, self._costs = 0, None, None
         key = (params.lethal_cost, params.allow_unknown, params.outline_map)
         if key != self._codes_for or not np.array_equal(costs, self._costs):
             _fill_codes(kernel_costs(costs), int(params.lethal_cost), params.allow_unknown, params.outline_map, self.codes)
             self._codes_for, self._costs = key, costs.copy()
         self.weights = _weights(params)
+        if self.base + 3 > np.iinfo(self.stamp.dtype).max:   # no stamps left: every cell untouched again
+            self.stamp[:] = 0
+            self.base = 0
         self.base += 2
         return self.base
 
@@ -272,10 +287,17 @@ class Search:
     expanded: int
     workspace: Workspace
     base: int
+    start: int          # the start's padded index
+    neutral: float      # the least a step costs
 
     def path(self, cell: tuple[int, int]) -> np.ndarray:
         """(row, col) of the cells from the start to a reached cell."""
-        return self.workspace.cells(_trace(self.workspace.parent, self.workspace.flat(*cell)))
+        if self.cost(cell) == math.inf:   # the descent needs this search's cost-to-come at its start
+            raise ValueError(f"cell {cell} was not reached by the search")
+        workspace = self.workspace
+        return workspace.cells(_descend(workspace.codes, workspace.weights, workspace.g, workspace.stamp,
+                                        workspace.shape[1] + 2, self.start, workspace.flat(*cell), self.base,
+                                        self.neutral))
 
     def expanded_mask(self) -> np.ndarray:
         """(H, W): the cells expanded; after an exhausted search, exactly the reachable cells."""
@@ -301,10 +323,11 @@ def search(costs: np.ndarray, start: tuple[int, int], goal: tuple[int, int], par
     neutral = float(params.neutral_cost)
     per_bucket = BUCKETS_PER_STEP / neutral
     steepest = (neutral + params.cost_factor * (params.lethal_cost - 1) + neutral) * SQRT2   # f's largest rise
-    found, expanded = _search(workspace.codes, workspace.weights, workspace.g, workspace.parent, workspace.stamp,
-                              costs.shape[1] + 2, workspace.flat(*start), workspace.flat(*goal), neutral, not dijkstra,
-                              base, per_bucket, 1 << (int(steepest * per_bucket) + 3).bit_length())
-    return Search(bool(found), int(expanded), workspace, base)
+    origin = workspace.flat(*start)
+    found, expanded = _search(workspace.codes, workspace.weights, workspace.g, workspace.stamp, costs.shape[1] + 2, origin,
+                              workspace.flat(*goal), neutral, not dijkstra, base, per_bucket,
+                              1 << (int(steepest * per_bucket) + 3).bit_length())
+    return Search(bool(found), int(expanded), workspace, base, origin, neutral)
 
 
 # ---------------------------------------------------------------- orientations

@@ -64,9 +64,18 @@ def _smooth(points, bounds, costs, w_data, w_smooth, max_iterations, tolerance):
     height, width = costs.shape
     out = points.copy()
     n = points.shape[0]
+    # changed[j]: point j moved at its last update. A point whose inputs (itself and both
+    # neighbours) did not change since its last update would be proposed the same move and get
+    # the same answer, so it is skipped: on straight runs, which the smoothing leaves where they are,
+    # that is most of the path. Updated in place, changed[i - 1] already says this sweep's news.
+    changed = np.ones(n, np.bool_)
+    changed[0] = changed[n - 1] = False
     for _ in range(max_iterations):
         moved = 0.0
         for i in range(1, n - 1):
+            if not (changed[i - 1] or changed[i] or changed[i + 1]):
+                continue
+            changed[i] = False
             pu = out[i, 0] + w_data * (points[i, 0] - out[i, 0]) \
                 + w_smooth * (out[i - 1, 0] + out[i + 1, 0] - 2.0 * out[i, 0])
             pv = out[i, 1] + w_data * (points[i, 1] - out[i, 1]) \
@@ -80,6 +89,7 @@ def _smooth(points, bounds, costs, w_data, w_smooth, max_iterations, tolerance):
             if segment_max_cost(costs, pu, pv, out[i + 1, 0], out[i + 1, 1]) > max(bounds[i], bounds[i + 1]):
                 continue
             moved = max(moved, math.hypot(pu - out[i, 0], pv - out[i, 1]))
+            changed[i] = pu != out[i, 0] or pv != out[i, 1]
             out[i, 0], out[i, 1] = pu, pv
         if moved < tolerance:
             break
