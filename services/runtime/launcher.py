@@ -38,7 +38,7 @@ import zenoh
 from ...schemas.keys import KeyLayout
 from .acl import (CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, union, write_passwords,
                   write_puts)
-from .child import Child, ChildDied
+from .child import Answers, Child, ChildDied
 from .compose import Compose, ComposeError, ProcessSpec, load_compose
 from ...parameters.declare import ParamError
 from .service_registry import UnknownService
@@ -246,6 +246,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run in lockstep with the simulator (services/runtime/lockstep.py): the same "
                              "messages at any machine load, as fast as the services compute; the sim waits "
                              "for every service and for ALSO (comma-separated clients such as navigate)")
+    parser.add_argument("--prepared", action="store_true",
+                        help="take what `prepare` makes of the compose file (loaded, then every identity's "
+                             "rights) pickled on stdin rather than from a child of its own: navigate makes it "
+                             "in the child that checks its goals, while up starts")
 
 
 def build_nodes(compose: Compose) -> dict[str, Node]:
@@ -336,7 +340,8 @@ def identity_names(compose: Compose) -> list[str]:
 
 def main(args: argparse.Namespace) -> int:
     out = Output()
-    with Child(prepare, Path(args.compose)) as child:
+    preparation = Answers(sys.stdin.buffer, "prepare") if args.prepared else Child(prepare, Path(args.compose))
+    with preparation as child:
         try:
             loaded: Loaded = child.next()
             compose = loaded.compose
@@ -351,7 +356,7 @@ def main(args: argparse.Namespace) -> int:
         return _launch(args, out, child, loaded, endpoint, users)
 
 
-def _launch(args: argparse.Namespace, out: Output, child: Child, loaded: Loaded, endpoint: str, users: list[str]) -> int:
+def _launch(args: argparse.Namespace, out: Output, child: Answers, loaded: Loaded, endpoint: str, users: list[str]) -> int:
     compose = loaded.compose
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
