@@ -65,8 +65,9 @@ class Child(Answers):
         return f" (exit {self.proc.wait()})"
 
     def relay(self, sink: IO[bytes]) -> threading.Thread:
-        """Copy the answers not yet read onto sink as they come, in a thread, and close it after the
-        last: the process reading sink takes them as Answers (`up --prepared` those of navigate's child)."""
+        """Copy the answers not yet read onto sink as they come, in a thread, close it after the last
+        and reap the child: the process reading sink takes them as Answers (`up --prepared` those of
+        navigate's child)."""
         def copy() -> None:
             try:
                 while chunk := self.stream.read1(1 << 16):
@@ -76,6 +77,7 @@ class Child(Answers):
                 pass
             with contextlib.suppress(BrokenPipeError):
                 sink.close()
+            self.proc.wait()        # reaped now, not left in the process table for the run
         thread = threading.Thread(target=copy, name=f"relay-{self.what}", daemon=True)
         thread.start()
         return thread
