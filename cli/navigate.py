@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import os
 import queue
@@ -355,6 +356,9 @@ def check_and_prepare(map_file: Path, world: World, goals: np.ndarray, compose: 
 
     check_goals(map_file, world, goals)
     yield None
+    # what loading and building say (parameters without effect…) each service says again in
+    # services.log as it starts; here it would land on navigate's terminal
+    logging.disable(logging.WARNING)
     compose_file.write_text(yaml.safe_dump(compose, sort_keys=False))
     yield from prepare(compose_file)
 
