@@ -8,6 +8,7 @@ $(STAMP): pyproject.toml
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
 	$(PY) -m pip install --quiet -e '.[test,rosbag]'
+	$(VENV)/bin/omninav warm
 	touch $(STAMP)
 
 venv: $(STAMP)

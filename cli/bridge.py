@@ -178,4 +178,4 @@ def main(args: argparse.Namespace) -> int:
         compose = Path(folder) / "ros2_robot.yaml"
         compose.write_text(yaml.safe_dump(data, sort_keys=False))
         return launcher.main(argparse.Namespace(compose=str(compose), router=None, duration=args.duration,
-                                                credentials=args.credentials, lockstep=None))
+                                                credentials=args.credentials, lockstep=None, prepared=False))

@@ -12,6 +12,7 @@ COMMANDS: dict[str, tuple[str, str]] = {
     "container": ("omninav.services.runtime.container", "run several services of a compose file in one process"),
     "router": ("omninav.cli.router", "run a Zenoh router on loopback"),
     "services": ("omninav.cli.services", "list the services that can be run"),
+    "warm": ("omninav.cli.warm", "compile the services' numba kernels into the cache (make venv runs it)"),
     "up": ("omninav.services.runtime.launcher", "start a compose file: router + services as processes"),
     "record": ("omninav.services.recorder.cli", "record messages on the bus to MCAP"),
     "recover": ("omninav.services.recorder.recover", "rewrite a damaged MCAP file with what is readable"),

@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import logging
 import math
 import os
 import queue
@@ -48,7 +49,7 @@ from ..services.chassis.kinematics import DRIVES
 from ..services.map_server.mapio import MapError, load_map, save_map
 from ..experiments.mission_score import TERMINAL, MissionError, load_mission, summarize_mission, summary_lines
 from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
-from ..services.runtime.child import call_in_child
+from ..services.runtime.child import Child, call_in_child
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..experiments.lockstep_mission import GoalSequencer
 from ..services.runtime.live import LiveRunner, tokens_present
@@ -346,6 +347,22 @@ def check_goals(map_file: Path, world: World, goals: np.ndarray) -> None:
         raise NavigateError(f"on the map {map_file}: " + "; ".join(problems))
 
 
+def check_and_prepare(map_file: Path, world: World, goals: np.ndarray, compose: dict, compose_file: Path):
+    """In a child process: yields None once the goals are checked (check_goals), then writes the
+    compose file and yields what `up` makes of it (launcher.prepare: the file loaded, then every
+    identity's rights): `up --prepared` takes them, so one child imports the stack, not two, and
+    `up` builds no Node to open its router."""
+    from ..services.runtime.launcher import prepare
+
+    check_goals(map_file, world, goals)
+    yield None
+    # what loading and building say (parameters without effect…) each service says again in
+    # services.log as it starts; here it would land on navigate's terminal
+    logging.disable(logging.WARNING)
+    compose_file.write_text(yaml.safe_dump(compose, sort_keys=False))
+    yield from prepare(compose_file)
+
+
 def check_numbers(args: argparse.Namespace) -> None:
     for name, value in (("--timeout", args.timeout), ("--rate", 1.0 if args.rate is None else args.rate)):
         if not (math.isfinite(value) and value > 0):
@@ -483,17 +500,21 @@ def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot:
     return False
 
 
-def start_stack(compose_file: Path, router: str, log: Path, lockstep: bool) -> subprocess.Popen:
-    """`up` with the ACL on; this process's sessions use the run's operator identity (goals, cancels).
-    In lockstep the sim also waits for this process's goal sequencer ("navigate")."""
+def start_stack(compose_file: Path, router: str, log: Path, lockstep: bool, preparing: Child) -> subprocess.Popen:
+    """`up` with the ACL on, handed the compose file as `preparing` prepares it (check_and_prepare);
+    this process's sessions use the run's operator identity (goals, cancels). In lockstep the sim
+    also waits for this process's goal sequencer ("navigate")."""
     credentials = compose_file.parent / "credentials"
     shutil.rmtree(credentials, ignore_errors=True)     # a previous run's passwords are not this run's
     os.environ[CREDENTIALS_ENV] = str(credentials / OPERATOR)
     with open(log, "wb") as sink:
-        return subprocess.Popen([sys.executable, "-m", "omninav.cli.main", "up", str(compose_file), "--router", router,
-                                 "--credentials", str(credentials),
-                                 *(["--lockstep", GoalSequencer.service] if lockstep else [])],
-                                cwd=REPO, stdout=sink, stderr=subprocess.STDOUT, start_new_session=True)
+        up = subprocess.Popen([sys.executable, "-m", "omninav.cli.main", "up", str(compose_file), "--router", router,
+                               "--credentials", str(credentials), "--prepared",
+                               *(["--lockstep", GoalSequencer.service] if lockstep else [])],
+                              cwd=REPO, stdin=subprocess.PIPE, stdout=sink, stderr=subprocess.STDOUT,
+                              start_new_session=True)
+    preparing.relay(up.stdin)
+    return up
 
 
 def stop_stack(up: subprocess.Popen) -> int:
@@ -528,8 +549,7 @@ def main(args: argparse.Namespace) -> int:
         (lambda text: print(f"navigate: {text}", file=sys.stderr if args.json else sys.stdout, flush=True))
 
     map_file = map_for(world, args.world, out)
-    call_in_child(check_goals, map_file, world, goals)
-    say(f"{len(goals)} goal(s) checked on the map {map_file.name}: free for the footprint and reachable from the start")
+    checked = f"{len(goals)} goal(s) checked on the map {map_file.name}: free for the footprint and reachable from the start"
     state_dir = None if args.in_process else out / "state"      # in one process nothing is restarted
     if state_dir is not None:
         shutil.rmtree(state_dir, ignore_errors=True)           # a previous run's state is not this run's to resume
@@ -541,13 +561,20 @@ def main(args: argparse.Namespace) -> int:
     if args.composed:
         compose["services"] = in_containers(compose["services"], args.composed)
     compose_file = out / "compose.yaml"
-    compose_file.write_text(yaml.safe_dump(compose, sort_keys=False))
-    say(f"{len(compose['services'])} services ({args.localization} localization, {drive} drive) in {world.name}")
+    summary_of = f"{len(compose['services'])} services ({args.localization} localization, {drive} drive) in {world.name}"
     if args.in_process:
+        call_in_child(check_goals, map_file, world, goals)
+        say(checked)
+        compose_file.write_text(yaml.safe_dump(compose, sort_keys=False))
+        say(summary_of)
         summary = run_in_process(compose, world, goals, args, recording, say)
         print_summary(summary, args.json)
         return 0 if summary.success else 1
-    problem = run_processes(compose, compose_file, args, recording, log, goals, say)
+    with Child(check_and_prepare, map_file, world, goals, compose, compose_file) as preparing:
+        preparing.next()
+        say(checked)
+        say(summary_of)
+        problem = run_processes(compose, compose_file, args, recording, log, goals, say, preparing)
     names = tuple(s["name"] for s in compose["services"])
     try:
         summary = summarize_mission(load_mission(recording, args.robot, names), world, goals_total=len(goals),
@@ -582,15 +609,15 @@ def run_in_process(compose: dict, world: World, goals: np.ndarray, args: argpars
 
 
 def run_processes(compose: dict, compose_file: Path, args: argparse.Namespace, recording: Path, log: Path,
-                  goals: np.ndarray, say) -> str:
-    """Every service its own process under `omninav up`; the goals sent over the bus. Returns why the
-    mission was given up, or ''."""
+                  goals: np.ndarray, say, preparing: Child) -> str:
+    """Every service its own process under `omninav up`, which takes the compose file as `preparing`
+    prepares it; the goals sent over the bus. Returns why the mission was given up, or ''."""
     names = [s["name"] for s in compose["services"]]
 
     # $OMNINAV_ROUTER names the mission's router, so `omninav view` can join it; else any free port
     router = router_endpoint() if os.environ.get(ROUTER_ENV) else free_loopback_endpoint()
     say(f"starting them as processes on the router {router}; log {log}")
-    up = start_stack(compose_file, router, log, args.lockstep)
+    up = start_stack(compose_file, router, log, args.lockstep, preparing)
     problem = ""
     try:
         # `up` validates the compose file (exit 2 naming the key) while the services start

@@ -16,9 +16,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 
 from ..schemas.messages import OccupancyGrid
+from ..geometry.distance import distances_to
 from ..geometry.footprint import cells_inside, pad, radii, transform
 from ..services.global_planner.astar import GlobalPlanner
 from ..services.global_planner.params import GlobalPlannerParams
@@ -82,7 +82,7 @@ def mission_problems(grid: OccupancyGrid, footprint, start, goals,
     resolution = grid.info.resolution
     # a cell is lethal when the disk around its centre reaches a blocked cell (whose centre is half
     # a cell inside its edge)
-    room = ndimage.distance_transform_edt(~blocked) * resolution
+    room = distances_to(blocked) * resolution
     costs = np.where(room < inscribed + resolution / 2, LETHAL, 0).astype(np.uint8)
     planner = GlobalPlanner(PATH_SEARCH)
     for what, goal in standing:

@@ -67,3 +67,11 @@ def nearest_cells(sources):
             cols[row, col] = nearest
             rows[row, col] = column_rows[nearest] if nearest >= 0 else -1
     return squared, rows, cols
+
+
+def distances_to(sources: np.ndarray) -> np.ndarray:
+    """(H, W) float64 distance in cells from each cell's centre to the nearest source cell's (0 on
+    them, inf without any): scipy.ndimage.distance_transform_edt(~sources) to the bit (both take the
+    square root of the same whole number), without importing scipy.ndimage, 0.2 CPU s in each
+    process that would (the localizer, the tracker, the local planner)."""
+    return np.sqrt(nearest_cells(np.ascontiguousarray(sources, np.bool_))[0])

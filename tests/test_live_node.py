@@ -1,4 +1,6 @@
 """A service as its own OS process on the bus: data flows, `get` answers, SIGINT stops it cleanly."""
+import time
+
 from omninav.schemas import decode
 from omninav.schemas.messages import Chatter
 from omninav.services.runtime.zenoh_config import open_client
@@ -32,3 +34,34 @@ def test_unknown_service_and_bad_parameter_fail_clearly(processes):
     assert bad.wait(30) == 2 and "unknown service 'nosuch'" in processes.log_of(bad)
     bad = processes.omninav("run", "listener", "--set", "gian=2")
     assert bad.wait(30) == 2 and "unknown parameter 'gian' (did you mean 'gain'?)" in processes.log_of(bad)
+
+
+def test_a_source_started_by_up_waits_for_the_listeners_tokens_before_it_declares_or_says_anything(
+        router_endpoint, monkeypatch):
+    """`up` starts every process at once; a source holds back until the services it lists are ready."""
+    import threading
+
+    from omninav.schemas.keys import KeyLayout
+    from omninav.services.demo.talker import Talker, TalkerParams
+    from omninav.services.runtime.live import LISTENERS_ENV, LiveRunner
+
+    keys = KeyLayout("r1")
+    monkeypatch.setenv(LISTENERS_ENV, f"{keys.alive('listener')},{keys.alive('recorder')}")
+    runner = LiveRunner(Talker(TalkerParams(), robot="r1"), router_endpoint)
+    heard = []
+    with open_client(router_endpoint) as session:
+        session.declare_subscriber(keys.robot("chatter"), lambda s: heard.append(s))
+        thread = threading.Thread(target=runner.run, daemon=True)
+        thread.start()
+        try:
+            listener = session.liveliness().declare_token(keys.alive("listener"))
+            time.sleep(1.0)     # one of the two: the talker still waits, its token undeclared
+            assert not heard and not list(session.liveliness().get(keys.alive("talker"), timeout=1.0))
+            recorder = session.liveliness().declare_token(keys.alive("recorder"))
+            wait_until(lambda: heard, 10, what="the talker's chatter once both listeners are ready")
+            assert list(session.liveliness().get(keys.alive("talker"), timeout=1.0))
+            listener.undeclare()
+            recorder.undeclare()
+        finally:
+            runner.stop()
+            thread.join(10)

@@ -48,10 +48,10 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy import ndimage
 
 from ...schemas.messages import MapMetaData
 from ..costmap.layers import LETHAL_OBSTACLE
+from ...geometry.distance import distances_to
 from ...geometry.se2 import wrap_angle
 from ...geometry.polygons import densify
 from .dwa import local_path
@@ -80,8 +80,8 @@ def clearance_field(costs: np.ndarray, resolution: float) -> np.ndarray:
     blocked = costs >= LETHAL_OBSTACLE
     if not blocked.any():
         return np.full(costs.shape, FAR)
-    outside = ndimage.distance_transform_edt(~blocked)
-    inside = ndimage.distance_transform_edt(blocked)
+    outside = distances_to(blocked)
+    inside = distances_to(~blocked)
     return np.where(blocked, 0.5 - inside, outside - 0.5) * resolution
 
 

@@ -30,9 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 from numba import njit
-from scipy import ndimage
 
 from ...schemas.messages import LaserScan, OccupancyGrid
+from ...geometry.distance import distances_to
 from ...geometry.raycast import cast_grid
 from ...geometry.grid import grid_coords
 from .params import AmclParams, BeamModelParams, LikelihoodFieldProbParams
@@ -256,7 +256,7 @@ class LaserModel:
         data = np.asarray(grid.data)
         occupied = data == OCCUPIED
         if occupied.any():
-            cells = ndimage.distance_transform_edt(~occupied)
+            cells = distances_to(occupied)
             distance = np.minimum(cells * self.resolution, params.laser_likelihood_max_dist)
         else:
             distance = np.full(data.shape, params.laser_likelihood_max_dist)
@@ -306,6 +306,7 @@ def warm_up() -> None:
     params = AmclParams()
     grid = OccupancyGrid()
     grid.data = np.zeros((2, 2), np.int8)
+    grid.data[0, 0] = OCCUPIED      # so the field's distance transform is loaded too
     grid.info.width = grid.info.height = 2
     scan = prepare_scan(np.ones(3), -1.0, 1.0, 0.1, 5.0, params)
     poses, weights = np.zeros((1, 3)), np.ones(1)

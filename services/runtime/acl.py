@@ -4,7 +4,8 @@ Zenoh does the enforcing: clients authenticate with user/password (transport/aut
 router checks them against a dictionary file and applies `access_control` with
 default_permission "deny". The rules are built from what each Node declares: it may put on its
 outputs and its diagnostics key, subscribe to its inputs, answer its queryables and declare its
-liveliness token — nothing else. Measured on zenoh 1.10 (tests/test_acl.py):
+liveliness token — nothing else, but for watching the others' tokens where it must (the lockstep
+coordinator; a source, which waits for the listeners before its first message). Measured on zenoh 1.10 (tests/test_acl.py):
 - a publisher must be allowed to *learn* of the subscribers (egress declare_subscriber), or its
   puts are never sent: without that rule a put is dropped without a word. A rule matches a
   declaration only if it includes the declared expression, so a publisher of omninav/r1/odom learns
@@ -46,11 +47,13 @@ def node_grants(node: Node) -> Grants:
     """What a service may do: exactly what its Node declared."""
     keys = node.keys
     follows = (keys.lockstep_of_all(),) if node.coordinates_lockstep else ()
+    # a source asks which services are ready before its first message (live.LISTENERS_ENV)
+    watches = follows or node.pace_s() is not None
     return Grants(put=(*node.outputs, node.diagnostics.key, keys.lockstep(node.name)),
                   subscribe=(*node.subscriptions(), *follows), queryable=tuple(node.queryables),
                   # watching liveliness is read-only; a rule on the token expression alone did not
                   # pass a token's deletion to the coordinator (measured: `up --lockstep` waited on)
-                  token=(keys.alive(node.name),), watch=(ALL,) if follows else ())
+                  token=(keys.alive(node.name),), watch=(ALL,) if watches else ())
 
 
 def union(grants: Iterable[Grants]) -> Grants:

@@ -21,10 +21,9 @@ import logging
 import signal
 import sys
 import threading
-import time
 
 from .compose import ComposeError, load_compose
-from .live import LiveRunner, deliver, received_from, tokens_present
+from .live import LiveRunner, await_tokens, deliver, received_from
 from .node import Node
 from ...parameters.declare import ParamError
 from .service_registry import UnknownService
@@ -55,7 +54,8 @@ class Container:
 
     def run(self) -> None:
         """Run every service until stop(); sources (the sim, which set the pace) only once the others
-        are ready, so they hear from the first tick, as `up` orders processes. At the end stop them in
+        are ready, so they hear from the first tick (and, started by `up`, once the other processes'
+        listeners are: LiveRunner waits for $OMNINAV_LISTENERS). At the end stop them in
         reverse order, each finished (its last inputs processed, its final Diagnostic out) before the
         next is asked."""
         with open_client(self.router) as session:
@@ -67,11 +67,8 @@ class Container:
             first = [r for r in self.runners if r.node.pace_s() is None]
             for runner in first:
                 threads[id(runner)].start()
-            waiting = {runner.node.keys.alive(runner.node.name) for runner in first}
-            deadline = time.monotonic() + READY_TIMEOUT_S
-            while waiting and not self.stopping.is_set() and time.monotonic() < deadline and not self.failed:
-                waiting -= tokens_present(session, waiting)
-                self.stopping.wait(0.05)
+            await_tokens(session, {runner.node.keys.alive(runner.node.name) for runner in first}, READY_TIMEOUT_S,
+                         lambda: self.stopping.is_set() or bool(self.failed))
             for runner in self.runners:
                 if runner not in first:
                     threads[id(runner)].start()

@@ -13,6 +13,10 @@ only what its Node declares.
 The compose file is loaded and every Node built (to read what it declares) in a child process
 (`prepare`, child.py), which hands over plain data and ends: its imports — numba, scipy, pymunk —
 with the maps and JIT caches the Nodes load are over 100 MB this process would hold for the run.
+Every process starts as soon as the file is loaded, all at once, while the child builds the Nodes
+for the ACL; they connect when the router opens. A source (a Node with a pace of its own: the sim)
+waits for the liveliness tokens of every service without one before it declares anything
+($OMNINAV_LISTENERS, live.py), so its first messages find everyone listening.
 """
 from __future__ import annotations
 
@@ -34,12 +38,12 @@ import zenoh
 from ...schemas.keys import KeyLayout
 from .acl import (CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, union, write_passwords,
                   write_puts)
-from .child import Child, ChildDied
+from .child import Answers, Child, ChildDied
 from .compose import Compose, ComposeError, ProcessSpec, load_compose
 from ...parameters.declare import ParamError
 from .service_registry import UnknownService
 from .node import Node
-from .live import tokens_present
+from .live import LISTENERS_ENV, tokens_present
 from .lockstep import LOCKSTEP_ENV, Lockstep, service_names
 from .run import build_node
 from .zenoh_config import ROUTER_ENV, open_router, router_endpoint
@@ -52,7 +56,6 @@ START_WINDOW_S = 10.0    # a first run that exits with an error sooner than this
 STOP_TIMEOUT_S = 10.0    # after SIGINT, then SIGKILL (a process's own: the longest its services ask for)
 TAIL_LINES = 20          # output lines kept per service, shown when it cannot start
 _POLL_S = 0.1
-SOURCES_WAVE = 2
 _READY_TIMEOUT_S = 60.0     # numba warm-up and imports on a loaded 2-core machine take a while
 
 
@@ -97,9 +100,9 @@ class Supervised:
     process, restart bookkeeping and output."""
 
     def __init__(self, spec: ProcessSpec, endpoint: str, params_dir: Path, credentials: Path, out: Output,
-                 wave: int = 1, stop_timeout_s: float = STOP_TIMEOUT_S):
+                 listeners: tuple[str, ...] = (), stop_timeout_s: float = STOP_TIMEOUT_S):
         self.spec, self.name, self.endpoint, self.out = spec, spec.name, endpoint, out
-        self.wave = wave        # start order (start_wave): the processes of a wave start together
+        self.listeners = listeners      # the tokens its sources wait for (Loaded.listeners)
         self.stop_timeout_s = stop_timeout_s
         self.credentials = credentials / spec.name
         self.params_file = self._write_params(params_dir)
@@ -142,7 +145,8 @@ class Supervised:
         return cmd
 
     def start(self) -> None:
-        env = {**os.environ, ROUTER_ENV: self.endpoint, CREDENTIALS_ENV: str(self.credentials), "PYTHONUNBUFFERED": "1"}
+        env = {**os.environ, ROUTER_ENV: self.endpoint, CREDENTIALS_ENV: str(self.credentials),
+               LISTENERS_ENV: ",".join(self.listeners), "PYTHONUNBUFFERED": "1"}
         self.proc = subprocess.Popen(self.command(), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                      stderr=subprocess.STDOUT, env=env, process_group=0)
         self.runs += 1
@@ -242,6 +246,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run in lockstep with the simulator (services/runtime/lockstep.py): the same "
                              "messages at any machine load, as fast as the services compute; the sim waits "
                              "for every service and for ALSO (comma-separated clients such as navigate)")
+    parser.add_argument("--prepared", action="store_true",
+                        help="take what `prepare` makes of the compose file (loaded, then every identity's "
+                             "rights) pickled on stdin rather than from a child of its own: navigate makes it "
+                             "in the child that checks its goals, while up starts")
 
 
 def build_nodes(compose: Compose) -> dict[str, Node]:
@@ -260,12 +268,12 @@ def build_nodes(compose: Compose) -> dict[str, Node]:
     return nodes
 
 
-def identities(compose: Compose, nodes: dict[str, Node] | None = None) -> dict[str, Grants]:
+def identities(compose: Compose) -> dict[str, Grants]:
     """Every identity of a run and what it may do: each process's from the declarations of its
-    services' Nodes (`nodes`, else built here; a container may do what any of its services may),
-    and the hand-started clients'."""
+    services' Nodes, built here (a container may do what any of its services may), and the
+    hand-started clients'."""
     identity_names(compose)
-    nodes = build_nodes(compose) if nodes is None else nodes
+    nodes = build_nodes(compose)
     grants = client_grants(compose.robot)
     for process in compose.processes:
         grants[process.name] = union(node_grants(nodes[spec.name]) for spec in process.services)
@@ -275,34 +283,38 @@ def identities(compose: Compose, nodes: dict[str, Node] | None = None) -> dict[s
 @dataclasses.dataclass(frozen=True)
 class Loaded:
     """A compose file as `up` runs it, plain data: the specs without their Node classes, and what
-    the classes tell (lockstep_participants, each process's start_wave and stop timeout)."""
+    the classes tell (lockstep_participants, the listeners' tokens, each process's stop timeout)."""
     compose: Compose
     participants: list[str]
-    waves: dict[str, int]
+    listeners: tuple[str, ...]
     stop_timeouts: dict[str, float]
 
 
-@dataclasses.dataclass(frozen=True)
-class Declared:
-    """What the built Nodes declare: every identity's rights and each process's start_wave."""
-    grants: dict[str, Grants]
-    waves: dict[str, int]
-
-
 def prepare(compose_path: Path):
-    """Yields the compose file Loaded, then, the Nodes built, what they Declared (ComposeError
-    naming what is wrong): `up` runs it in a child process, starting the first processes between."""
+    """Yields the compose file Loaded, then, the Nodes built, every identity's rights (ComposeError
+    naming what is wrong): `up` runs it in a child process, starting the processes between."""
     compose = load_compose(compose_path)
-    classes = {p.name: [s.node_type for s in p.services] for p in compose.processes}
     plain = tuple(dataclasses.replace(s, node_type=None) for s in compose.services)
     processes = tuple(dataclasses.replace(p, services=tuple(dataclasses.replace(s, node_type=None) for s in p.services))
                       for p in compose.processes)
     yield Loaded(dataclasses.replace(compose, services=plain, processes=processes), lockstep_participants(compose),
-                 {name: start_wave(types) for name, types in classes.items()},
-                 {name: max(c.stop_timeout_s for c in types) for name, types in classes.items()})
-    nodes = build_nodes(compose)
-    yield Declared(identities(compose, nodes),
-                   {p.name: start_wave([nodes[s.name] for s in p.services]) for p in compose.processes})
+                 listeners(compose),
+                 {p.name: max(s.node_type.stop_timeout_s for s in p.services) for p in compose.processes})
+    yield identities(compose)
+
+
+def sets_its_own_pace(cls: type) -> bool:
+    """Whether a Node class may be a source: it has a pace of its own (the sim, the talker, a map
+    server that publishes once), depending on its parameters."""
+    return cls.pace_s is not Node.pace_s
+
+
+def listeners(compose: Compose) -> tuple[str, ...]:
+    """The liveliness tokens of the services that set no pace of their own: those a source waits
+    for before its first message (an instance of a class that may be a source but is not one with
+    its parameters, a map server publishing on the clock, is not waited for)."""
+    return tuple(KeyLayout(spec.robot).alive(spec.name) for spec in compose.services
+                 if not sets_its_own_pace(spec.node_type))
 
 
 def lockstep_participants(compose: Compose) -> list[str]:
@@ -328,7 +340,8 @@ def identity_names(compose: Compose) -> list[str]:
 
 def main(args: argparse.Namespace) -> int:
     out = Output()
-    with Child(prepare, Path(args.compose)) as child:
+    preparation = Answers(sys.stdin.buffer, "prepare") if args.prepared else Child(prepare, Path(args.compose))
+    with preparation as child:
         try:
             loaded: Loaded = child.next()
             compose = loaded.compose
@@ -343,7 +356,7 @@ def main(args: argparse.Namespace) -> int:
         return _launch(args, out, child, loaded, endpoint, users)
 
 
-def _launch(args: argparse.Namespace, out: Output, child: Child, loaded: Loaded, endpoint: str, users: list[str]) -> int:
+def _launch(args: argparse.Namespace, out: Output, child: Answers, loaded: Loaded, endpoint: str, users: list[str]) -> int:
     compose = loaded.compose
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -355,26 +368,22 @@ def _launch(args: argparse.Namespace, out: Output, child: Child, loaded: Loaded,
         except OSError as exc:
             out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
             return 1
-        services = [Supervised(spec, endpoint, Path(params_dir), credentials, out, loaded.waves[spec.name],
+        services = [Supervised(spec, endpoint, Path(params_dir), credentials, out, loaded.listeners,
                                loaded.stop_timeouts[spec.name])
                     for spec in compose.processes]
-        # the processes that set no pace start now: they import and build their nodes while the child
-        # builds them too (for the rights), and connect once the router is open
-        early = [s for s in services if s.wave < SOURCES_WAVE]
-        for service in early:
+        # every process starts now: they import and build their nodes while the child builds them too
+        # (for the rights), and connect once the router is open; the sources then wait for the others
+        for service in services:
             service.start()
         try:
-            declared: Declared = child.next()
+            grants: dict[str, Grants] = child.next()
             child.close()
-            write_puts(credentials, declared.grants)
-            router = open_router(endpoint, dictionary, access_control(declared.grants))
+            write_puts(credentials, grants)
+            router = open_router(endpoint, dictionary, access_control(grants))
         except (ComposeError, ChildDied, OSError, zenoh.ZError) as exc:
-            for service in reversed(early):
+            for service in reversed(services):
                 service.stop()
             return _not_started(exc, credentials, endpoint, out)
-        for service in services:
-            if service.runs == 0:
-                service.wave = declared.waves[service.name]
         with router:
             out.say(f"router listening on {endpoint}")
             out.say(f"identities in {credentials} (tools: {CREDENTIALS_ENV}={credentials / TOOL})")
@@ -405,22 +414,10 @@ def _run(services: list[Supervised], stop: threading.Event, duration: float | No
         out.say("stopped")
 
 
-def start_wave(members: list[type] | list[Node]) -> int:
-    """When a process starts: 0 with an observer (a service with its own session that listens to
-    the others: the recorder, the view), so it sees everything; SOURCES_WAVE with a source (a Node
-    with its own pace: the sim, the talker, a map server publishing once), once everyone listening
-    is ready; 1 the rest. The processes of one wave start at once and the next wave starts when all
-    of them are ready. Before the Nodes are built (their classes given) any class with a pace of its
-    own counts as a source; the built Nodes say whether they have one with their parameters."""
-    if any(m.pace_s is not Node.pace_s if isinstance(m, type) else m.pace_s() is not None for m in members):
-        return SOURCES_WAVE
-    return 0 if any(hasattr(m, "run_live") for m in members) else 1
-
-
-def _wait_ready(wave: list[Supervised], session: zenoh.Session, stop: threading.Event, out: Output) -> None:
-    """Until the liveliness token of each service of these processes appears, so what they record or
-    answer is in place before the next wave starts publishing (raises CannotStart if one dies meanwhile)."""
-    waiting = {KeyLayout(spec.robot).alive(spec.name): service for service in wave for spec in service.spec.services}
+def _wait_ready(services: list[Supervised], session: zenoh.Session, stop: threading.Event, out: Output) -> None:
+    """Until the liveliness token of each service of these processes appears (raises CannotStart if
+    one dies meanwhile), saying which did not within _READY_TIMEOUT_S."""
+    waiting = {KeyLayout(spec.robot).alive(spec.name): service for service in services for spec in service.spec.services}
     deadline = time.monotonic() + _READY_TIMEOUT_S
     while not stop.is_set() and time.monotonic() < deadline:
         for key in tokens_present(session, waiting, _POLL_S):
@@ -433,18 +430,13 @@ def _wait_ready(wave: list[Supervised], session: zenoh.Session, stop: threading.
         stop.wait(_POLL_S / 2)
     if not stop.is_set():
         late = sorted({service.name for service in waiting.values()})
-        out.say(f"{', '.join(late)} did not report ready within {_READY_TIMEOUT_S:.0f}s; starting the rest anyway")
+        out.say(f"{', '.join(late)} did not report ready within {_READY_TIMEOUT_S:.0f}s")
 
 
 def _supervise(services: list[Supervised], stop: threading.Event, duration: float | None, out: Output,
                session: zenoh.Session) -> int:
     try:
-        for wave in sorted({s.wave for s in services}):
-            starting = [s for s in services if s.wave == wave]
-            for service in starting:
-                if service.runs == 0:       # not started early (main)
-                    service.start()
-            _wait_ready(starting, session, stop, out)
+        _wait_ready(services, session, stop, out)
     except CannotStart as exc:
         return _cannot_start(exc, out)
     deadline = None if duration is None else time.monotonic() + duration

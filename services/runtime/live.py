@@ -12,10 +12,11 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import queue
 import threading
 import time
-from typing import Iterable
+from typing import Callable, Iterable
 
 import zenoh
 
@@ -33,6 +34,11 @@ _POLL_S = 0.05
 _REPORT_AGAIN_S = 0.5   # a lockstep participant's unchanged progress is repeated this often (wall)
 _STALL_LOG_S = 10.0     # a lockstep step held up this long (wall) is logged with who holds it
 RUN_STARTED = "run_started_ns"
+# set by `up` for every process it starts: the liveliness tokens (comma-separated) of the run's
+# services that set no pace of their own; a source waits for them before it declares anything, so
+# its first messages find everyone listening while every process starts at once
+LISTENERS_ENV = "OMNINAV_LISTENERS"
+LISTENERS_TIMEOUT_S = 60.0      # imports and numba caches on a loaded 2-core machine take a while
 
 
 def tokens_present(session: zenoh.Session, keys: Iterable[str], timeout_s: float = 0.5) -> set[str]:
@@ -44,6 +50,24 @@ def tokens_present(session: zenoh.Session, keys: Iterable[str], timeout_s: float
         found.update(str(reply.ok.key_expr) for reply in session.liveliness().get(expr, timeout=timeout_s)
                      if reply.ok is not None)
     return found & wanted
+
+
+def await_tokens(session: zenoh.Session, keys: Iterable[str], timeout_s: float,
+                 give_up: Callable[[], bool] = lambda: False) -> set[str]:
+    """Until each of these liveliness tokens is declared, give_up() says so, or timeout_s (wall) has
+    passed; the keys still missing."""
+    missing = set(keys)
+    deadline = time.monotonic() + timeout_s
+    while missing and not give_up() and time.monotonic() < deadline:
+        missing -= tokens_present(session, missing)
+        if missing:
+            time.sleep(_POLL_S)
+    return missing
+
+
+def listeners_from_env() -> tuple[str, ...]:
+    """The tokens a source waits for ($OMNINAV_LISTENERS); none when no launcher set them."""
+    return tuple(filter(None, os.environ.get(LISTENERS_ENV, "").split(",")))
 
 
 def _seq_of(sample) -> int | None:
@@ -96,6 +120,7 @@ class LiveRunner:
         self.node = node
         # lockstep.py: on when the launcher set OMNINAV_LOCKSTEP; the sim coordinates, the others report
         self.lockstep = lockstep if lockstep is not None else Lockstep.from_env()
+        self.listeners = listeners_from_env()
         self.barrier = Barrier(self.lockstep.wait_for) if self.lockstep and node.coordinates_lockstep else None
         self._received: dict[str, int] = {}      # key -> last seq taken (lockstep progress)
         self._reported: tuple | None = None
@@ -187,6 +212,11 @@ class LiveRunner:
             with open_client(self.router) as own:
                 self.run(own)
             return
+        if self.listeners and self.node.pace_s() is not None:
+            late = await_tokens(session, self.listeners, LISTENERS_TIMEOUT_S, self.stop_event.is_set)
+            if late and not self.stop_event.is_set():
+                self.node.log.warning("%s not ready within %.0f s; starting anyway", ", ".join(sorted(late)),
+                                      LISTENERS_TIMEOUT_S)
         handles = self._declare(session)
         self._loop()
         self._finish()

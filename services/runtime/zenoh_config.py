@@ -23,6 +23,7 @@ SHM_ENV = "OMNINAV_SHM"
 # the largest message a session receives (zenoh's default, 1 GiB: a 4000 x 4000 map of 16 MB passes);
 # LiveRunner refuses to publish anything bigger, naming the key and the size
 MAX_MESSAGE_SIZE = "transport/link/rx/max_message_size"
+CONNECT_RETRY = {"period_init_ms": 50, "period_max_ms": 100, "period_increase_factor": 2}
 _SWITCH = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": False}
 
 
@@ -98,6 +99,10 @@ def foreign_client_config(endpoint: str) -> zenoh.Config:
     conf.insert_json5("connect/endpoints", json.dumps([check_loopback(endpoint)]))
     conf.insert_json5("connect/timeout_ms", "-1")
     conf.insert_json5("connect/exit_on_failure", "false")
+    # zenoh retries a connection 1 s, then 2 s, then every 4 s: a service started before `up` opens
+    # its router (it imports and builds meanwhile) joined up to 4 s after it opened (measured 3.0 s);
+    # a refused loopback connection costs nothing, so retry every 0.1 s
+    conf.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
     return conf
 
 

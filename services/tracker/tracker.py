@@ -33,13 +33,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from numba import njit
-from scipy import ndimage
 from scipy.optimize import linear_sum_assignment
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
 from ...schemas.messages import OccupancyGrid
+from ...geometry.distance import distances_to
 from ...geometry.se2 import compose, inverse
 from ...parameters.declare import Parameters, Rule, param
 
@@ -195,7 +195,7 @@ class StaticMap:
             raise ValueError(f"a map of {info.width} x {info.height} cells at {info.resolution} m cannot be used")
         occupied = np.asarray(grid.data) >= params.map_occupied_thresh
         self.info = info
-        self.distance = ndimage.distance_transform_edt(~occupied) * info.resolution if occupied.any() \
+        self.distance = distances_to(occupied) * info.resolution if occupied.any() \
             else np.full(occupied.shape, np.inf)
         self.origin = np.array([info.origin.x, info.origin.y, info.origin.theta])
 
@@ -365,5 +365,10 @@ class MoverTracker:
 
 
 def warm_up() -> None:
-    """Compile (or load from cache) the evidence kernel outside any scan."""
-    EvidenceGrid(TrackerParams(evidence_size=1.0)).update(0.0, np.zeros(2), np.array([[0.3, 0.2]]))
+    """Compile (or load from cache) the evidence kernel and the map's distance transform outside any scan."""
+    params = TrackerParams(evidence_size=1.0)
+    EvidenceGrid(params).update(0.0, np.zeros(2), np.array([[0.3, 0.2]]))
+    grid = OccupancyGrid()
+    grid.data = np.full((2, 2), 100, np.int8)
+    grid.info.width = grid.info.height = 2
+    StaticMap(grid, params)
