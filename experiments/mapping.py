@@ -28,7 +28,6 @@ from ..schemas.messages import OccupancyGrid
 from ..sim.node import SimNode, SimNodeParams
 from ..sim.world import World
 from ..geometry.grid import GRID_OBSTACLE
-from ..cli.navigate import NAVIGATOR, drive_params
 from ..services.chassis.node import ChassisNode, ChassisNodeParams
 from ..geometry.footprint import radii
 from ..services.costmap.node import CostmapNode, CostmapNodeParams
@@ -117,12 +116,12 @@ def navigation_stack(world: World, drive: str) -> list[Node]:
     costmap_files = {f"{which}_costmap_files": (str(COSTMAP_PARAMS / "costmap_common_params.yaml"),
                                                 str(COSTMAP_PARAMS / f"costmap_{which}_params.yaml"))
                      for which in ("global", "local")}
+    strafing = {} if drive != "diff" else dict(holonomic_robot=False, max_vel_y=0.0, min_vel_y=0.0, y_vels=())
     return [CostmapNode(CostmapNodeParams(**costmap_files, **start)), TrackerNode(TrackerNodeParams(use_map=False, **start)),
             PlannerNode(PlannerNodeParams(goal_topic="plan_request", planner_frequency=0.0, use_dijkstra=False,
                                           **start)),
-            LocalPlannerNode(LocalPlannerNodeParams(**drive_params(drive), **start)),
-            CmdVelMuxNode(), VelocitySmootherNode(), CollisionMonitorNode(),
-            NavigatorNode(NavigatorNodeParams(**NAVIGATOR, **start))]
+            LocalPlannerNode(LocalPlannerNodeParams(**strafing, **start)),
+            CmdVelMuxNode(), VelocitySmootherNode(), CollisionMonitorNode(), NavigatorNode(NavigatorNodeParams(**start))]
 
 
 def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, params: SlamNodeParams | None = None,
