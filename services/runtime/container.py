@@ -19,7 +19,11 @@ thread (a futex, a context switch, the GIL handed over) cost tens of microsecond
 2-core development machine: about as much as the services' own work in a live mission.
 
 The process has one identity: the union of what its services declare (launcher.identities).
-Services with their own session (the recorder, the view: run_live) run in a thread beside them.
+Services with their own session (the recorder, the view: run_live) run in a thread beside them. A
+recorder (a node with take_local) runs on the container's session instead: the services beside it
+hand it what they publish, and its subscriptions take only what other processes publish, so the
+container's messages that no other process takes never go through the router (in `navigate
+--composed` the simulator's 100 Hz wheel states, ground truth, movers and wheel commands).
 """
 from __future__ import annotations
 
@@ -161,11 +165,13 @@ class Container:
         with open_client(self.router) as session:
             executor = Executor(session, self.failed)
             own_session = [r for r in self.runners if hasattr(r.node, "run_live")]
-            threads = {id(runner): threading.Thread(target=self._serve, args=(runner,), name=runner.node.name)
+            threads = {id(runner): threading.Thread(target=self._serve, args=(runner, session), name=runner.node.name)
                        for runner in own_session}
+            recorders = [r.node.take_local for r in own_session if hasattr(r.node, "take_local")]
             for runner in self.runners:
                 if runner not in own_session:
                     executor.adopt(runner)
+                    runner.taps = recorders
             # before any node declares its token: whoever sees it may publish to it at once
             subscribers = [session.declare_subscriber(key, lambda s, takers=takers: deliver(takers, *received_from(s)))
                            for key, takers in self.routes.items()]
@@ -203,11 +209,14 @@ class Container:
             for subscriber in subscribers:
                 subscriber.undeclare()
 
-    def _serve(self, runner: LiveRunner) -> None:
-        """A service with its own session (run_live) on its own thread."""
+    def _serve(self, runner: LiveRunner, session) -> None:
+        """A service with its own session (run_live) on its own thread; a recorder on the container's."""
         node = runner.node
         try:
-            node.run_live(runner.router, runner.stop_event)
+            if hasattr(node, "take_local"):
+                node.run_live(runner.router, runner.stop_event, session)
+            else:
+                node.run_live(runner.router, runner.stop_event)
         except Exception:
             self.failed.append(node.name)
             node.log.exception("%s stopped on an error; stopping the container", node.name)

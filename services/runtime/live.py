@@ -15,7 +15,7 @@ import math
 import queue
 import threading
 import time
-from typing import Iterable
+from typing import Callable, Iterable
 
 import zenoh
 
@@ -117,6 +117,9 @@ class LiveRunner:
         # those get a published message straight into their inbox, the bus carries it to the others,
         # and the container subscribes once per key for all of them
         self.local: dict[str, list[tuple[LiveRunner, int]]] | None = None
+        # in a container: (key, type name, payload, seq, stamp_ns) of every message published is also
+        # handed to these (a recorder beside it: RecorderNode.take_local)
+        self.taps: list[Callable[[str, str, bytes, int, int], None]] = []
 
     def stop(self) -> None:
         """Ask the loop to finish; safe from a signal handler. The wake-up item matters: on
@@ -135,6 +138,8 @@ class LiveRunner:
         self._zpubs[pub.key].put(payload, attachment=pack_attachment(pub.seq, stamp_ns, pub.type_name))
         if self.local is not None:
             deliver(self.local.get(pub.key, ()), Received(payload, pub.key), pub.seq)
+        for tap in self.taps:
+            tap(pub.key, pub.type_name, payload, pub.seq, stamp_ns)
 
     def _declare(self, session: zenoh.Session) -> list:
         handles = []
