@@ -1,9 +1,9 @@
 """Several services in one OS process, as Nav2's component container: `omninav container FILE`.
 
 Every service of FILE (a compose file; `up` writes one per `process:` of a run) is built as its own
-Node with its own parameters and driven by its own LiveRunner thread — the same code, keys, merge
-rules and Diagnostic as when it runs alone — but all of them share one Zenoh session, so the
-process imports numpy, numba and zenoh and opens a session once. A message one of them publishes
+Node with its own parameters and its own LiveRunner — the same code, keys, merge rules and
+Diagnostic as when it runs alone — but all of them share one Zenoh session and one thread (below),
+so the process imports numpy, numba and zenoh and opens a session once. A message one of them publishes
 is handed straight to the inboxes of the others that take its key (no network, no router) and is
 also put on the bus with destination "remote", so the recorder, the view and the services of other
 processes see it and the container's own nodes do not get it twice. Each node still merges its
