@@ -21,6 +21,7 @@ BENCHES: dict[str, str] = {
     "explore": "omninav.bench.explore",
     "kills": "omninav.experiments.kills",
     "footprint": "omninav.bench.process_footprint",
+    "cpu": "omninav.bench.service_cpu",
     "lockstep": "omninav.bench.determinism",
 }
 

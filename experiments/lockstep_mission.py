@@ -19,7 +19,7 @@ import numpy as np
 from ..schemas.messages import CancelGoal, Clock, Goal, NavStatus, Pose2D
 from .mission_score import TERMINAL, MissionCollector, MissionSummary, summarize_mission
 from ..services.recorder.mcap_io import RecordingWriter
-from ..services.runtime.inprocess import InProcessRunner
+from ..services.runtime.inprocess import CpuMeter, InProcessRunner
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.run import build_node
 from ..sim.world import World
@@ -107,17 +107,19 @@ def mission_nodes(services: list[dict], robot: str, progress: Callable[[str], No
 def run_mission(services: list[dict], world: World, goals: np.ndarray, *, timeout_s: float, robot: str = "r1",
                 recording: Path | None = None, max_sim_s: float | None = None,
                 watch: Callable[[str, bytes, int], None] | None = None,
-                progress: Callable[[str], None] | None = None, until: Callable[[], bool] | None = None) -> LockstepRun:
+                progress: Callable[[str], None] | None = None, until: Callable[[], bool] | None = None,
+                meter: CpuMeter | None = None) -> LockstepRun:
     """Drive the goals through the stack in lockstep and score the mission against the truth.
 
     max_sim_s bounds the whole run (default: every goal's timeout, the cancels and the settling);
     `watch` sees every published (key, payload, stamp_ns), as InProcessRunner.tap does; `progress`
     hears of each service as it starts; `until` ends the run early once it turns true (a benchmark
-    that judges arrival itself).
+    that judges arrival itself); `meter` is charged with the CPU time of each service's work
+    (InProcessRunner: `omninav bench cpu`).
     """
     nodes = mission_nodes(services, robot, progress)
     sequencer = GoalSequencer(goals, timeout_s, robot=robot)
-    runner = InProcessRunner([*nodes.values(), sequencer])
+    runner = InProcessRunner([*nodes.values(), sequencer], meter)
     collector = MissionCollector(robot)
     runner.watch(collector.keys, collector.add_message)
     if watch is not None:

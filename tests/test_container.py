@@ -30,19 +30,19 @@ KEYS = KeyLayout("r1")
 CHATTER, ECHO, CLOCK = KEYS.robot("chatter"), KEYS.robot("echo"), KEYS.resolve("sim/clock")
 
 
-def recorded_demo(recording, composed: bool) -> str:
-    """recorder, talker and listener; talker and listener in one process `demo` when composed."""
-    process = "\n        process: demo" if composed else ""
+def recorded_demo(recording, together: tuple[str, ...]) -> str:
+    """recorder, talker and listener; those named in `together` in one process `demo`."""
+    process = {name: "\n        process: demo" if name in together else "" for name in ("recorder", "talker", "listener")}
     return f"""\
     services:
       - name: recorder
         service: recorder
-        params: {{output: {recording}}}
+        params: {{output: {recording}}}{process["recorder"]}
       - name: talker
         service: talker
-        params: {{rate: 4}}{process}
+        params: {{rate: 4}}{process["talker"]}
       - name: listener
-        service: listener{process}
+        service: listener{process["listener"]}
     """
 
 
@@ -68,11 +68,11 @@ def _payloads(path, keys) -> dict[tuple[str, int], bytes]:
 def test_a_composed_pair_talks_in_process_the_bus_sees_it_and_it_replays_as_a_separate_run(up, endpoint, tmp_path):
     composed = tmp_path / "composed.mcap"
     # the container's publishers send only to other processes: the listener hears the talker in-process
-    kids = run_demo(up, endpoint, recorded_demo(composed, composed=True))
+    kids = run_demo(up, endpoint, recorded_demo(composed, together=("talker", "listener")))
     assert len(kids) == 2       # the recorder's process and the container
 
     separate = tmp_path / "separate.mcap"
-    assert len(run_demo(up, endpoint, recorded_demo(separate, composed=False))) == 3
+    assert len(run_demo(up, endpoint, recorded_demo(separate, together=()))) == 3
 
     keys = [CHATTER, ECHO, CLOCK]
     a, b = _payloads(composed, keys), _payloads(separate, keys)
@@ -86,6 +86,20 @@ def test_a_composed_pair_talks_in_process_the_bus_sees_it_and_it_replays_as_a_se
                                "listener", "--compare"], cwd=REPO, capture_output=True, text=True, timeout=120)
         assert done.returncode == 0, done.stdout + done.stderr
         assert "equal: 0" not in done.stdout
+
+
+def test_a_recorder_composed_with_a_talker_takes_its_messages_in_process_and_the_others_from_the_bus(
+        up, endpoint, tmp_path):
+    recording = tmp_path / "run.mcap"
+    assert len(run_demo(up, endpoint, recorded_demo(recording, together=("recorder", "talker")))) == 2
+    seqs: dict[str, list[int]] = {}
+    for record in read_records(recording, [CHATTER, ECHO]):
+        seqs.setdefault(record.key, []).append(record.seq)
+    # the talker's handed over in the container, the listener's (another process) through the
+    # router: each message once, none missing
+    assert len(seqs[CHATTER]) >= 20 and len(seqs[ECHO]) >= 20
+    for key, taken in seqs.items():
+        assert taken == list(range(taken[0], taken[0] + len(taken))), key
 
 
 def _write(tmp_path, text: str):
@@ -183,7 +197,12 @@ class _Taker(Node):
 
     def setup(self) -> None:
         self.taken = []
-        self.subscribe("chatter", self.taken.append, synced=False)
+        self.threads: set[int] = set()
+        self.subscribe("chatter", self.take, synced=False)
+
+    def take(self, msg: Chatter) -> None:
+        self.taken.append(msg)
+        self.threads.add(threading.get_ident())
 
 
 def test_a_container_takes_each_payload_once_from_the_bus_for_all_its_nodes_and_decodes_it_once():
@@ -205,4 +224,5 @@ def test_a_container_takes_each_payload_once_from_the_bus_for_all_its_nodes_and_
             thread.join(60)
     assert [m.text for m in nodes[0].taken] == [f"m{k}" for k in range(5)]
     assert all(a is b for a, b in zip(nodes[0].taken, nodes[1].taken))     # one message, not one per node
+    assert len(nodes[0].threads | nodes[1].threads) == 1        # one thread drives both
     assert all(n.counters[f"malformed/{CHATTER}"] == 1 for n in nodes)

@@ -6,7 +6,10 @@ dropping anything. The recorder must keep up with 100k small messages/s, and Pyt
 hand each sample to a writer thread (a GIL hand-off per message) measured 108k messages/s against
 146k for this design, in the same run of `omninav bench recorder`'s recorder_run on 2 loaded cores.
 log_time is therefore the wall time the recorder took the sample from the FIFO: its arrival plus
-however long it waited there.
+however long it waited there (up to _IDLE_S when the recorder was idle: each wake-up of a Python
+thread costs tens of microseconds of CPU, so it does not poll more often). In a container
+(container.py) the services beside the recorder hand it what they publish (take_local), stamped
+with the wall time they published it.
 
 Files are flushed every flush_period_s so that a SIGKILL loses at most that much (plus what sat in
 the FIFO); `omninav recover` rewrites such a file into a valid one.
@@ -14,6 +17,7 @@ the FIFO); `omninav recover` rewrites such a file into a valid one.
 from __future__ import annotations
 
 import time
+from collections import deque
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,7 +36,7 @@ from ...parameters.declare import Parameters, param
 RECORDINGS_DIR = "recordings"
 _FIFO_CAPACITY = 16384      # samples; at 100k/s that is 160 ms of slack for a slow chunk write
 _BATCH = 512                # samples taken from one subscription before looking at the clock again
-_IDLE_S = 0.002
+_IDLE_S = 0.01            # wall s asleep when nothing was queued; measured CPU per idle second: 25 ms at 2 ms, 11.5 at 10, 6 at 20
 
 
 @dataclass(frozen=True)
@@ -126,6 +130,9 @@ class RecorderNode(Node):
         self.tally = SequenceTally()
         self.failed = False
         self._types: dict[str, str] = {}      # key -> type, for samples without our attachment
+        # in a container: what the services beside it published (take_local), for the recording thread
+        self.local: deque[tuple[str, str, bytes, int, int, int]] = deque()
+        self._records_key: dict[str, bool] = {}
 
     def subscriptions(self) -> list[str]:
         return [str(ke) for ke in self.key_exprs]
@@ -140,36 +147,68 @@ class RecorderNode(Node):
             self._types[key] = name
         return name
 
-    def run_live(self, router: str | None, stop_event) -> None:
+    def take_local(self, key: str, type_name: str, payload: bytes, seq: int, stamp_ns: int) -> None:
+        """A message a service beside it in a container published, handed over on that service's
+        thread: queued for the recording thread with the wall time now as its log time. It never
+        crosses the router: in a container the recorder's subscriptions take only what other
+        processes publish (record's `session`)."""
+        records = self._records_key.get(key)
+        if records is None:
+            records = self._records_key[key] = not is_lockstep_key(key) and any(
+                ke.intersects(zenoh.KeyExpr(key)) for ke in self.key_exprs)
+        if records:
+            self.local.append((key, type_name, payload, seq, stamp_ns, time.time_ns()))
+
+    def run_live(self, router: str | None, stop_event, session: zenoh.Session | None = None) -> None:
         """Record until stop_event is set, finish the file(s), print the report."""
         started = time.monotonic()
         try:
-            self.record(router, stop_event)
+            self.record(router, stop_event, session)
         except OSError as exc:      # disk full, directory not writable ...
             self.failed = True
             self.log.error("cannot write the recording: %s; what was flushed before is readable with "
                            "`omninav recover FILE`", exc)
         print(self.report(time.monotonic() - started), flush=True)
 
-    def record(self, router: str | None, stop_event) -> None:
+    def record(self, router: str | None, stop_event, session: zenoh.Session | None = None) -> None:
+        """On its own session, or on a container's (`session`, which it does not close), whose other
+        services hand it what they publish (take_local): its subscriptions then take only what comes
+        from other sessions."""
         self.out.open_next(time.monotonic())
-        with open_client(router) as session:
-            subscribers = [session.declare_subscriber(ke, zenoh.handlers.FifoChannel(_FIFO_CAPACITY))
-                           for ke in self.key_exprs]
-            handlers = [s.handler for s in subscribers]
-            alive = session.liveliness().declare_token(self.keys.alive(self.name))
-            self.log.info("recording %s to %s%s", " ".join(map(str, self.key_exprs)), self.out.files[0],
-                          " and the next numbered files" if self.out.split else "")
-            try:
-                self._record(handlers, stop_event)
-            finally:
-                alive.undeclare()
-                for sub in subscribers:
-                    sub.undeclare()
-            self._drain(handlers)   # what was queued before the undeclare
-            # finish the files before closing the session: a Zenoh session close can hang, and
-            # the recording must be complete whatever happens after this point
-            self.close()
+        if session is not None:
+            self._record_on(session, stop_event, zenoh.Locality.REMOTE)
+            return
+        with open_client(router) as own:
+            self._record_on(own, stop_event, None)
+
+    def _record_on(self, session: zenoh.Session, stop_event, origin: zenoh.Locality | None) -> None:
+        subscribers = [session.declare_subscriber(ke, zenoh.handlers.FifoChannel(_FIFO_CAPACITY), allowed_origin=origin)
+                       for ke in self.key_exprs]
+        handlers = [s.handler for s in subscribers]
+        alive = session.liveliness().declare_token(self.keys.alive(self.name))
+        self.log.info("recording %s to %s%s", " ".join(map(str, self.key_exprs)), self.out.files[0],
+                      " and the next numbered files" if self.out.split else "")
+        try:
+            self._record(handlers, stop_event)
+        finally:
+            alive.undeclare()
+            for sub in subscribers:
+                sub.undeclare()
+        self._drain(handlers)   # what was queued before the undeclare
+        # finish the files before closing the session: a Zenoh session close can hang, and
+        # the recording must be complete whatever happens after this point
+        self.close()
+
+    def _take_local(self, limit: int) -> int:
+        """Write up to `limit` of the messages handed over in-process; returns how many."""
+        writer, add, local = self.out.writer, self.tally.add, self.local
+        taken = 0
+        while local and taken < limit:
+            key, type_name, payload, seq, stamp, log_time = local.popleft()
+            writer.write(key, type_name, payload, seq, stamp, log_time)
+            add(key, type_name, seq)
+            taken += 1
+        return taken
 
     def _take(self, handler, limit: int) -> int:
         """Write up to `limit` queued samples of one subscription; returns how many."""
@@ -200,7 +239,7 @@ class RecorderNode(Node):
         period = self.params.flush_period_s
         next_flush = time.monotonic() + period
         while not stop_event.is_set():
-            taken = sum(self._take(h, _BATCH) for h in handlers)
+            taken = sum(self._take(h, _BATCH) for h in handlers) + self._take_local(_BATCH)
             now = time.monotonic()
             if self.out.split and self.out.due(now):
                 self.out.open_next(now)
@@ -212,6 +251,8 @@ class RecorderNode(Node):
                 stop_event.wait(_IDLE_S)
 
     def _drain(self, handlers: list) -> None:
+        while self._take_local(_BATCH):
+            pass
         for handler in handlers:
             try:
                 while self._take(handler, _BATCH):

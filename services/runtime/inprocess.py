@@ -11,7 +11,8 @@ releases until nothing moves: the sim never runs ahead of a slow service.
 """
 from __future__ import annotations
 
-from collections import defaultdict
+import time
+from collections import Counter, defaultdict
 from typing import Any, Callable, Iterable
 
 from ...schemas import MessageError, decode
@@ -19,9 +20,50 @@ from .merge import StampMerger
 from .node import Input, Node, Publisher
 
 
+DELIVERY = "delivery (decode, merge)"
+RECORDING = "recording (MCAP)"
+WATCHING = "watchers (mission scoring)"
+
+
+class CpuMeter:
+    """This thread's CPU time split between what it works for — a node's handlers and ticks (its
+    outputs' encoding included), the runner's delivery, the recording — each charged only for its
+    own time (a node's handler that publishes is not charged for the delivery of what it published).
+    `omninav bench cpu` reads it: where a mission's CPU goes, service by service."""
+
+    def __init__(self, first: str = "other"):
+        self.ns: Counter[str] = Counter()
+        self.calls: Counter[str] = Counter()
+        self._stack = [first]
+        self.start()
+
+    def start(self) -> None:
+        """Charge from now on (what came before, the nodes' setup, is not a run's steady cost);
+        process_started_ns: the whole process's CPU time then (time.process_time_ns)."""
+        self.ns.clear()
+        self.calls.clear()
+        self._since = time.thread_time_ns()
+        self.process_started_ns = time.process_time_ns()
+
+    def enter(self, what: str) -> None:
+        now = time.thread_time_ns()
+        self.ns[self._stack[-1]] += now - self._since
+        self._since = now
+        self._stack.append(what)
+        self.calls[what] += 1
+
+    def leave(self) -> None:
+        now = time.thread_time_ns()
+        self.ns[self._stack.pop()] += now - self._since
+        self._since = now
+
+
 class InProcessRunner:
-    def __init__(self, nodes: Iterable[Node]):
+    def __init__(self, nodes: Iterable[Node], meter: CpuMeter | None = None):
         self.nodes = list(nodes)
+        self.meter = meter
+        if meter is not None:
+            meter.start()
         self.sources = [n for n in self.nodes if n.pace_s() is not None]
         if not self.sources:
             raise ValueError("an in-process run needs a source node (the sim) to advance time")
@@ -54,9 +96,26 @@ class InProcessRunner:
         would; its log time is the sim stamp, so the same run gives the same file byte for byte."""
         self._writers.append(writer)
 
+    def _metered(self, what: str, call: Callable, *args) -> Any:
+        """call(*args), its CPU time charged to `what` when a meter is on."""
+        if self.meter is None:
+            return call(*args)
+        self.meter.enter(what)
+        try:
+            return call(*args)
+        finally:
+            self.meter.leave()
+
     def _deliver(self, pub: Publisher, payload: bytes, stamp_ns: int) -> None:
+        self._metered(DELIVERY, self._hand_over, pub, payload, stamp_ns)
+
+    def _record(self, pub: Publisher, payload: bytes, stamp_ns: int) -> None:
         for writer in self._writers:
             writer.write(pub.key, pub.type_name, payload, pub.seq, stamp_ns, stamp_ns)
+
+    def _hand_over(self, pub: Publisher, payload: bytes, stamp_ns: int) -> None:
+        if self._writers:
+            self._metered(RECORDING, self._record, pub, payload, stamp_ns)
         for tap in self._taps:
             tap(pub.key, payload, stamp_ns)
         decoded: dict[type, Any] = {}      # one message per type, handed to everyone who takes it
@@ -75,11 +134,17 @@ class InProcessRunner:
             self._pushed[position] = True
             if not self._mergers[position].push(index, msg.header.stamp_ns, (index, msg)):
                 self.nodes[position].counters[f"late/{pub.key}"] += 1
-        for callback in self._watchers.get(pub.key, ()):
+        watchers = self._watchers.get(pub.key, ())
+        if watchers:
+            self._metered(WATCHING, self._watch, watchers, pub, message)
+
+    @staticmethod
+    def _watch(watchers: list, pub: Publisher, message: Callable[[type], Any]) -> None:
+        for callback in watchers:
             try:
                 msg = message(pub.msg_type)
             except MessageError:
-                break       # watchers skip what does not decode
+                return      # watchers skip what does not decode
             callback(pub.key, msg)
 
     def _settle(self) -> None:
@@ -91,13 +156,13 @@ class InProcessRunner:
                     continue
                 self._pushed[position] = False
                 for index, msg in self._mergers[position].pop_ready():
-                    node.process(index, msg)
+                    self._metered(node.name, node.process, index, msg)
                     moved = True
 
     def step(self) -> None:
         """One tick of every source, then every node works until nothing more is ready."""
         for source in self.sources:
-            source.tick()
+            self._metered(source.name, source.tick)
         self._settle()
 
     def run_until(self, done: Callable[[], bool], max_steps: int) -> int:

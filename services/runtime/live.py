@@ -30,7 +30,7 @@ from .node import NS_PER_S, Node, Publisher, QueryError
 from .selector import parse_parameters
 from .zenoh_config import MAX_MESSAGE_SIZE, client_config, open_client
 
-_POLL_S = 0.05
+POLL_S = 0.05           # wall s a runner waits for input before it looks at its clocks again
 _REPORT_AGAIN_S = 0.5   # a lockstep participant's unchanged progress is repeated this often (wall)
 _STALL_LOG_S = 10.0     # a lockstep step held up this long (wall) is logged with who holds it
 RUN_STARTED = "run_started_ns"
@@ -61,7 +61,7 @@ def await_tokens(session: zenoh.Session, keys: Iterable[str], timeout_s: float,
     while missing and not give_up() and time.monotonic() < deadline:
         missing -= tokens_present(session, missing)
         if missing:
-            time.sleep(_POLL_S)
+            time.sleep(POLL_S)
     return missing
 
 
@@ -142,6 +142,9 @@ class LiveRunner:
         # those get a published message straight into their inbox, the bus carries it to the others,
         # and the container subscribes once per key for all of them
         self.local: dict[str, list[tuple[LiveRunner, int]]] | None = None
+        # in a container: (key, type name, payload, seq, stamp_ns) of every message published is also
+        # handed to these (a recorder beside it: RecorderNode.take_local)
+        self.taps: list[Callable[[str, str, bytes, int, int], None]] = []
 
     def stop(self) -> None:
         """Ask the loop to finish; safe from a signal handler. The wake-up item matters: on
@@ -160,6 +163,8 @@ class LiveRunner:
         self._zpubs[pub.key].put(payload, attachment=pack_attachment(pub.seq, stamp_ns, pub.type_name))
         if self.local is not None:
             deliver(self.local.get(pub.key, ()), Received(payload, pub.key), pub.seq)
+        for tap in self.taps:
+            tap(pub.key, pub.type_name, payload, pub.seq, stamp_ns)
 
     def _declare(self, session: zenoh.Session) -> list:
         handles = []
@@ -212,41 +217,61 @@ class LiveRunner:
             with open_client(self.router) as own:
                 self.run(own)
             return
+        self.open(session)
+        while not self.stop_event.is_set():
+            self._take_inbox(self.wait_s())
+            self.turn()
+        self.close()
+
+    def open(self, session: zenoh.Session) -> None:
+        """Declare everything on the session and start the clocks of the turns. A source first
+        waits for the run's listeners ($OMNINAV_LISTENERS), so its first messages find them."""
         if self.listeners and self.node.pace_s() is not None:
             late = await_tokens(session, self.listeners, LISTENERS_TIMEOUT_S, self.stop_event.is_set)
             if late and not self.stop_event.is_set():
                 self.node.log.warning("%s not ready within %.0f s; starting anyway", ", ".join(sorted(late)),
                                       LISTENERS_TIMEOUT_S)
-        handles = self._declare(session)
-        self._loop()
+        self._handles = self._declare(session)
+        pacer = self.node.pace_s()
+        self._pacer = pacer
+        # in lockstep the wall clock decides nothing: the sim ticks when the barrier lets it, any
+        # other paced node (teleop) on its inputs' sim time
+        self._stepped = self.lockstep is not None and pacer is not None and pacer != math.inf
+        now = time.monotonic()
+        self._next_tick = now
+        self._next_tick_ns: int | None = None
+        self._next_diag = now + self.diagnostics_period_s
+        self._stalled_since = now
+        self._ready = False     # lockstep: the barrier's answer after the last inputs; then only the pace is waited for
+
+    def close(self) -> None:
+        """Process what is buffered, close the node, publish its last Diagnostic and undeclare."""
         self._finish()
-        for handle in handles:
+        for handle in self._handles:
             handle.undeclare()
         for zpub in self._zpubs.values():
             zpub.undeclare()
 
-    def _loop(self) -> None:
-        pacer = self.node.pace_s()
-        if self.lockstep is not None and pacer is not None and pacer != math.inf:
-            # in lockstep the wall clock decides nothing: the sim ticks when the barrier lets it,
-            # any other paced node (teleop) on its inputs' sim time
-            self._lockstep_loop(pacer)
-            return
-        next_tick = time.monotonic()
-        next_diag = time.monotonic() + self.diagnostics_period_s
-        while not self.stop_event.is_set():
-            now = time.monotonic()
-            wait = _POLL_S if pacer is None else max(0.0, min(_POLL_S, next_tick - now))
-            self._take_inbox(wait)
-            self._release()
-            now = time.monotonic()
-            if pacer is not None and now >= next_tick:
-                self.node.tick()
-                next_tick = max(next_tick + pacer, now - 10 * pacer)  # never burst more than 10 ticks
-            self._report_progress()
-            if now >= next_diag:
-                self._publish_diagnostic()
-                next_diag = now + self.diagnostics_period_s
+    def wait_s(self) -> float:
+        """How long this runner may wait for input before its next turn: until its next tick when
+        paced (in lockstep: once the barrier let it), else a poll period."""
+        if self._pacer is None or (self._stepped and not self._ready):
+            return POLL_S
+        return max(0.0, min(POLL_S, self._next_tick - time.monotonic()))
+
+    def turn(self) -> None:
+        """After taking the inbox: process what the merger releases, tick when due, report."""
+        self._release()
+        now = time.monotonic()
+        if self._stepped:
+            self._lockstep_tick(now)
+        elif self._pacer is not None and now >= self._next_tick:
+            self.node.tick()
+            self._next_tick = max(self._next_tick + self._pacer, now - 10 * self._pacer)  # never burst more than 10 ticks
+        self._report_progress()
+        if now >= self._next_diag:
+            self._publish_diagnostic()
+            self._next_diag = now + self.diagnostics_period_s
 
     def _take_inbox(self, wait_s: float) -> None:
         try:
@@ -256,37 +281,23 @@ class LiveRunner:
         except queue.Empty:
             pass
 
-    def _lockstep_loop(self, pacer: float) -> None:
+    def _lockstep_tick(self, now: float) -> None:
         """The coordinator ticks once the barrier lets it and, with a pace (the sim's rate), not
         before its wall time: paced lockstep is real time while the services keep up, slower when
         they do not, and never late. The others tick on their inputs' sim time."""
-        period_ns = round(pacer * NS_PER_S)
-        next_tick_ns: int | None = None
-        next_tick = time.monotonic()
-        next_diag = next_tick + self.diagnostics_period_s
-        stalled_since = next_tick
-        ready = False       # the barrier's answer after the last inputs: then only the pace is waited for
-        while not self.stop_event.is_set():
-            self._take_inbox(max(0.0, min(_POLL_S, next_tick - time.monotonic())) if ready else _POLL_S)
-            self._release()
-            now = time.monotonic()
-            if self.barrier is not None:
-                ready = self._may_step()
-                if ready and now >= next_tick:
-                    self.node.tick()
-                    ready = False       # the step's messages are on their way
-                    next_tick = max(next_tick + pacer, now - 10 * pacer)
-                    stalled_since = now
-                elif not ready and now - stalled_since > _STALL_LOG_S:
-                    self.node.log.info("lockstep: waiting for %s", ", ".join(self._waiting_on()) or "inputs")
-                    stalled_since = now
-            elif self.node.now_ns and (next_tick_ns is None or self.node.now_ns >= next_tick_ns):
+        if self.barrier is not None:
+            self._ready = self._may_step()
+            if self._ready and now >= self._next_tick:
                 self.node.tick()
-                next_tick_ns = self.node.now_ns + period_ns
-            self._report_progress()
-            if now >= next_diag:
-                self._publish_diagnostic()
-                next_diag = now + self.diagnostics_period_s
+                self._ready = False       # the step's messages are on their way
+                self._next_tick = max(self._next_tick + self._pacer, now - 10 * self._pacer)
+                self._stalled_since = now
+            elif not self._ready and now - self._stalled_since > _STALL_LOG_S:
+                self.node.log.info("lockstep: waiting for %s", ", ".join(self._waiting_on()) or "inputs")
+                self._stalled_since = now
+        elif self.node.now_ns and (self._next_tick_ns is None or self.node.now_ns >= self._next_tick_ns):
+            self.node.tick()
+            self._next_tick_ns = self.node.now_ns + round(self._pacer * NS_PER_S)
 
     def _published(self) -> dict[str, int]:
         return {key: pub.seq for key, pub in self.node.outputs.items() if pub.seq}
