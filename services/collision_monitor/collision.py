@@ -109,15 +109,18 @@ class CollisionMonitor:
     def check(self, twist, points, movers: Movers | None = None) -> MonitorResult:
         """The command allowed with these obstacle points and moving obstacles (robot frame)."""
         points = np.asarray(points, float).reshape(-1, 2)
+        # the inside test only for points in the zones' bounding box: a scan's other points (most
+        # of them) are in neither, and testing them was most of the monitor's cost
+        points = points[np.all((points >= self._zones_lo) & (points <= self._zones_hi), axis=1)]
+        zones = points_in_polygons(points, self._zones)
         if movers is None or len(movers) == 0:
-            return self._check_points(np.asarray(twist, float), points)
+            return self._check_points(np.asarray(twist, float), points, zones)
         gap = np.hypot(*(points[:, None, :] - movers.positions[None]).transpose(2, 0, 1))
         on_track = np.any(gap <= movers.radii[None] + TRACKED_POINT_MARGIN, axis=1)
-        result = self._check_points(np.asarray(twist, float), points[~on_track])
+        result = self._check_points(np.asarray(twist, float), points[~on_track], zones[~on_track])
         if result.action == "stop":
             return result
         near_person = np.any(gap <= movers.radii[None] + PERSON_POINT_MARGIN, axis=1)
-        zones = points_in_polygons(points, self._zones)
         return self._check_movers(result, movers, points[zones[:, 0] | (zones[:, 1] & near_person)])
 
     def gaps(self, twist, movers: Movers) -> np.ndarray:
@@ -169,12 +172,10 @@ class CollisionMonitor:
                                                            f"at full speed, deeper than standing")
         return MonitorResult(np.zeros(3), "approach", 0, "a track would be met deeper than standing still")
 
-    def _check_points(self, twist: np.ndarray, points: np.ndarray) -> MonitorResult:
+    def _check_points(self, twist: np.ndarray, points: np.ndarray, zones: np.ndarray) -> MonitorResult:
+        """The stop and slowdown rules on points (K, 2) with their zones (K, 2): in the stop zone,
+        in the slowdown zone."""
         p = self.params
-        # the inside test only for points in the zones' bounding box: a scan's other points (most
-        # of them) are in neither, and testing them was most of the monitor's cost
-        points = points[np.all((points >= self._zones_lo) & (points <= self._zones_hi), axis=1)]
-        zones = points_in_polygons(points, self._zones)
         inside = zones.sum(axis=0)
         approached = self._approached(twist, points[zones[:, 0]])
         if approached >= p.min_points:
