@@ -28,6 +28,7 @@ from ..schemas.messages import OccupancyGrid
 from ..sim.node import SimNode, SimNodeParams
 from ..sim.world import World
 from ..geometry.grid import GRID_OBSTACLE
+from ..cli.navigate import drive_params
 from ..services.chassis.node import ChassisNode, ChassisNodeParams
 from ..geometry.footprint import radii
 from ..services.costmap.node import CostmapNode, CostmapNodeParams
@@ -116,7 +117,9 @@ def navigation_stack(world: World, drive: str) -> list[Node]:
     costmap_files = {f"{which}_costmap_files": (str(COSTMAP_PARAMS / "costmap_common_params.yaml"),
                                                 str(COSTMAP_PARAMS / f"costmap_{which}_params.yaml"))
                      for which in ("global", "local")}
-    strafing = {} if drive != "diff" else dict(holonomic_robot=False, max_vel_y=0.0, min_vel_y=0.0, y_vels=())
+    # a differential drive as navigate sets it; holonomic drives keep DWA's strafe (±0.1 m/s): with
+    # navigate's ±0.3 and its navigator, 8 of 50 mazes had contacts (docs/slam.md)
+    strafing = drive_params(drive) if drive == "diff" else {}
     return [CostmapNode(CostmapNodeParams(**costmap_files, **start)), TrackerNode(TrackerNodeParams(use_map=False, **start)),
             PlannerNode(PlannerNodeParams(goal_topic="plan_request", planner_frequency=0.0, use_dijkstra=False,
                                           **start)),
