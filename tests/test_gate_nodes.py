@@ -157,3 +157,20 @@ def test_the_mux_node_passes_teleop_over_navigation_and_navigation_again_after_t
     assert all(vx == -0.2 for t, vx in passed if 100 <= t <= 800)   # teleop's last at 0.3 s holds to 0.8 s
     assert [t for t, vx in passed if vx == 0.4] == [50, 850, 900, 950, 1000]
     assert node.counters["overridden/navigation"] == 15
+
+
+@pytest.mark.parametrize("correct, stopped_at_ms", [(True, 250), (False, None)])
+def test_the_monitor_carries_the_scan_by_its_own_commands_since_the_scan(correct, stopped_at_ms):
+    """A wall 3 cm beyond the stop zone in the one scan: driving on slowed at 0.25 m/s, the robot is
+    in the stop zone's reach after 0.12 s of them, which only the scan carried by the commands sent
+    shows (the scan takes effect after scan_delay_s; until then the robot is held)."""
+    node = CollisionMonitorNode(CollisionMonitorNodeParams(laser_x=0.0, base_shift_correction=correct))
+    out = outputs(node)
+    wall = [(0.416 + 0.05 + 0.03, y) for y in (-0.1, -0.05, 0.0, 0.05, 0.1)]
+    commands = [("cmd_vel_smoothed", twist(k * 50 * MS, vx=0.5, seq=k)) for k in range(1, 9)]
+    feed(node, [("scan", ring_scan(0, wall, 1))] + commands)
+    got = {m.header.stamp_ns // MS: m.linear_x for m in out}
+    assert (got[50], got[100], got[150], got[200]) == (0.0, 0.25, 0.25, 0.25)   # no scan yet; the slowdown zone
+    stops = [t for t, vx in got.items() if vx == 0.0 and t > 50]
+    assert (stops[0] if stops else None) == stopped_at_ms
+    assert all(got[t] == 0.0 for t in got if stopped_at_ms and t >= stopped_at_ms)

@@ -99,7 +99,7 @@ def robot_frame_points(scan: LaserScan, sensor_pose) -> np.ndarray:
 class CollisionMonitor:
     def __init__(self, params: CollisionMonitorParams):
         self.params = params
-        footprint = np.asarray(params.footprint, float)
+        footprint = self._footprint = np.asarray(params.footprint, float)
         self.stop_zone = pad(footprint, params.stop_padding)
         self.slowdown_zone = pad(footprint, params.slowdown_padding)
         self._zones = np.stack([self.stop_zone, self.slowdown_zone])
@@ -195,6 +195,11 @@ class CollisionMonitor:
         cos, sin = np.cos(dtheta), np.sin(dtheta)
         shifted = points - (dx, dy)
         after = np.column_stack([cos * shifted[:, 0] + sin * shifted[:, 1], -sin * shifted[:, 0] + cos * shifted[:, 1]])
-        footprint = np.asarray(self.params.footprint, float)
-        closer = distance_to_outline(after, footprint) < distance_to_outline(points, footprint) - tolerance
+        closer = self._signed_distance(after) < self._signed_distance(points) - tolerance
         return int(np.count_nonzero(closer))
+
+    def _signed_distance(self, points: np.ndarray) -> np.ndarray:
+        """(K,) distance from each point to the footprint's outline, negative inside: a point the
+        command carries through the outline within approach_check_s is approached, not left."""
+        distance = distance_to_outline(points, self._footprint)
+        return np.where(points_in_polygons(points, self._footprint[None])[:, 0], -distance, distance)

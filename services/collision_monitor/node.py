@@ -8,8 +8,11 @@ sporadic: a scan stamped t is used from the first command stamped after t + scan
 time a scan may take to arrive, live) until a newer one takes effect; its points are placed in the
 robot frame by the laser's mount on the robot (laser_x, laser_y, laser_yaw: the simulated lidar's
 mount by default, as the costmap). No scan, or one older than source_timeout, stops the robot:
-the monitor cannot see. The zones do not account for the robot's motion since the scan (as Nav2's
-without its source_timeout shift), so at 0.5 m/s the scan in use is up to 7.5 cm behind.
+the monitor cannot see. The scan's points are carried to the command's time by the robot's motion
+since the scan's stamp (Nav2's base_shift_correction), dead-reckoned from the monitor's own
+commands since then: the odometry arrives too late for it (held tracks_delay_s, below), and without
+it the scan in use is up to 0.15 s old — 7.5 cm at 0.5 m/s, or a corner 0.5 m out swung 4 cm by a
+turn at 0.5 rad/s, most of the 5 cm stop zone (generated mazes: corners turned into walls).
 The tracker's tracks and the odometry are held tracks_delay_s the same way; the tracks are
 predicted to the command's time and placed around the robot where its odometry, carried on by its
 twist, puts it then: a command that would meet a track in the stop zone within
@@ -22,6 +25,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...geometry.frames import LASER_MOUNT, twist_message, twist_vector
+from ...geometry.odometry_history import TwistHistory
+from ...geometry.polygons import transform_points
 from ...geometry.se2 import integrate, inverse
 from ...schemas.messages import Odometry, Tracks, Twist
 from ...geometry.movers import Movers, movers_at, tracks_problem
@@ -38,6 +43,7 @@ class CollisionMonitorNodeParams(CollisionMonitorParams):
     laser_yaw: float = LASER_MOUNT[2]
     scan_delay_s: float = param(0.05, ge=0)               # sim s from a scan's stamp until it is used
     source_timeout: float = param(1.0, finite=True)              # s: an older scan is no scan (Nav2's name; its default is 2)
+    base_shift_correction: bool = True    # Nav2's name: carry the scan by the robot's motion since its stamp
     tracks_delay_s: float = param(0.5, ge=0)              # sim s from a tracks / odom stamp until it is used (live, tracks trailed
                                              # the clock the monitor runs on by more than 0.3 s)
 
@@ -59,7 +65,8 @@ class CollisionMonitorNode(Node):
         self.timeout_ns = round(p.source_timeout * NS_PER_S)
         self.pending = Deferred(p.scan_delay_s)              # scans not yet in effect
         self.scan_stamp_ns: int | None = None                 # of the scan in effect
-        self.points = np.zeros((0, 2))                        # its points, robot frame
+        self.points = np.zeros((0, 2))                        # its points, robot frame at its stamp
+        self.sent = TwistHistory(self.timeout_ns)             # the commands sent, for the motion since the scan
         self.pending_tracks = Deferred(p.tracks_delay_s)     # tracks and odometry not yet in effect
         self.tracks: Tracks | None = None
         self.odom: Odometry | None = None
@@ -80,6 +87,12 @@ class CollisionMonitorNode(Node):
                           age)
         return movers_at(self.tracks, t / NS_PER_S, inverse(robot), 0.0)
 
+    def _points_at(self, t: int) -> np.ndarray:
+        """The scan's points in the robot frame at t."""
+        if not self.params.base_shift_correction:
+            return self.points
+        return transform_points(self.points, inverse(self.sent.motion(self.scan_stamp_ns, t)))[0]
+
     def on_command(self, msg: Twist) -> None:
         t = msg.header.stamp_ns
         for _, scan in self.pending.due(t):
@@ -94,7 +107,8 @@ class CollisionMonitorNode(Node):
         if self.scan_stamp_ns is None or t - self.scan_stamp_ns > self.timeout_ns:
             action, twist = "no_scan", np.zeros(3)
         else:
-            result = self.monitor.check(twist, self.points, self._movers(t))
+            result = self.monitor.check(twist, self._points_at(t), self._movers(t))
             action, twist = result.action, result.twist
         self.counters[f"action/{action}"] += 1
+        self.sent.add(t, twist)
         self.out_pub.publish(twist_message(twist, t))
