@@ -1,8 +1,10 @@
 """`omninav bench footprint [--json]`: what the stack costs the computer it runs on.
 
 Runs `omninav navigate` live at 1× real time — the demo's room mission (AMCL) and a BARN world
-(odometry only, the Jackal profile) — once with every service its own process and once composed
-(`--composed`), and measures from outside, through /proc of navigate's process tree:
+(odometry only, the Jackal profile) — with every service its own process, composed in two containers
+(`--composed`: the simulated hardware apart from the robot's stack, as on a robot whose drivers run
+apart) and composed in one (`--composed one`: as Nav2's single component container; the simulator
+with it, so its cost is counted too), and measures from outside, through /proc of navigate's process tree:
 - start-up: wall seconds from launching navigate to its line saying the first goal was sent;
 - CPU: cores used per sim second in steady state: the tree's user + system CPU time over a window
   that starts `settle_s` after the first goal, divided by the sim time that passed in it (read from
@@ -35,12 +37,14 @@ from ..sim.barn_world import GOAL
 from ..sim.world import shared_data_dir
 
 REPO = Path(__file__).resolve().parents[1]
-MODES = ("separate", "composed")
+# navigate's flags for each way of running the services
+MODES = {"separate": [], "composed": ["--composed"], "composed-one": ["--composed", "one"]}
 # the demo's mission (cli/demo.py) and BARN's goal from the start, as navigate takes them (degrees)
 ROOM = ["--world", "room", "--localization", "amcl", "--goal", "8.3", "3.5", "90", "--goal", "3.0", "4.8", "180"]
 BARN_ARGS = ["--profile", "jackal", "--localization", "odom", "--goal", str(GOAL[0]), str(GOAL[1]), "90"]
 # issue 15's aims on this machine: cores, MB, seconds to the first goal
 AIMS = {"composed": {"cores": 0.25, "pss_mb": 400, "startup_s": 3.0},
+        "composed-one": {"cores": 0.25, "pss_mb": 400, "startup_s": 3.0},
         "separate": {"cores": 0.5, "pss_mb": 800, "startup_s": 5.0}}
 FIRST_GOAL = re.compile(r"g1: goal .* sent at sim")
 GOAL_ENDED = re.compile(r"g\d+: (succeeded|aborted|canceled|no result)")
@@ -124,9 +128,7 @@ class RunFigures:
 
 
 def measure_run(mission: list[str], mode: str, settle_s: float, window_s: float, folder: Path) -> RunFigures:
-    cmd = [sys.executable, "-m", "omninav.cli.main", "navigate", *mission, "-o", str(folder)]
-    if mode == "composed":
-        cmd.append("--composed")
+    cmd = [sys.executable, "-m", "omninav.cli.main", "navigate", *mission, "-o", str(folder), *MODES[mode]]
     lines: list[tuple[float, str]] = []
     sent = threading.Event()
     launched = time.monotonic()
@@ -228,11 +230,11 @@ def main(args: argparse.Namespace) -> int:
     if args.json:
         print(json.dumps(result))
         return 0
-    print(f"{'world':6} {'mode':9} {'start-up s':>10} {'cores':>7} {'PSS MB':>7} {'procs':>5}   aim (s, cores, MB)")
+    print(f"{'world':6} {'mode':12} {'start-up s':>10} {'cores':>7} {'PSS MB':>7} {'procs':>5}   aim (s, cores, MB)")
     for world, modes in result["worlds"].items():
         for mode, m in modes.items():
             aim = AIMS[mode]
-            print(f"{world:6} {mode:9} {m['startup_s']:10.2f} {m['cores']:7.3f} {m['pss_mb']:7.0f} {m['processes']:5d}"
+            print(f"{world:6} {mode:12} {m['startup_s']:10.2f} {m['cores']:7.3f} {m['pss_mb']:7.0f} {m['processes']:5d}"
                   f"   ≤{aim['startup_s']:g}, ≤{aim['cores']:g}, ≤{aim['pss_mb']:g}")
     print(f"medians of {args.runs} run(s); load average before {load[0]:.2f}, after {result['load_average_after'][0]:.2f}")
     return 0
