@@ -56,27 +56,23 @@ def connect(router: str | None, give_up_s: float | None = None) -> zenoh.Session
         endpoint = router_endpoint(router)
     except ValueError as exc:
         raise CommandError(str(exc), 2) from None
-    opened: dict = {}
+    started, told = time.monotonic(), []
 
-    def open_it() -> None:
-        try:
-            opened["session"] = open_client(endpoint)
-        except Exception as exc:  # zenoh raises its own error types; the user gets the text
-            opened["error"] = exc
+    def stopped() -> bool:
+        waited = time.monotonic() - started
+        if waited >= _NOTICE_S and not told and (give_up_s is None or give_up_s > _NOTICE_S):
+            told.append(True)
+            print(f"waiting for the router at {endpoint} (start one with `omninav up` or `omninav router`)",
+                  file=sys.stderr, flush=True)
+        return give_up_s is not None and waited >= give_up_s
 
-    # a daemon thread, because zenoh.open cannot be cancelled while it waits for the router
-    opener = threading.Thread(target=open_it, daemon=True)
-    opener.start()
-    opener.join(_NOTICE_S if give_up_s is None else min(_NOTICE_S, give_up_s))
-    if opener.is_alive() and (give_up_s is None or give_up_s > _NOTICE_S):
-        print(f"waiting for the router at {endpoint} (start one with `omninav up` or `omninav router`)",
-              file=sys.stderr, flush=True)
-        opener.join(None if give_up_s is None else give_up_s - _NOTICE_S)
-    if opener.is_alive():
+    try:
+        session = open_client(endpoint, stopped=stopped)
+    except Exception as exc:  # zenoh raises its own error types; the user gets the text
+        raise CommandError(f"cannot connect to {endpoint}: {exc}") from None
+    if session is None:
         raise CommandError(f"no router reachable at {endpoint} within {give_up_s:g} s")
-    if "error" in opened:
-        raise CommandError(f"cannot connect to {endpoint}: {opened['error']}")
-    return opened["session"]
+    return session
 
 
 def _reason(exc: zenoh.ZError) -> str:

@@ -515,7 +515,10 @@ def wait_until_ready(router: str, names: list[str], up: subprocess.Popen, robot:
             return False
         time.sleep(POLL_S)
     ready: set[str] = set()
-    with open_client(router) as session:
+    session = open_client(router, stopped=lambda: up.poll() is not None or time.monotonic() > deadline)
+    if session is None:
+        return False
+    with session:
         while time.monotonic() < deadline and up.poll() is None:
             alive = {keys.service_of_alive(key) for key in tokens_present(session, [keys.alive(n) for n in names])}
             if len(alive) > len(ready):

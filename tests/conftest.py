@@ -104,6 +104,8 @@ class Processes:
             try:
                 proc.wait(timeout)
             except subprocess.TimeoutExpired:
+                os.kill(proc.pid, signal.SIGUSR1)     # `omninav run` prints its threads' stacks to its log
+                time.sleep(1.0)
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait(5)
         return proc.returncode

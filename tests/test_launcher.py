@@ -2,11 +2,14 @@
 import os
 import signal
 import textwrap
+import time
+
+from mcap.reader import make_reader
 
 
 from omninav.services.runtime.zenoh_config import open_client
 
-from conftest import wait_until
+from conftest import free_port, wait_until
 from launching import (TALKER_LISTENER, alive, count_echoes, echo_subscriber, processes_using,
                        service_pids)
 
@@ -100,3 +103,20 @@ def test_restart_always_with_max_restarts_then_up_ends_when_every_service_has(up
     assert [line.rpartition(";")[2] for line in ended] == [
         " restarting in 0.5s (restart 1)", " restarting in 1.0s (restart 2)", " giving up after 2 restart(s)"]
     assert "[up] every service has ended" in lines
+
+
+def test_a_service_waiting_for_its_router_stops_when_asked(processes_no_router, tmp_path):
+    """Started before any router (start order does not matter), it waits; SIGINT still ends it
+    cleanly — a recorder with a whole, empty recording."""
+    absent = f"tcp/127.0.0.1:{free_port()}"
+    talker = processes_no_router.omninav("run", "talker", "--router", absent)
+    recorder = processes_no_router.omninav("run", "recorder", "--router", absent,
+                                           "--set", f"output={tmp_path / 'early.mcap'}")
+    for proc in (talker, recorder):
+        wait_until(lambda: "started" in processes_no_router.log_of(proc), 60, what="the service's start")
+    time.sleep(1.5)    # into the wait for the router
+    assert processes_no_router.stop(talker) == 0
+    assert processes_no_router.stop(recorder) == 0
+    assert "recorded 0 messages" in processes_no_router.log_of(recorder)
+    with open(tmp_path / "early.mcap", "rb") as recording:
+        assert make_reader(recording).get_summary() is not None

@@ -471,9 +471,9 @@ def test_the_bridge_waits_for_the_robots_router_and_stops_when_asked(processes, 
             return [r for r in robot_side.liveliness().get("@ros2_lv/0/**/NN/%/%/omninav_bridge", timeout=1.0)
                     if r.ok is not None]
         wait_until(bridge_node_token, 60, what="the bridge's node on the robot's graph")
-        assert processes.stop(bridge) == 0
+        assert processes.stop(bridge) == 0, processes.log_of(bridge)
         wait_until(lambda: not bridge_node_token(), 30, what="the bridge's node leaving the robot's graph")
     # one still waiting for the robot stops as promptly
     waiting = processes.omninav("run", "ros2_bridge", "--name", "waiting_bridge", "--set", f"ros_router={robot_router}")
     wait_alive(router_endpoint, ["waiting_bridge"], timeout=120)
-    assert processes.stop(waiting) == 0
+    assert processes.stop(waiting) == 0, processes.log_of(waiting)

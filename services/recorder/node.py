@@ -178,7 +178,11 @@ class RecorderNode(Node):
         if session is not None:
             self._record_on(session, stop_event, zenoh.Locality.REMOTE)
             return
-        with open_client(router) as own:
+        own = open_client(router, stopped=stop_event.is_set)
+        if own is None:     # stopped while waiting for the router: the files are empty, but whole
+            self.close()
+            return
+        with own:
             self._record_on(own, stop_event, None)
 
     def _record_on(self, session: zenoh.Session, stop_event, origin: zenoh.Locality | None) -> None:

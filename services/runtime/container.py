@@ -163,7 +163,10 @@ class Container:
         listeners are: LiveRunner waits for $OMNINAV_LISTENERS). At the end stop them in
         reverse order, each finished (its last inputs processed, its final Diagnostic out) before the
         next is asked."""
-        with open_client(self.router) as session:
+        session = open_client(self.router, stopped=self.stopping.is_set)
+        if session is None:     # stopped while waiting for the router
+            return
+        with session:
             executor = Executor(session, self.failed)
             own_session = [r for r in self.runners if hasattr(r.node, "run_live")]
             threads = {id(runner): threading.Thread(target=self._serve, args=(runner, session), name=runner.node.name)

@@ -214,8 +214,10 @@ class LiveRunner:
         """Process until stop_event is set; then drain what is buffered and undeclare. On its own
         session (closed at the end), or on a container's shared one."""
         if session is None:
-            with open_client(self.router) as own:
-                self.run(own)
+            own = open_client(self.router, stopped=self.stop_event.is_set)
+            if own is not None:     # else stopped while waiting for the router
+                with own:
+                    self.run(own)
             return
         self.open(session)
         while not self.stop_event.is_set():

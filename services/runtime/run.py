@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import logging
 import signal
 import sys
@@ -64,6 +65,8 @@ def lockstep_of(args: argparse.Namespace) -> Lockstep | None:
 
 def main(args: argparse.Namespace) -> int:
     configure_logging(args.name or args.service, args.log_level)
+    # `kill -USR1 PID` prints where every thread of a service is, e.g. one that does not stop
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     log = logging.getLogger("omninav.run")
     try:
         node = build_node(args.service, args.params, parse_overrides(args.set), args.robot, args.name,
@@ -72,7 +75,11 @@ def main(args: argparse.Namespace) -> int:
         log.error("%s", exc)
         return 2
     # a service that talks to Zenoh itself (the recorder) provides run_live(router, stop_event)
-    runner = LiveRunner(node, args.router, lockstep=lockstep_of(args))
+    try:
+        runner = LiveRunner(node, args.router, lockstep=lockstep_of(args))
+    except ValueError as exc:       # a router endpoint off loopback, or not an endpoint at all
+        log.error("%s", exc)
+        return 2
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: runner.stop())
     log.info("started (robot %s)", args.robot)

@@ -10,6 +10,7 @@ import json
 import os
 import socket
 from pathlib import Path
+from typing import Callable
 
 import zenoh
 
@@ -24,6 +25,7 @@ SHM_ENV = "OMNINAV_SHM"
 # LiveRunner refuses to publish anything bigger, naming the key and the size
 MAX_MESSAGE_SIZE = "transport/link/rx/max_message_size"
 CONNECT_RETRY = {"period_init_ms": 50, "period_max_ms": 100, "period_increase_factor": 2}
+OPEN_ATTEMPT_S = 1.0     # how long one attempt to reach the router waits; open_client makes as many as it takes
 _SWITCH = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": False}
 
 
@@ -106,8 +108,20 @@ def foreign_client_config(endpoint: str) -> zenoh.Config:
     return conf
 
 
-def open_client(router: str | None = None, credentials: str | None = None) -> zenoh.Session:
-    return zenoh.open(client_config(router, credentials))
+def open_client(router: str | None = None, credentials: str | None = None,
+                stopped: Callable[[], bool] = lambda: False) -> zenoh.Session | None:
+    """A client session once the router answers; None if stopped() turns true before it does.
+    zenoh.open's own wait for a router cannot be interrupted (a signal handler runs only once it
+    returns: `omninav run` started before `up` could not be stopped), so the wait is made of
+    attempts of OPEN_ATTEMPT_S each, with stopped() asked, and Ctrl-C taken, between them."""
+    conf = client_config(router, credentials)
+    conf.insert_json5("connect/timeout_ms", json.dumps(round(OPEN_ATTEMPT_S * 1000)))
+    while not stopped():
+        try:
+            return zenoh.open(conf)
+        except zenoh.ZError:
+            continue
+    return None
 
 
 def open_router(listen: str | None = None, dictionary: Path | None = None,
