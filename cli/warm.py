@@ -7,13 +7,8 @@ compiled again at its first use."""
 from __future__ import annotations
 
 import argparse
-import importlib
-import time
 
-# the modules whose warm_up() a service's setup calls (navigate's goal check uses the planner's)
-WARM_UPS = ("omninav.sim.lidar", "omninav.services.costmap.layers", "omninav.services.global_planner.astar",
-            "omninav.services.local_planner.dwa", "omninav.services.local_planner.eband",
-            "omninav.services.localizer.filter", "omninav.services.tracker.tracker")
+from ..services.runtime.kernels import warm_all
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -21,8 +16,5 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    for name in WARM_UPS:
-        started = time.monotonic()
-        importlib.import_module(name).warm_up()
-        print(f"warm: {name} in {time.monotonic() - started:.1f} s", flush=True)
+    warm_all(lambda name, seconds: print(f"warm: {name} in {seconds:.1f} s", flush=True))
     return 0

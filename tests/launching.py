@@ -54,10 +54,17 @@ def descendants(pid: int) -> list[int]:
     return found
 
 
+def launched(up_pid: int) -> list[int]:
+    """The processes `up` started, services or containers (forked from its fork server: its
+    grandchildren), by their command lines."""
+    return [p for p in descendants(up_pid) if "omninav.cli.main" in _cmdline(p)]
+
+
 def service_pids(up_pid: int) -> dict[str, int]:
-    """name -> pid of the `omninav run … --name NAME` children of `up`."""
+    """name -> pid of the `omninav run … --name NAME` processes `up` started (forked from its fork
+    server: its grandchildren)."""
     out = {}
-    for pid in children(up_pid):
+    for pid in descendants(up_pid):
         cmd = _cmdline(pid)
         if "run" in cmd and "--name" in cmd:
             out[cmd[cmd.index("--name") + 1]] = pid

@@ -24,7 +24,7 @@ from omninav.services.runtime.node import Node
 from omninav.services.runtime.zenoh_config import free_loopback_endpoint, open_client, open_router
 
 from conftest import REPO, wait_alive, wait_until
-from launching import children, count_echoes, echo_subscriber
+from launching import count_echoes, echo_subscriber, launched
 
 KEYS = KeyLayout("r1")
 CHATTER, ECHO, CLOCK = KEYS.robot("chatter"), KEYS.robot("echo"), KEYS.resolve("sim/clock")
@@ -47,10 +47,10 @@ def recorded_demo(recording, together: tuple[str, ...]) -> str:
 
 
 def run_demo(up, endpoint, compose_text: str, echoes_wanted: int = 20) -> list[int]:
-    """Run it until this test's client (a third process) saw enough echoes; returns up's children."""
+    """Run it until this test's client (a third process) saw enough echoes; returns the processes up started."""
     launcher = up(compose_text)
     wait_alive(endpoint, ["recorder", "talker", "listener"])
-    kids = children(launcher.pid)
+    kids = launched(launcher.pid)
     echoes = []
     with open_client(endpoint) as session:
         sub = echo_subscriber(session, echoes)
@@ -176,13 +176,13 @@ def test_zenoh_keeps_a_remote_only_put_from_its_own_sessions_subscribers():
 def test_a_killed_container_is_restarted_as_a_whole_by_its_services_policy(up, endpoint):
     launcher = up(TALKER_LISTENER_IN_ONE.replace("process: demo\n", "process: demo\n        max_restarts: 1\n"))
     wait_alive(endpoint, ["talker", "listener"])
-    [first] = children(launcher.pid)
+    [first] = launched(launcher.pid)
     echoes = []
     with open_client(endpoint) as session:
         sub = echo_subscriber(session, echoes)
         wait_until(lambda: count_echoes(echoes) >= 3, 60, what="echoes from the container")
         os.kill(first, signal.SIGKILL)
-        wait_until(lambda: children(launcher.pid) not in ([], [first]), 60, what="the container restarted")
+        wait_until(lambda: launched(launcher.pid) not in ([], [first]), 60, what="the container restarted")
         before = count_echoes(echoes)
         wait_until(lambda: count_echoes(echoes) >= before + 3, 60, what="echoes after the restart")
         sub.undeclare()

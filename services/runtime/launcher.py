@@ -39,6 +39,7 @@ from ...schemas.keys import KeyLayout
 from .acl import (CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, node_grants, union, write_passwords,
                   write_puts)
 from .child import Answers, Child, ChildDied
+from .forked import ForkedProcess
 from .compose import Compose, ComposeError, ProcessSpec, load_compose
 from ...parameters.declare import ParamError
 from .service_registry import UnknownService
@@ -106,7 +107,7 @@ class Supervised:
         self.stop_timeout_s = stop_timeout_s
         self.credentials = credentials / spec.name
         self.params_file = self._write_params(params_dir)
-        self.proc: subprocess.Popen | None = None
+        self.proc: ForkedProcess | None = None
         self.reader: threading.Thread | None = None
         self.tail: collections.deque[str] = collections.deque(maxlen=TAIL_LINES)
         self.runs = 0
@@ -147,8 +148,7 @@ class Supervised:
     def start(self) -> None:
         env = {**os.environ, ROUTER_ENV: self.endpoint, CREDENTIALS_ENV: str(self.credentials),
                LISTENERS_ENV: ",".join(self.listeners), "PYTHONUNBUFFERED": "1"}
-        self.proc = subprocess.Popen(self.command(), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                     stderr=subprocess.STDOUT, env=env, process_group=0)
+        self.proc = ForkedProcess(self.command()[3:], env)
         self.runs += 1
         self.started_at = time.monotonic()
         self.restart_at = None
@@ -158,7 +158,7 @@ class Supervised:
         self.reader.start()
         self.out.say(f"started {self.name} (pid {self.proc.pid})")
 
-    def _pump(self, proc: subprocess.Popen) -> None:
+    def _pump(self, proc: ForkedProcess) -> None:
         with proc.stdout:
             for raw in proc.stdout:
                 text = raw.decode(errors="replace").rstrip("\r\n")
