@@ -14,7 +14,7 @@ import threading
 import typing
 from dataclasses import dataclass
 from functools import cache
-from typing import Any
+from typing import Any, Callable
 
 import msgpack
 import numpy as np
@@ -347,29 +347,42 @@ def peek_type(data: bytes | bytearray | memoryview) -> str:
     return name
 
 
+# per registered type name: (class, version, happy-path decoder), so that decoding a payload looks
+# its type up once; filled only with registered names, never with what a payload claims
+_readers: dict[str, tuple[type, int, Callable[[dict], Any]]] = {}
+
+
+def _new_reader(name: str) -> tuple[type, int, Callable[[dict], Any]] | None:
+    cls = by_name(name)
+    if cls is None:
+        return None
+    _readers[name] = reader = (cls, type_info(cls)[1], _sound_decoder(cls))
+    return reader
+
+
 def decode(data: bytes | bytearray | memoryview, expected: type | None = None, *, key: str = "") -> Any:
     """Decode and validate a payload; `expected` (a message class) also checks the type."""
     try:
         raw = _unpack(data)
         name = raw.get(TYPE_FIELD)
-        cls = by_name(name) if isinstance(name, str) else None
-        if cls is None:
+        reader = (_readers.get(name) or _new_reader(name)) if type(name) is str else None
+        if reader is None:
             raise MessageError(f"unknown message type {name!r}", field=TYPE_FIELD)
-        want_name, want_version = type_info(cls)
+        cls, want_version, decode_sound = reader
         if expected is not None and cls is not expected:
             raise MessageError(f"got {name}, expected {type_info(expected)[0]}", field=TYPE_FIELD)
         if raw.get(VERSION_FIELD) != want_version:
             raise MessageError(
                 f"version {raw.get(VERSION_FIELD)!r}, this build reads {want_version}",
-                field=VERSION_FIELD, type_name=want_name,
+                field=VERSION_FIELD, type_name=name,
             )
-        msg = _sound_decoder(cls)(raw)
+        msg = decode_sound(raw)
         if msg is not None:
             return msg
         try:
             return _struct_decoder(cls, (TYPE_FIELD, VERSION_FIELD))(raw)
         except _Bad as bad:
-            raise MessageError(bad.reason, field=".".join(bad.path), type_name=want_name) from None
+            raise MessageError(bad.reason, field=".".join(bad.path), type_name=name) from None
     except MessageError as exc:
         if key and not exc.key:
             raise MessageError(exc.reason, field=exc.field, type_name=exc.type_name, key=key) from None
