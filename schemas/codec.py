@@ -10,10 +10,11 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import threading
 import typing
 from dataclasses import dataclass
 from functools import cache
-from typing import Any
+from typing import Any, Callable
 
 import msgpack
 import numpy as np
@@ -72,8 +73,9 @@ def _plan(cls: type) -> tuple[_Field, ...]:
 
 def _array_wire(value: Any, dtype: str) -> dict:
     arr = np.ascontiguousarray(value, dtype=dtype)
-    # a flat byte view: msgpack copies it once into the payload, tobytes() would copy twice
-    data = memoryview(arr.reshape(-1)).cast("B") if arr.size else b""
+    # a flat byte view of the (C-contiguous) array: msgpack copies it once into the payload,
+    # tobytes() would copy twice
+    data = memoryview(arr).cast("B") if arr.size else b""
     return {"dtype": dtype, "shape": list(arr.shape), "data": data}
 
 
@@ -114,8 +116,21 @@ def to_wire(msg: Any) -> dict:
     return _wire_builder(type(msg))(msg)
 
 
+# msgpack.packb builds a Packer (and its buffer) per call, half the cost of packing a small message;
+# a Packer keeps state while packing, so each thread (Zenoh runs callbacks on several) has its own
+_packers = threading.local()
+
+
+def _packer() -> msgpack.Packer:
+    try:
+        return _packers.packer
+    except AttributeError:
+        _packers.packer = msgpack.Packer(use_bin_type=True)
+        return _packers.packer
+
+
 def encode(msg: Any) -> bytes:
-    return msgpack.packb(_wire_builder(type(msg))(msg), use_bin_type=True)
+    return _packer().pack(_wire_builder(type(msg))(msg))
 
 
 # ---------------------------------------------------------------- decode
@@ -292,9 +307,13 @@ def _sound_array(spec: ArraySpec, var: str, lines: list[str], names: dict[str, A
     out(f"{indent}{var}_data = {var}['data']")
     out(f"{indent}if type({var}_data) is not bytes or len({var}_data) != {' * '.join([*sizes, str(dtype.itemsize)])}: "
         "return None")
-    out(f"{indent}{var}_array = frombuffer({var}_data, dtype_{var}).reshape({var}_shape)")
+    # frombuffer already gives the one axis of a 1-D field
+    reshape = f".reshape({var}_shape)" if len(spec.shape) != 1 else ""
+    out(f"{indent}{var}_array = frombuffer({var}_data, dtype_{var}){reshape}")
     if not spec.allow_nonfinite and dtype.kind == "f":
-        out(f"{indent}if {var}_array.size and not isfinite_array({var}_array).all(): return None")
+        # one reduction instead of isfinite + all: NaN and infinities make the sum non-finite; a sum
+        # that overflows from finite values only sends the payload to the exact check
+        out(f"{indent}if not isfinite({var}_array.sum()): return None")
     return f"{var}_array"
 
 
@@ -302,7 +321,7 @@ def _sound_array(spec: ArraySpec, var: str, lines: list[str], names: dict[str, A
 def _sound_decoder(cls: type):
     """The generated happy-path decoder of a message type: its message, or None at the first doubt."""
     lines: list[str] = []
-    names: dict[str, Any] = {"isfinite": math.isfinite, "isfinite_array": np.isfinite, "frombuffer": np.frombuffer,
+    names: dict[str, Any] = {"isfinite": math.isfinite, "frombuffer": np.frombuffer,
                              "array_keys": {"dtype", "shape", "data"}}
     built = _sound_items(cls, "raw", lines, names, (TYPE_FIELD, VERSION_FIELD))
     source = "\n".join(["def decode_sound(raw):", *lines, f"    return {built}"])
@@ -328,29 +347,42 @@ def peek_type(data: bytes | bytearray | memoryview) -> str:
     return name
 
 
+# per registered type name: (class, version, happy-path decoder), so that decoding a payload looks
+# its type up once; filled only with registered names, never with what a payload claims
+_readers: dict[str, tuple[type, int, Callable[[dict], Any]]] = {}
+
+
+def _new_reader(name: str) -> tuple[type, int, Callable[[dict], Any]] | None:
+    cls = by_name(name)
+    if cls is None:
+        return None
+    _readers[name] = reader = (cls, type_info(cls)[1], _sound_decoder(cls))
+    return reader
+
+
 def decode(data: bytes | bytearray | memoryview, expected: type | None = None, *, key: str = "") -> Any:
     """Decode and validate a payload; `expected` (a message class) also checks the type."""
     try:
         raw = _unpack(data)
         name = raw.get(TYPE_FIELD)
-        cls = by_name(name) if isinstance(name, str) else None
-        if cls is None:
+        reader = (_readers.get(name) or _new_reader(name)) if type(name) is str else None
+        if reader is None:
             raise MessageError(f"unknown message type {name!r}", field=TYPE_FIELD)
-        want_name, want_version = type_info(cls)
+        cls, want_version, decode_sound = reader
         if expected is not None and cls is not expected:
             raise MessageError(f"got {name}, expected {type_info(expected)[0]}", field=TYPE_FIELD)
         if raw.get(VERSION_FIELD) != want_version:
             raise MessageError(
                 f"version {raw.get(VERSION_FIELD)!r}, this build reads {want_version}",
-                field=VERSION_FIELD, type_name=want_name,
+                field=VERSION_FIELD, type_name=name,
             )
-        msg = _sound_decoder(cls)(raw)
+        msg = decode_sound(raw)
         if msg is not None:
             return msg
         try:
             return _struct_decoder(cls, (TYPE_FIELD, VERSION_FIELD))(raw)
         except _Bad as bad:
-            raise MessageError(bad.reason, field=".".join(bad.path), type_name=want_name) from None
+            raise MessageError(bad.reason, field=".".join(bad.path), type_name=name) from None
     except MessageError as exc:
         if key and not exc.key:
             raise MessageError(exc.reason, field=exc.field, type_name=exc.type_name, key=key) from None

@@ -164,7 +164,8 @@ class LaserScan:
         if abs(len(self.ranges) - beams) > SCAN_BEAM_SLACK:
             return "ranges", (f"{len(self.ranges)} ranges, but angle_min..angle_max in steps of angle_increment "
                               f"make {beams} beams")
-        if (self.ranges < 0).any():     # NaN compares false: only negative numbers and -inf
+        # fmin skips NaN: below zero only with a negative number or -inf (one reduction per decode)
+        if len(self.ranges) and np.fmin.reduce(self.ranges) < 0:
             negative = self.ranges[(self.ranges < 0) & np.isfinite(self.ranges)]
             if negative.size:
                 return "ranges", f"{negative.size} negative range(s), e.g. {float(negative[0])}"

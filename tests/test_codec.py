@@ -1,4 +1,5 @@
 import math
+from concurrent.futures import ThreadPoolExecutor
 
 import msgpack
 import numpy as np
@@ -125,6 +126,22 @@ def test_nan_allowed_only_where_declared():
         decode(encode(odom))
 
 
+def test_finite_values_whose_sum_overflows_are_accepted_and_nan_among_them_refused():
+    huge = WheelCommand(drive="diff", velocities=np.array([1.7e308, 1.7e308]))
+    assert decode(encode(huge)).velocities.tolist() == [1.7e308, 1.7e308]
+    huge.velocities[1] = np.nan
+    with pytest.raises(MessageError, match="WheelCommand.velocities"):
+        decode(encode(huge))
+
+
+def test_threads_encoding_at_once_get_the_bytes_one_thread_gets():
+    messages = [Chatter(text="x" * n, value=float(n)) for n in range(200)]
+    expected = [encode(msg) for msg in messages]
+    with ThreadPoolExecutor(4) as pool:
+        for _ in range(5):
+            assert list(pool.map(encode, messages)) == expected
+
+
 @pytest.mark.parametrize("name,cls", ALL_TYPES)
 def test_every_type_has_a_schema(name, cls):
     schema = describe(cls)
@@ -140,6 +157,7 @@ def test_every_type_has_a_schema(name, cls):
     (OccupancyGrid(info=MapMetaData(width=1, height=1), data=np.full((1, 1), 101, np.int8)), "OccupancyGrid.data"),
     (Costmap(info=MapMetaData(width=2, height=2), data=np.zeros((1, 2), np.uint8)), "Costmap.data"),
     (scan_of([1.0, -0.5, 2.0]), "LaserScan.ranges"),
+    (scan_of([np.nan, -0.5, 2.0]), "LaserScan.ranges"),
     (scan_of([1.0, 2.0], angle_increment=0.0), "LaserScan.angle_increment"),
     (LaserScan(ranges=np.ones(3, np.float32), angle_increment=-0.01, angle_max=0.02, range_max=5.0),
      "LaserScan.angle_increment"),
