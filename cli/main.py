@@ -2,8 +2,10 @@
 from __future__ import annotations
 
 import argparse
+import faulthandler
 import importlib
 import os
+import signal
 import sys
 
 # name -> (module with add_arguments(parser) and main(args) -> int, one-line help)
@@ -57,6 +59,8 @@ def main(argv: list[str] | None = None) -> int:
     add(parser)
     args = parser.parse_args(rest)
     run = getattr(module, f"main_{name}", None) or module.main
+    # `kill -USR1 PID` prints where every thread of any omninav command is, e.g. one that does not stop
+    faulthandler.register(signal.SIGUSR1, all_threads=True)
     try:
         return int(run(args) or 0)
     except KeyboardInterrupt:

@@ -95,7 +95,10 @@ class Processes:
         return next(self.output(log) for p, log in self.started if p is proc)
 
     @staticmethod
-    def stop(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 30.0) -> int:
+    def stop(proc: subprocess.Popen, sig: int = signal.SIGINT, timeout: float = 120.0) -> int:
+        """The exit code once proc has stopped; the timeout is the recorder's stop_timeout_s: a
+        recorder draining a lockstep sim's backlog had not stopped after 30 s (a fresh clone's suite
+        beside two exploration benches on 2 cores)."""
         if proc.poll() is None:
             try:
                 os.killpg(proc.pid, sig)
@@ -104,7 +107,7 @@ class Processes:
             try:
                 proc.wait(timeout)
             except subprocess.TimeoutExpired:
-                os.kill(proc.pid, signal.SIGUSR1)     # `omninav run` prints its threads' stacks to its log
+                os.kill(proc.pid, signal.SIGUSR1)     # any omninav command prints its threads' stacks to its log
                 time.sleep(1.0)
                 os.killpg(proc.pid, signal.SIGKILL)
                 proc.wait(5)

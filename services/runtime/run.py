@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import faulthandler
 import logging
 import signal
 import sys
@@ -65,8 +64,6 @@ def lockstep_of(args: argparse.Namespace) -> Lockstep | None:
 
 def main(args: argparse.Namespace) -> int:
     configure_logging(args.name or args.service, args.log_level)
-    # `kill -USR1 PID` prints where every thread of a service is, e.g. one that does not stop
-    faulthandler.register(signal.SIGUSR1, all_threads=True)
     log = logging.getLogger("omninav.run")
     try:
         node = build_node(args.service, args.params, parse_overrides(args.set), args.robot, args.name,
