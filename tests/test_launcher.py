@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 from omninav.services.runtime.zenoh_config import open_client
 
 from conftest import free_port, wait_until
-from launching import (TALKER_LISTENER, alive, count_echoes, echo_subscriber, processes_using,
+from launching import (TALKER_LISTENER, alive, children, count_echoes, echo_subscriber, processes_using,
                        service_pids)
 
 # ------------------------------------------------------------------ tests
@@ -20,6 +20,8 @@ def test_up_runs_services_as_processes_restarts_a_killed_one_and_stops_in_revers
     pids = wait_until(lambda: (p := service_pids(launcher.pid)).keys() == {"talker", "listener"} and p,
                       30, what="talker and listener started by up")
     assert len({launcher.pid, *pids.values()}) == 3
+    # forked from up's fork server, shared by the two: its children, not up's
+    assert not set(pids.values()) & set(children(launcher.pid))
 
     echoes = []
     with open_client(endpoint) as session:
@@ -120,3 +122,4 @@ def test_a_service_waiting_for_its_router_stops_when_asked(processes_no_router, 
     assert "recorded 0 messages" in processes_no_router.log_of(recorder)
     with open(tmp_path / "early.mcap", "rb") as recording:
         assert make_reader(recording).get_summary() is not None
+
