@@ -59,8 +59,10 @@ def main(argv: list[str] | None = None) -> int:
     add(parser)
     args = parser.parse_args(rest)
     run = getattr(module, f"main_{name}", None) or module.main
-    # `kill -USR1 PID` prints where every thread of any omninav command is, e.g. one that does not stop
-    faulthandler.register(signal.SIGUSR1, all_threads=True)
+    # `kill -USR1 PID` prints where every thread of any omninav command is, e.g. one that does not stop;
+    # to the process's own stderr (fd 2), not sys.stderr, which a caller in-process may have replaced
+    if sys.__stderr__ is not None:
+        faulthandler.register(signal.SIGUSR1, file=sys.__stderr__, all_threads=True)
     try:
         return int(run(args) or 0)
     except KeyboardInterrupt:
