@@ -24,7 +24,7 @@ from omninav.services.runtime.node import Node
 from omninav.services.runtime.zenoh_config import free_loopback_endpoint, open_client, open_router
 
 from conftest import REPO, wait_alive, wait_until
-from launching import children, count_echoes, echo_subscriber, launched
+from launching import count_echoes, echo_subscriber, launched
 
 KEYS = KeyLayout("r1")
 CHATTER, ECHO, CLOCK = KEYS.robot("chatter"), KEYS.robot("echo"), KEYS.resolve("sim/clock")
@@ -226,13 +226,3 @@ def test_a_container_takes_each_payload_once_from_the_bus_for_all_its_nodes_and_
     assert all(a is b for a, b in zip(nodes[0].taken, nodes[1].taken))     # one message, not one per node
     assert len(nodes[0].threads | nodes[1].threads) == 1        # one thread drives both
     assert all(n.counters[f"malformed/{CHATTER}"] == 1 for n in nodes)
-
-
-def test_a_lone_container_is_started_afresh_not_forked(up, endpoint):
-    """up's fork server pays for itself only when shared: a compose of one process has it as up's
-    own child (with two, tests/test_launcher.py, they are the server's)."""
-    launcher = up(TALKER_LISTENER_IN_ONE)
-    wait_alive(endpoint, ["talker", "listener"])
-    [container] = launched(launcher.pid)
-    assert container in children(launcher.pid)
-    assert up.procs.stop(launcher, signal.SIGINT) == 0

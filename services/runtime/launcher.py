@@ -101,14 +101,13 @@ class Supervised:
     process, restart bookkeeping and output."""
 
     def __init__(self, spec: ProcessSpec, endpoint: str, params_dir: Path, credentials: Path, out: Output,
-                 listeners: tuple[str, ...] = (), stop_timeout_s: float = STOP_TIMEOUT_S, forked: bool = True):
+                 listeners: tuple[str, ...] = (), stop_timeout_s: float = STOP_TIMEOUT_S):
         self.spec, self.name, self.endpoint, self.out = spec, spec.name, endpoint, out
-        self.forked = forked            # from the fork server (forked.py), else started afresh
         self.listeners = listeners      # the tokens its sources wait for (Loaded.listeners)
         self.stop_timeout_s = stop_timeout_s
         self.credentials = credentials / spec.name
         self.params_file = self._write_params(params_dir)
-        self.proc: ForkedProcess | subprocess.Popen | None = None
+        self.proc: ForkedProcess | None = None
         self.reader: threading.Thread | None = None
         self.tail: collections.deque[str] = collections.deque(maxlen=TAIL_LINES)
         self.runs = 0
@@ -149,11 +148,7 @@ class Supervised:
     def start(self) -> None:
         env = {**os.environ, ROUTER_ENV: self.endpoint, CREDENTIALS_ENV: str(self.credentials),
                LISTENERS_ENV: ",".join(self.listeners), "PYTHONUNBUFFERED": "1"}
-        if self.forked:
-            self.proc = ForkedProcess(self.command()[3:], env)
-        else:
-            self.proc = subprocess.Popen(self.command(), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
-                                         stderr=subprocess.STDOUT, env=env, process_group=0)
+        self.proc = ForkedProcess(self.command()[3:], env)
         self.runs += 1
         self.started_at = time.monotonic()
         self.restart_at = None
@@ -163,7 +158,7 @@ class Supervised:
         self.reader.start()
         self.out.say(f"started {self.name} (pid {self.proc.pid})")
 
-    def _pump(self, proc: ForkedProcess | subprocess.Popen) -> None:
+    def _pump(self, proc: ForkedProcess) -> None:
         with proc.stdout:
             for raw in proc.stdout:
                 text = raw.decode(errors="replace").rstrip("\r\n")
@@ -373,11 +368,8 @@ def _launch(args: argparse.Namespace, out: Output, child: Answers, loaded: Loade
         except OSError as exc:
             out.say(f"error: cannot write the credentials to {credentials}: {exc.strerror}", sys.stderr)
             return 1
-        # the fork server pays for itself once it is shared: a lone process (navigate --composed one)
-        # forked from it held 25-56 MB more PSS than started afresh (the server's own share)
-        shared = len(compose.processes) > 1
         services = [Supervised(spec, endpoint, Path(params_dir), credentials, out, loaded.listeners,
-                               loaded.stop_timeouts[spec.name], forked=shared)
+                               loaded.stop_timeouts[spec.name])
                     for spec in compose.processes]
         # every process starts now: they import and build their nodes while the child builds them too
         # (for the rights), and connect once the router is open; the sources then wait for the others
