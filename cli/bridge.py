@@ -26,7 +26,7 @@ from ..services.ros2_bridge.rmw import NodeIdentity
 from ..services.runtime import launcher
 from ..services.runtime.params import read_yaml
 from ..parameters.declare import ParamError
-from ..services.runtime.zenoh_config import check_loopback
+from ..services.runtime.zenoh_config import check_loopback, open_in_attempts
 
 COMPOSE = Path(__file__).resolve().parents[1] / "compose" / "ros2_robot.yaml"
 BRIDGE = "ros2_bridge"
@@ -148,12 +148,10 @@ def find_laser(params: Ros2BridgeParams, timeout_s: float) -> tuple[tuple[float,
 
 def _open_robot_session(router: str, deadline: float) -> zenoh.Session:
     """A session with the robot's router, tried until the deadline (LookupError if it never answers)."""
-    while True:
-        try:
-            return zenoh.open(ros_session_config(router))
-        except zenoh.ZError:
-            if time.monotonic() >= deadline:
-                raise LookupError(f"the robot's router at {router} does not answer (is rmw_zenohd running?)") from None
+    session = open_in_attempts(ros_session_config(router), lambda: time.monotonic() >= deadline)
+    if session is None:
+        raise LookupError(f"the robot's router at {router} does not answer (is rmw_zenohd running?)")
+    return session
 
 
 def main(args: argparse.Namespace) -> int:

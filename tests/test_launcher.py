@@ -6,7 +6,6 @@ import time
 
 from mcap.reader import make_reader
 
-
 from omninav.services.runtime.zenoh_config import open_client
 
 from conftest import free_port, wait_until
@@ -122,4 +121,3 @@ def test_a_service_waiting_for_its_router_stops_when_asked(processes_no_router, 
     assert "recorded 0 messages" in processes_no_router.log_of(recorder)
     with open(tmp_path / "early.mcap", "rb") as recording:
         assert make_reader(recording).get_summary() is not None
-

@@ -70,7 +70,8 @@ def _serve(argv: list[str], env: dict[str, str], cwd: str, output: multiprocessi
 def _show_as(argv: list[str]) -> None:
     """Write argv over the process's own command line (cut to the room the server's leaves) and
     the service's name as the process's name."""
-    fields = open("/proc/self/stat", "rb").read().rpartition(b")")[2].split()
+    with open("/proc/self/stat", "rb") as stat:
+        fields = stat.read().rpartition(b")")[2].split()
     start, end = int(fields[STAT_ARG_START]), int(fields[STAT_ARG_START + 1])
     text = b"\0".join(arg.encode() for arg in argv)[:end - start - 1]
     ctypes.memmove(start, text.ljust(end - start, b"\0"), end - start)

@@ -116,6 +116,12 @@ def open_client(router: str | None = None, credentials: str | None = None,
     attempts of OPEN_ATTEMPT_S each, with stopped() asked, and Ctrl-C taken, between them."""
     conf = client_config(router, credentials)
     conf.insert_json5("connect/timeout_ms", json.dumps(round(OPEN_ATTEMPT_S * 1000)))
+    return open_in_attempts(conf, stopped)
+
+
+def open_in_attempts(conf: zenoh.Config, stopped: Callable[[], bool]) -> zenoh.Session | None:
+    """zenoh.open(conf) again after every failure (conf's connect/timeout_ms bounds each attempt)
+    until it succeeds, or None once stopped() is true."""
     while not stopped():
         try:
             return zenoh.open(conf)
