@@ -94,6 +94,8 @@ RECOVERY_WITH_FOLLOWERS = {"recovery_alpha_slow": 0.001, "recovery_alpha_fast": 
 LOCALIZER_BEYOND_ROS = {"temporal_update": 0.2, "recovery_local_share": 0.5}
 # without a map the plan was made through unknown space: replan as the scans fill it in
 MAPLESS_NAVIGATOR = {"planner_frequency": 2.0}
+# the chassis's parameters that say how the robot follows a command: the collision monitor's model of it
+CHASSIS_RESPONSE = ("cmd_vel_delay_s", "acc_lim_x", "acc_lim_y", "acc_lim_theta")
 SETTLE_S = 1.0          # sim s after the last goal ends: the robot comes to rest before the stop
 CANCEL_WAIT_S = 2.0     # sim s to wait for the navigator to confirm a cancel
 POLL_S = 0.1
@@ -223,7 +225,8 @@ def drive_params(drive: str) -> dict:
 
 def robot_params(profile: Profile | None) -> dict[str, dict]:
     """Per service, the parameters a robot profile sets: its footprint where a service takes one,
-    then the profile's own `params`; the simulator's wheels are the chassis's."""
+    then the profile's own `params`; the simulator's wheels are the chassis's, and the collision
+    monitor's model of how the robot follows its commands is the chassis's too (unless set)."""
     if profile is None:
         return {}
     footprint = [list(p) for p in profile.footprint]
@@ -232,6 +235,8 @@ def robot_params(profile: Profile | None) -> dict[str, dict]:
     for service, values in profile.params.items():
         out[service] = {**out.get(service, {}), **values}
     out["sim"]["chassis"] = out.get("chassis", {})      # the simulated wheels are the chassis's
+    response = {k: v for k, v in out["sim"]["chassis"].items() if k in CHASSIS_RESPONSE}
+    out["collision_monitor"] = {**response, **out["collision_monitor"]}
     return out
 
 
@@ -274,7 +279,8 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "local_planner", "service": "local_planner", "params": {**drive_params(drive), **start}},
         {"name": "cmd_vel_mux", "service": "cmd_vel_mux"},
         {"name": "velocity_smoother", "service": "velocity_smoother"},
-        {"name": "collision_monitor", "service": "collision_monitor"},
+        {"name": "collision_monitor", "service": "collision_monitor",
+         "params": {"chassis_period_s": sim_dt} if sim_dt else {}},
         {"name": "navigator", "service": "navigator",
          "params": {**start, **NAVIGATOR, **(MAPLESS_NAVIGATOR if localization == "odom" else {})}},
     ]

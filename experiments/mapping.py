@@ -28,7 +28,7 @@ from ..schemas.messages import OccupancyGrid
 from ..sim.node import SimNode, SimNodeParams
 from ..sim.world import World
 from ..geometry.grid import GRID_OBSTACLE
-from ..cli.navigate import drive_params
+from ..cli.navigate import NAVIGATOR, drive_params
 from ..services.chassis.node import ChassisNode, ChassisNodeParams
 from ..geometry.footprint import radii
 from ..services.costmap.node import CostmapNode, CostmapNodeParams
@@ -110,7 +110,8 @@ def slam_params_for(world: World, overrides: dict | None = None, seed: int = 0) 
 
 def navigation_stack(world: World, drive: str) -> list[Node]:
     """costmap, tracker, global_planner, local_planner, cmd_vel_mux, velocity_smoother, collision_monitor and navigator, as
-    `omninav navigate` runs them (compose/params' costmaps), fed by slam: the map frame is the world's,
+    `omninav navigate` runs them (compose/params' costmaps, its navigator: replanning every second,
+    recovering from oscillation), fed by slam: the map frame is the world's,
     odometry starts at the world's start pose. The tracker ignores slam's map, still being drawn (as
     `navigate --localization slam`)."""
     start = dict(zip(("initial_pose_x", "initial_pose_y", "initial_pose_a"), map(float, world.robot.start)))
@@ -124,7 +125,8 @@ def navigation_stack(world: World, drive: str) -> list[Node]:
             PlannerNode(PlannerNodeParams(goal_topic="plan_request", planner_frequency=0.0, use_dijkstra=False,
                                           **start)),
             LocalPlannerNode(LocalPlannerNodeParams(**strafing, **start)),
-            CmdVelMuxNode(), VelocitySmootherNode(), CollisionMonitorNode(), NavigatorNode(NavigatorNodeParams(**start))]
+            CmdVelMuxNode(), VelocitySmootherNode(), CollisionMonitorNode(),
+            NavigatorNode(NavigatorNodeParams(**NAVIGATOR, **start))]
 
 
 def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, params: SlamNodeParams | None = None,

@@ -97,6 +97,8 @@ def test_the_jackal_profile_sets_the_robot_of_every_service(tmp_path):
     sim = SimNodeParams(**services["sim"]["params"])
     wheels = sim.chassis_params()
     assert {**sim.chassis, "drive": profile.drive} == services["chassis"]["params"]   # the same wheels
+    monitor = services["collision_monitor"]["params"]                     # and the monitor knows how they follow
+    assert (monitor["acc_lim_x"], monitor["acc_lim_theta"]) == (sim.chassis["acc_lim_x"], sim.chassis["acc_lim_theta"])
     assert wheels.wheel_radius * wheels.max_wheel_speed >= 2.0             # the simulated wheels reach 2 m/s
     assert services["lidar"]["params"]["fov"] == pytest.approx(math.radians(270))
     assert services["lidar"]["params"]["range_max"] == 30.0

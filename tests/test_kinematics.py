@@ -6,7 +6,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from omninav.services.chassis.kinematics import DRIVES, ChassisParams, Kinematics, limit_acceleration
+from omninav.geometry.command_response import limit_acceleration
+from omninav.services.chassis.kinematics import DRIVES, ChassisParams, Kinematics
 from omninav.parameters.declare import ParamError
 from omninav.parameters.from_mapping import load_params
 

@@ -3,7 +3,6 @@ commanded twists."""
 import numpy as np
 import pytest
 
-from omninav.geometry.odometry_history import TwistHistory
 from omninav.geometry.se2 import compose, integrate, inverse, relative, se2_exp
 
 
@@ -30,18 +29,3 @@ def test_se2_exp_of_a_pure_translation_and_a_quarter_turn():
     assert se2_exp([1.0, 2.0, 0.0]).tolist() == [1.0, 2.0, 0.0]
     x, y, phi = se2_exp([np.pi / 2, 0.0, np.pi / 2])                 # a quarter circle of radius 1
     assert (x, y, phi) == pytest.approx((1.0, 1.0, np.pi / 2))
-
-
-def test_the_twist_history_dead_reckons_piecewise_constant_commands():
-    history = TwistHistory(keep_ns=10 ** 9)
-    turn = np.array([0.4, 0.1, 0.5])
-    for k in range(10):                                       # the same twist every 50 ms from 100 ms
-        history.add((100 + 50 * k) * 1_000_000, turn)
-    np.testing.assert_allclose(history.motion(120_000_000, 470_000_000), integrate(np.zeros(3), turn, 0.35),
-                               atol=1e-12)
-    np.testing.assert_array_equal(history.motion(0, 100_000_000), np.zeros(3))   # nothing known before
-    history.add(600_000_000, np.zeros(3))                     # a stop: no motion after it
-    np.testing.assert_allclose(history.motion(500_000_000, 900_000_000), integrate(np.zeros(3), turn, 0.1),
-                               atol=1e-12)
-    history.add(2_000_000_000, turn)                          # older than keep_ns is forgotten but the one in effect
-    assert history.stamps == [600_000_000, 2_000_000_000]

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...geometry.command_response import limit_acceleration
 from ...parameters.declare import Parameters, Rule, param
 
 
@@ -174,17 +175,3 @@ class Kinematics:
         if reach.size == 0 or reach.min() >= 1.0:
             return stepped
         return previous + max(0.0, float(reach.min())) * (stepped - previous)
-
-
-def limit_acceleration(requested, previous, dt: float, acc_limits) -> np.ndarray:
-    """Clip each axis of the change from `previous` to `acc_limits * dt` (batches broadcast).
-
-    Axes within their limit come back bit for bit, so callers can tell whether anything clipped.
-    """
-    if dt < 0:
-        raise ValueError(f"dt must not be negative, got {dt}")
-    requested = np.asarray(requested, dtype=float)
-    previous = np.asarray(previous, dtype=float)
-    step = np.asarray(acc_limits, dtype=float) * dt
-    change = requested - previous
-    return np.where(np.abs(change) > step, previous + np.sign(change) * step, requested)

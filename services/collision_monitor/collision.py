@@ -2,10 +2,14 @@
 planner and the chassis, independent of the costmaps.
 
 Two polygons around the footprint (each vertex pushed out by stop_padding / slowdown_padding, as
-costmap_2d pads a footprint): with at least min_points scan points inside the stop zone that the
-command brings closer to the footprint, the command becomes zero; else with at least min_points
-inside the slowdown zone it is scaled by slowdown_ratio (all axes, so the direction is kept).
-Points are in the robot frame.
+costmap_2d pads a footprint): with at least min_points scan points that the command brings into
+the stop zone, and closer to the footprint than stopping now would, the command becomes zero; else
+with at least min_points inside the slowdown zone it is scaled by slowdown_ratio (all axes, so the
+direction is kept). Points are in the robot frame. What a command brings is judged over the whole
+motion it starts (a path, given by the caller): the commands already on their way, the command
+held approach_check_s, then braking until the robot stands. A stop takes effect only after the
+chassis's delay and its deceleration: judged on the instant, a turn at 0.5 rad/s was stopped when
+a corner 0.5 m out was already 2 cm from a wall, and then rolled into it (generated maze 35).
 
 Moving obstacles (the tracker's tracks, circles at constant velocity, robot frame at the command's
 time): as Nav2's "approach" action, the command and each track are carried forward every
@@ -25,13 +29,14 @@ turned was 17 cm off them, its points split between on and off the track, too fe
 (generated doorway worlds, seeds 20–39: a creep at 2 cm/s and a turn at 0.4 rad/s into a person).
 
 Unlike Nav2's stop polygon, a point in the stop zone stops only a command that approaches it (its
-distance to the footprint would shrink over approach_check_s): a robot that has come within
-stop_padding of a door post may still turn or move away from it, instead of standing there until
-the navigator gives up.
+distance to the footprint would shrink more than stopping would shrink it): a robot that has come
+within stop_padding of a door post may still turn or move away from it, instead of standing there
+until the navigator gives up.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Callable
 
 import numpy as np
 
@@ -43,13 +48,15 @@ from ...geometry.se2 import integrate
 from ...geometry.movers import Movers
 from ...parameters.declare import Parameters, Rule, param
 
+# a command -> the robot's poses (K, 3), robot frame now, while it carries the command out and then stops
+PathOf = Callable[[np.ndarray], np.ndarray]
 APPROACH_SCALES = (1.0, 0.75, 0.5, 0.25)   # of a command, tried in turn against the tracks (then standing)
 TRACKED_POINT_MARGIN = 0.15   # m beyond a track's radius within which a scan point is that track's
 # m beyond a track's radius within which a scan point may be the person it follows: the tracks in
 # effect are tracks_delay_s (0.5 s) old, carried on at constant velocity, and a person who turned
 # since is up to 0.3 m from there (0.5 s × a right-angle turn at 0.55 m/s)
 PERSON_POINT_MARGIN = 0.4
-ZONE_BOX_MARGIN = 1e-6        # m around the zones' bounding box: far beyond rounding in the inside test
+ZONE_REACH_MARGIN = 1e-6      # m beyond the zones' farthest corner: far beyond rounding in the inside test
 APPROACH_TOLERANCE = 0.01     # m deeper into the stop zone than standing that a command may bring a track
 # ... and no sooner than this rate allows: just before a contact, a command closing in on a person
 # faster than the simulator's fault_speed (0.02 m/s) makes the contact the robot's
@@ -65,7 +72,7 @@ class CollisionMonitorParams(Parameters):
     slowdown_padding: float = param(0.30, ge=0)       # m added around the footprint for the slowdown zone
     slowdown_ratio: float = param(0.5, ge=0.0, le=1.0)          # Nav2's default
     min_points: int = param(4, ge=1)                  # Nav2's default: fewer points inside a zone are noise
-    approach_check_s: float = param(0.1, gt=0)        # s: a stop-zone point stops commands that come closer within this
+    approach_check_s: float = param(0.1, gt=0)        # s a command is held in the motion it is judged by, before braking
     # Nav2's "approach" action, here against the tracker's moving obstacles (constant velocity)
     time_before_collision: float = param(2.0, gt=0)   # s: a command meeting a track in its stop zone sooner is slowed or stopped
     simulation_time_step: float = param(0.1, gt=0)    # s between the predicted poses checked
@@ -103,25 +110,36 @@ class CollisionMonitor:
         self.stop_zone = pad(footprint, params.stop_padding)
         self.slowdown_zone = pad(footprint, params.slowdown_padding)
         self._zones = np.stack([self.stop_zone, self.slowdown_zone])
-        self._zones_lo = self._zones.reshape(-1, 2).min(axis=0) - ZONE_BOX_MARGIN
-        self._zones_hi = self._zones.reshape(-1, 2).max(axis=0) + ZONE_BOX_MARGIN
+        self._stop_reach = float(np.hypot(*self.stop_zone.T).max()) + ZONE_REACH_MARGIN
+        self._slowdown_reach = float(np.hypot(*self.slowdown_zone.T).max()) + ZONE_REACH_MARGIN
 
-    def check(self, twist, points, movers: Movers | None = None) -> MonitorResult:
-        """The command allowed with these obstacle points and moving obstacles (robot frame)."""
+    def check(self, twist, points, movers: Movers | None = None, path: PathOf | None = None) -> MonitorResult:
+        """The command allowed with these obstacle points and moving obstacles (robot frame);
+        path(twist) gives the robot's poses while it carries out a command and then stops
+        (default: the command held for approach_check_s from standing, then an instant stop)."""
+        path = path or self.held_path
+        twist = np.asarray(twist, float)
+        paths = Paths(path)
         points = np.asarray(points, float).reshape(-1, 2)
-        # the inside test only for points in the zones' bounding box: a scan's other points (most
-        # of them) are in neither, and testing them was most of the monitor's cost
-        points = points[np.all((points >= self._zones_lo) & (points <= self._zones_hi), axis=1)]
+        # the zone and path tests only for points a path could bring into the stop zone, or in
+        # the slowdown zone: a scan's other points (most of them) are in neither, and testing them
+        # was most of the monitor's cost
+        reach = max(self._slowdown_reach, self._stop_reach + paths.extent(twist))
+        points = points[np.hypot(points[:, 0], points[:, 1]) <= reach]
         zones = points_in_polygons(points, self._zones)
         if movers is None or len(movers) == 0:
-            return self._check_points(np.asarray(twist, float), points, zones)
+            return self._check_points(twist, paths, points, zones)
         gap = np.hypot(*(points[:, None, :] - movers.positions[None]).transpose(2, 0, 1))
         on_track = np.any(gap <= movers.radii[None] + TRACKED_POINT_MARGIN, axis=1)
-        result = self._check_points(np.asarray(twist, float), points[~on_track], zones[~on_track])
+        result = self._check_points(twist, paths, points[~on_track], zones[~on_track])
         if result.action == "stop":
             return result
         near_person = np.any(gap <= movers.radii[None] + PERSON_POINT_MARGIN, axis=1)
-        return self._check_movers(result, movers, points[zones[:, 0] | (zones[:, 1] & near_person)])
+        return self._check_movers(result, movers, paths, points[zones[:, 0] | (zones[:, 1] & near_person)])
+
+    def held_path(self, twist) -> np.ndarray:
+        """The robot's poses for a command held approach_check_s from standing, then an instant stop."""
+        return np.stack([np.zeros(3), integrate((0.0, 0.0, 0.0), twist, self.params.approach_check_s)])
 
     def gaps(self, twist, movers: Movers) -> np.ndarray:
         """(K,) metres between the stop zone and the nearest track's circle every
@@ -159,47 +177,69 @@ class CollisionMonitor:
         allowed = np.minimum(APPROACH_TOLERANCE, APPROACH_TOLERANCE_SPEED * taus)
         return bool(np.any((moving[:until] < 0) & (moving[:until] < standing[:until] - allowed)))
 
-    def _check_movers(self, result: MonitorResult, movers: Movers, watched: np.ndarray) -> MonitorResult:
+    def _check_movers(self, result: MonitorResult, movers: Movers, paths: Paths, watched: np.ndarray) -> MonitorResult:
         standing = self.gaps(np.zeros(3), movers)
         closing = APPROACH_TOLERANCE_SPEED * self.params.approach_check_s
         for scale in APPROACH_SCALES:
             twist = result.twist * scale
             if (not self._worse_than_standing(twist, movers, standing)
-                    and self._approached(twist, watched, closing) < self.params.min_points):
+                    and self._approached(paths, twist, watched, closing, np.inf) < self.params.min_points):
                 if scale == 1.0:
                     return result
                 return MonitorResult(twist, "approach", 0, f"a track met within {self.params.time_before_collision} s "
                                                            f"at full speed, deeper than standing")
         return MonitorResult(np.zeros(3), "approach", 0, "a track would be met deeper than standing still")
 
-    def _check_points(self, twist: np.ndarray, points: np.ndarray, zones: np.ndarray) -> MonitorResult:
+    def _check_points(self, twist: np.ndarray, paths: Paths, points: np.ndarray, zones: np.ndarray) -> MonitorResult:
         """The stop and slowdown rules on points (K, 2) with their zones (K, 2): in the stop zone,
         in the slowdown zone."""
         p = self.params
         inside = zones.sum(axis=0)
-        approached = self._approached(twist, points[zones[:, 0]])
+        approached = self._approached(paths, twist, points, 1e-9, p.stop_padding)
         if approached >= p.min_points:
             return MonitorResult(np.zeros(3), "stop", approached,
-                                 f"{approached} scan points within {p.stop_padding} m of the footprint, approached")
+                                 f"{approached} scan points the command brings within {p.stop_padding} m "
+                                 f"of the footprint before the robot can stop")
         if inside[1] >= p.min_points:
             return MonitorResult(twist * p.slowdown_ratio, "slowdown", int(inside[1]),
                                  f"{inside[1]} scan points within {p.slowdown_padding} m of the footprint")
         return MonitorResult(twist.copy(), "none", 0, "")
 
-    def _approached(self, twist: np.ndarray, points: np.ndarray, tolerance: float = 1e-9) -> int:
-        """How many of the points the command brings closer to the footprint's outline (by more than
-        tolerance metres over approach_check_s)."""
+    def _approached(self, paths: Paths, twist: np.ndarray, points: np.ndarray, tolerance: float, within: float) -> int:
+        """How many of the points the command's path brings closer to the footprint's outline than
+        stopping now would (by more than tolerance metres), and within `within` of it."""
         if len(points) == 0:
             return 0
-        dx, dy, dtheta = integrate((0.0, 0.0, 0.0), twist, self.params.approach_check_s)
-        cos, sin = np.cos(dtheta), np.sin(dtheta)
-        shifted = points - (dx, dy)
-        after = np.column_stack([cos * shifted[:, 0] + sin * shifted[:, 1], -sin * shifted[:, 0] + cos * shifted[:, 1]])
-        closer = self._signed_distance(after) < self._signed_distance(points) - tolerance
-        return int(np.count_nonzero(closer))
+        moving = self._closest(paths.of(twist), points)
+        standing = self._closest(paths.of(np.zeros(3)), points)
+        return int(np.count_nonzero((moving < standing - tolerance) & (moving < within)))
 
-    def _signed_distance(self, points: np.ndarray) -> np.ndarray:
-        """(K,) distance from each point to the footprint's outline, negative inside: a point the
-        command carries through the outline within approach_check_s is approached, not left."""
-        distance = distance_to_outline(points, self._footprint)
-        return np.where(points_in_polygons(points, self._footprint[None])[:, 0], -distance, distance)
+    def _closest(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
+        """(K,) the least signed distance from each point to the footprint's outline (negative
+        inside) over the poses (robot frame now): a point a path carries through the outline is
+        approached, not left."""
+        c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
+        dx = points[None, :, 0] - poses[:, 0, None]
+        dy = points[None, :, 1] - poses[:, 1, None]
+        local = np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1).reshape(-1, 2)
+        distance = distance_to_outline(local, self._footprint)
+        signed = np.where(points_in_polygons(local, self._footprint[None])[:, 0], -distance, distance)
+        return signed.reshape(len(poses), len(points)).min(axis=0)
+
+
+class Paths:
+    """The robot's poses for each command asked about in one check, each worked out once."""
+
+    def __init__(self, path: PathOf):
+        self._path = path
+        self._known: dict[bytes, np.ndarray] = {}
+
+    def of(self, twist: np.ndarray) -> np.ndarray:
+        key = np.asarray(twist, float).tobytes()
+        if key not in self._known:
+            self._known[key] = self._path(twist)
+        return self._known[key]
+
+    def extent(self, twist: np.ndarray) -> float:
+        """How far the robot's origin gets from where it is, with the command or stopping now."""
+        return float(max(np.hypot(*self.of(t)[:, :2].T).max() for t in (twist, np.zeros(3))))

@@ -10,9 +10,13 @@ robot frame by the laser's mount on the robot (laser_x, laser_y, laser_yaw: the 
 mount by default, as the costmap). No scan, or one older than source_timeout, stops the robot:
 the monitor cannot see. The scan's points are carried to the command's time by the robot's motion
 since the scan's stamp (Nav2's base_shift_correction), dead-reckoned from the monitor's own
-commands since then: the odometry arrives too late for it (held tracks_delay_s, below), and without
-it the scan in use is up to 0.15 s old — 7.5 cm at 0.5 m/s, or a corner 0.5 m out swung 4 cm by a
-turn at 0.5 rad/s, most of the 5 cm stop zone (generated mazes: corners turned into walls).
+commands as the chassis carries them out (geometry/command_response.py: cmd_vel_delay_s late, at
+the acceleration limits): the odometry arrives too late for it (held tracks_delay_s, below), and
+without it the scan in use is up to 0.15 s old — 7.5 cm at 0.5 m/s, or a corner 0.5 m out swung
+4 cm by a turn at 0.5 rad/s, most of the 5 cm stop zone (generated mazes: corners turned into
+walls). The commands as sent were not enough: after a stop they say the robot stood, while it was
+still turning, and the monitor let the turn go on (maze 35). The same model gives the path each
+command is judged by (collision.py): what is on its way, the command, then braking.
 The tracker's tracks and the odometry are held tracks_delay_s the same way; the tracks are
 predicted to the command's time and placed around the robot where its odometry, carried on by its
 twist, puts it then: a command that would meet a track in the stop zone within
@@ -25,7 +29,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...geometry.frames import LASER_MOUNT, twist_message, twist_vector
-from ...geometry.odometry_history import TwistHistory
+from ...geometry.command_response import CommandResponse
 from ...geometry.polygons import transform_points
 from ...geometry.se2 import integrate, inverse
 from ...schemas.messages import Odometry, Tracks, Twist
@@ -44,6 +48,12 @@ class CollisionMonitorNodeParams(CollisionMonitorParams):
     scan_delay_s: float = param(0.05, ge=0)               # sim s from a scan's stamp until it is used
     source_timeout: float = param(1.0, finite=True)              # s: an older scan is no scan (Nav2's name; its default is 2)
     base_shift_correction: bool = True    # Nav2's name: carry the scan by the robot's motion since its stamp
+    # the chassis the commands go to (the chassis service's names and defaults): how the robot follows them
+    cmd_vel_delay_s: float = param(0.05, ge=0)            # sim s from a command's stamp until it takes effect
+    acc_lim_x: float = param(2.5, gt=0)                   # m/s^2
+    acc_lim_y: float = param(2.5, gt=0)                   # m/s^2
+    acc_lim_theta: float = param(3.2, gt=0)               # rad/s^2
+    chassis_period_s: float = param(0.01, gt=0)           # s between the chassis's velocity steps (the sim's dt)
     tracks_delay_s: float = param(0.5, ge=0)              # sim s from a tracks / odom stamp until it is used (live, tracks trailed
                                              # the clock the monitor runs on by more than 0.3 s)
 
@@ -66,7 +76,8 @@ class CollisionMonitorNode(Node):
         self.pending = Deferred(p.scan_delay_s)              # scans not yet in effect
         self.scan_stamp_ns: int | None = None                 # of the scan in effect
         self.points = np.zeros((0, 2))                        # its points, robot frame at its stamp
-        self.sent = TwistHistory(self.timeout_ns)             # the commands sent, for the motion since the scan
+        self.response = CommandResponse(p.cmd_vel_delay_s, (p.acc_lim_x, p.acc_lim_y, p.acc_lim_theta),
+                                        p.chassis_period_s, p.source_timeout)   # the robot's motion from the commands sent
         self.pending_tracks = Deferred(p.tracks_delay_s)     # tracks and odometry not yet in effect
         self.tracks: Tracks | None = None
         self.odom: Odometry | None = None
@@ -91,7 +102,7 @@ class CollisionMonitorNode(Node):
         """The scan's points in the robot frame at t."""
         if not self.params.base_shift_correction:
             return self.points
-        return transform_points(self.points, inverse(self.sent.motion(self.scan_stamp_ns, t)))[0]
+        return transform_points(self.points, inverse(self.response.motion(self.scan_stamp_ns, t)))[0]
 
     def on_command(self, msg: Twist) -> None:
         t = msg.header.stamp_ns
@@ -107,8 +118,9 @@ class CollisionMonitorNode(Node):
         if self.scan_stamp_ns is None or t - self.scan_stamp_ns > self.timeout_ns:
             action, twist = "no_scan", np.zeros(3)
         else:
-            result = self.monitor.check(twist, self._points_at(t), self._movers(t))
+            result = self.monitor.check(twist, self._points_at(t), self._movers(t),
+                                        lambda command: self.response.path(t, command, self.params.approach_check_s))
             action, twist = result.action, result.twist
         self.counters[f"action/{action}"] += 1
-        self.sent.add(t, twist)
+        self.response.add(t, twist)
         self.out_pub.publish(twist_message(twist, t))
