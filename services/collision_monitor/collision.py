@@ -107,6 +107,7 @@ class CollisionMonitor:
     def __init__(self, params: CollisionMonitorParams):
         self.params = params
         footprint = self._footprint = np.asarray(params.footprint, float)
+        self._radius = float(np.hypot(*footprint.T).max())       # the footprint's farthest point from the origin
         self.stop_zone = pad(footprint, params.stop_padding)
         self.slowdown_zone = pad(footprint, params.slowdown_padding)
         self._zones = np.stack([self.stop_zone, self.slowdown_zone])
@@ -208,11 +209,22 @@ class CollisionMonitor:
     def _approached(self, paths: Paths, twist: np.ndarray, points: np.ndarray, tolerance: float, within: float) -> int:
         """How many of the points the command's path brings closer to the footprint's outline than
         stopping now would (by more than tolerance metres), and within `within` of it."""
+        path = paths.of(twist)
+        if np.isfinite(within) and len(points):
+            # no point of the footprint moves farther along the path than this: points farther out
+            # (most of them) cannot be brought within, and the path test is the monitor's cost
+            sweep = float(np.max(np.hypot(path[:, 0], path[:, 1]) + self._radius * np.abs(path[:, 2])))
+            points = points[self._signed_distance(points) < within + sweep]
         if len(points) == 0:
             return 0
-        moving = self._closest(paths.of(twist), points)
+        moving = self._closest(path, points)
         standing = self._closest(paths.of(np.zeros(3)), points)
         return int(np.count_nonzero((moving < standing - tolerance) & (moving < within)))
+
+    def _signed_distance(self, points: np.ndarray) -> np.ndarray:
+        """(K,) distance from each point to the footprint's outline, negative inside."""
+        distance = distance_to_outline(points, self._footprint)
+        return np.where(points_in_polygons(points, self._footprint[None])[:, 0], -distance, distance)
 
     def _closest(self, poses: np.ndarray, points: np.ndarray) -> np.ndarray:
         """(K,) the least signed distance from each point to the footprint's outline (negative
@@ -222,9 +234,7 @@ class CollisionMonitor:
         dx = points[None, :, 0] - poses[:, 0, None]
         dy = points[None, :, 1] - poses[:, 1, None]
         local = np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1).reshape(-1, 2)
-        distance = distance_to_outline(local, self._footprint)
-        signed = np.where(points_in_polygons(local, self._footprint[None])[:, 0], -distance, distance)
-        return signed.reshape(len(poses), len(points)).min(axis=0)
+        return self._signed_distance(local).reshape(len(poses), len(points)).min(axis=0)
 
 
 class Paths:
