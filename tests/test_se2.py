@@ -3,7 +3,7 @@ commanded twists."""
 import numpy as np
 import pytest
 
-from omninav.geometry.se2 import compose, integrate, inverse, relative, se2_exp
+from omninav.geometry.se2 import compose, inverse, relative, se2_exp
 
 
 def poses(rng: np.random.Generator, n: int) -> np.ndarray:
