@@ -1,5 +1,6 @@
 """The chassis's response to commands as the collision monitor models it: late by the delay, at the
-acceleration limits, rolling on after a stop; and its paths ahead, against the chassis service itself."""
+acceleration limits, rolling on after a stop; and its paths ahead, worked out by hand. (Against the
+simulated chassis: tests/test_gate_nodes.py, a turn beside a wall.)"""
 import numpy as np
 import pytest
 

@@ -9,7 +9,7 @@ direction is kept). Points are in the robot frame. What a command brings is judg
 motion it starts (a path, given by the caller): the commands already on their way, the command
 held approach_check_s, then braking until the robot stands. A stop takes effect only after the
 chassis's delay and its deceleration: judged on the instant, a turn at 0.5 rad/s was stopped when
-a corner 0.5 m out was already 2 cm from a wall, and then rolled into it (generated maze 35).
+a corner 0.5 m out was already 3 cm from a wall, and then rolled into it (generated maze 35).
 
 Moving obstacles (the tracker's tracks, circles at constant velocity, robot frame at the command's
 time): as Nav2's "approach" action, the command and each track are carried forward every
@@ -41,10 +41,10 @@ from typing import Callable
 import numpy as np
 
 from ...schemas.messages import LaserScan
-from ...geometry.polygons import points_in_polygons
+from ...geometry.polygons import points_in_polygons, transform_points
 from ...geometry.footprint import STOP_PADDING, pad
 from ...geometry.frames import scan_points
-from ...geometry.se2 import integrate
+from ...geometry.se2 import integrate, inverse
 from ...geometry.movers import Movers
 from ...parameters.declare import Parameters, Rule, param
 
@@ -230,10 +230,7 @@ class CollisionMonitor:
         """(K,) the least signed distance from each point to the footprint's outline (negative
         inside) over the poses (robot frame now): a point a path carries through the outline is
         approached, not left."""
-        c, s = np.cos(poses[:, 2])[:, None], np.sin(poses[:, 2])[:, None]
-        dx = points[None, :, 0] - poses[:, 0, None]
-        dy = points[None, :, 1] - poses[:, 1, None]
-        local = np.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1).reshape(-1, 2)
+        local = transform_points(points, inverse(poses)).reshape(-1, 2)     # the points in each pose's frame
         return self._signed_distance(local).reshape(len(poses), len(points)).min(axis=0)
 
 
