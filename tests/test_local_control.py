@@ -143,6 +143,23 @@ def test_a_shim_turn_that_would_sweep_into_a_wall_is_left_to_the_controller():
     assert without_wall.step(ControlInputs(np.zeros(3), frames, costmap(), None, 0.0)).reason == "rotate_to_heading"
 
 
+def test_dwa_backing_up_arms_the_shim_again_and_the_robot_turns_round_once_the_turn_is_free():
+    # a differential robot 3 cm from a wall ahead, its path behind it: the shim's turn would sweep its
+    # front corners into the wall (blocked, handed over); DWA backs away (escape), which arms the shim
+    # again, and once backed far enough the turn is free and the shim turns the robot round — rather
+    # than DWA creeping at the wall and backing off in turn (BARN world 58)
+    west = polyline([(0.0, 0.0), (-2.0, 0.0)], math.pi)
+    frames = RobotFrames("map", "odom")
+    core = LocalControl(LocalControlParams(holonomic_robot=False, min_vel_x=0.0), DT)
+    core.follow(follow_path(west), frames)
+    answers, pose = drive(core, frames, (0.0, 0.0, 0.0), costmap((0.445, -3.0, 0.6, 3.0)), 600)
+    counted = [c for a in answers for c in a.counted]
+    assert counted[0] == "shim/blocked" and "shim/rearmed" in counted
+    first_escape = next(k for k, a in enumerate(answers) if a.reason == "escape")
+    assert any(a.reason == "rotate_to_heading" for a in answers[first_escape:])
+    assert answers[-1].reason == GOAL_REACHED and math.hypot(pose[0] + 2.0, pose[1]) <= 0.02
+
+
 def tracks(t: float, *people) -> Tracks:
     """Tracks (odom frame) stamped t of people given as (x, y, vx, vy)."""
     return Tracks(header=Header(stamp_ns=round(t * NS_PER_S), frame_id="odom"), ids=np.arange(len(people)),

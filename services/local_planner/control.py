@@ -25,7 +25,11 @@ One tick, in order:
 - The rotation shim (shim.py; on by default with dwa) turns the robot on the spot towards a new path
   (a new goal_id, or a start more than START_MOVED from the last path's) that lies more than
   angular_dist_threshold off its heading: reason "rotate_to_heading". Its state is set by `follow`
-  and the ticks alone. It stays out within final_approach_distance of the goal.
+  and the ticks alone. It stays out within final_approach_distance of the goal. DWA failing (backing
+  up or braking: no forward rollout legal) arms it again (counted shim/rearmed): a path that turned
+  round while the robot crept into a dead end (BARN world 58: a replanned path led back out of a
+  pocket behind the robot) is one DWA's forward samples never reach — it crept on and backed up in
+  turn until the navigator gave up — while turning on the spot first leaves it facing the way out.
 - Else the controller: DWA (scoring the tracker's tracks predicted to the tick, dynamic.py), the
   elastic band, or the path follower (braking, not ok, "path_blocked: …" when the path ahead is
   illegal on the costmap).
@@ -207,6 +211,9 @@ class LocalControl:
             return self._follow_path(velocity, path, robot, frames, costmap)
         if self.params.controller == "dwa":
             result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path, movers=movers)
+            if result.status in ("escape", "no_valid_trajectory") and self.shim is not None:
+                self.shim.new_path()
+                self._counted.append("shim/rearmed")
         else:
             result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path)
         reason = result.status if result.status in ("ok", "escape") else f"{result.status}: {result.message}"
