@@ -166,6 +166,25 @@ def test_no_legal_trajectory_backs_up_or_brakes():
     assert np.allclose(result.cmd, [0.3 - 2.5 / 20, 0.0, 0.2 - 3.2 / 20])   # braking as hard as allowed
 
 
+def test_backing_up_goes_on_until_escape_reset_dist_before_forward_samples_come_back():
+    # base_local_planner's escaping: a robot that backed out of a gap it did not fit would, a
+    # centimetre back, see the gap's mouth legal again and creep in, back out, creep in...
+    walled, info, check = costmap(boxes=[(0.25, -1.0, 0.5, 1.0)])   # a wall just ahead
+    free, _, _ = costmap()
+    params = DwaParams(min_vel_x=0.1, holonomic_robot=False)
+    planner = DwaPlanner(params, FootprintCheck(FOOTPRINT.points, check))
+    path = straight(0.0, 0.0, 2.0, 0.0)
+    standing = (0.0, 0.0, 0.0)
+    assert planner.compute((0.0, 0.0, 0.0), standing, walled, info, path).status == "escape"
+    backed = planner.compute((-0.05, 0.0, 0.0), standing, free, info, path)
+    assert backed.status == "ok" and np.all(backed.samples[:, 0] == 0.0), "turns only while escaping"
+    beyond = planner.compute((-params.escape_reset_dist - 0.01, 0.0, 0.0), standing, free, info, path)
+    assert beyond.status == "ok" and beyond.cmd[0] > 0, "forward again once escape_reset_dist is backed"
+    assert planner.compute((0.0, 0.0, 0.0), standing, walled, info, path).status == "escape"
+    turned = planner.compute((0.0, 0.0, params.escape_reset_theta + 0.01), standing, free, info, path)
+    assert (turned.samples[:, 0] > 0).any(), "forward again once escape_reset_theta is turned"
+
+
 def test_no_path_on_the_costmap_brakes():
     costs, info, check = costmap()
     result = DwaPlanner(HOLO, FootprintCheck(FOOTPRINT.points, check)).compute(
@@ -287,6 +306,21 @@ def test_a_robot_pushed_within_its_padding_of_a_wall_drives_on_with_its_own_outl
     trace, results = drive(planner, costs, info, straight(-2.5, 0.0, 2.5, 0.0), start, 200)
     assert not any(footprint_hits_lethal(costs, info, p) for p in trace)
     assert trace[-1, 0] > 1.5, "drove along the corridor"
+
+
+def test_the_stop_zone_is_not_stacked_on_a_padding_that_already_holds_it():
+    # the monitor's stop zone lies around the robot's own outline: a footprint padded by 0.1 m
+    # already keeps a 0.05 m zone clear, so a robot 0.06 m from a wall gets no extra 0.05 m
+    padding = 0.1
+    costs, info, check = costmap(boxes=[(0.25, -1.0, 0.5, 1.0)], padding=padding)
+    padded = make_footprint(SQUARE, padding=padding)
+    poses = np.array([[-1.0, 0.0, 0.0], [-0.075, 0.0, 0.0], [0.0, 0.0, 0.0]])
+    thick = FootprintCheck(padded.points, check, stop_padding=0.05, footprint_padding=padding)
+    thin = FootprintCheck(padded.points, check, stop_padding=0.15, footprint_padding=padding)
+    def legal_from_afar(check):   # each pose checked as from the first, a metre clear of the wall
+        return [bool(check.legal_poses(poses[[0, i]], costs, info)[1]) for i in range(len(poses))]
+    assert legal_from_afar(thick) == [True, True, False]
+    assert legal_from_afar(thin) == [True, False, False]
 
 
 def test_a_footprint_check_set_up_again_gives_what_a_fresh_one_gives_as_the_grid_changes():

@@ -24,6 +24,9 @@ One control cycle (`DwaPlanner.compute`):
 With no legal trajectory, base_local_planner's last resorts are rolled out (`fallback_velocities`:
 turns on the spot and, holonomic, pure strafes, at the reachable speed nearest standing whatever
 min_vel_x), then backing up at escape_vel; else the command brakes as hard as the window allows.
+Once it backs up the planner is escaping, as base_local_planner's is: only the last resorts are
+sampled until the robot has moved escape_reset_dist or turned escape_reset_theta from where the
+backing began, so it does not creep forward into the same gap on the next cycle.
 Distances are 16-connected around the inscribed, lethal and unknown cells; cells the flood does
 not reach (those cells themselves) get the distance of the nearest reached cell plus the straight
 line to it, so a point ahead of a pose near a wall is scored, not rejected.
@@ -39,6 +42,7 @@ from numba import njit
 from ...schemas.messages import MapMetaData
 from ...geometry.distance import nearest_cells
 from ...geometry.polygons import densify
+from ...geometry.se2 import wrap_angle
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE
 from ...geometry.grid import in_grid, kernel_costs, world_to_cell
 from .dynamic import Movers, critic, slack
@@ -376,6 +380,12 @@ class DwaPlanner:
         self.params = params
         self.footprint_check = footprint_check
         self.distances = DistanceCache()
+        self._escape_start: np.ndarray | None = None   # the pose where backing up began, while escaping
+
+    def _escaped(self, pose) -> bool:
+        start, p = self._escape_start, self.params
+        return (math.hypot(pose[0] - start[0], pose[1] - start[1]) >= p.escape_reset_dist
+                or abs(wrap_angle(pose[2] - start[2])) >= p.escape_reset_theta)
 
     def n_steps(self, samples: np.ndarray) -> int:
         """Poses per rollout: the fastest sample moves at most sim_granularity (m, or rad) per step."""
@@ -430,7 +440,10 @@ class DwaPlanner:
         brake = np.clip(0.0, low, high)   # as hard as the acceleration limits allow
         if not self.params.holonomic_robot:
             brake[1] = 0.0
-        samples = sample_velocities(self.params, velocity)
+        if self._escape_start is not None and self._escaped(pose):
+            self._escape_start = None
+        escaping = self._escape_start is not None
+        samples = (fallback_velocities if escaping else sample_velocities)(self.params, velocity)
         if maps is None:
             return DwaResult("no_path", brake, samples, np.zeros((0, 1, 3)), np.zeros(0), -1,
                              "no point of the path lies on the local costmap")
@@ -445,7 +458,7 @@ class DwaPlanner:
             return poses, legal, self.score(poses, max_cost, legal, maps, info) + cost
 
         poses, legal, scores = evaluate(samples)
-        last_resorts = fallback_velocities(self.params, velocity) if not legal.any() else samples[:0]
+        last_resorts = fallback_velocities(self.params, velocity) if not (legal.any() or escaping) else samples[:0]
         if len(last_resorts):     # base_local_planner's last resorts before backing up
             samples = last_resorts
             poses, legal, scores = evaluate(samples)
@@ -455,8 +468,13 @@ class DwaPlanner:
         if self.params.escape_vel < 0:
             escape = np.clip(np.array([self.params.escape_vel, 0.0, 0.0]), low, high)
             if escape[0] < 0 and evaluate(escape[None])[1][0]:
+                if not escaping:
+                    self._escape_start = np.array(pose[:3], np.float64)
                 return DwaResult("escape", escape, samples, poses, scores, -1,
                                  f"every one of {len(samples)} trajectories collides; backing up")
+        if escaping:   # cannot turn or back any further: the whole window again
+            self._escape_start = None
+            return self.compute(pose, velocity, costs, info, path, maps, movers)
         return DwaResult("no_valid_trajectory", brake, samples, poses, scores, -1,
                          f"every one of {len(samples)} trajectories collides; braking")
 

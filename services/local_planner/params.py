@@ -3,7 +3,7 @@
 DwaParams holds base_local_planner's TrajectoryPlannerROS names (the ones the mecanum paper's table
 lists) and dwa_local_planner's where base_local_planner has none. Defaults are the ROS wiki's:
 base_local_planner for acc_lim_*, max/min_vel_x, max/min_vel_theta, min_in_place_vel_theta,
-escape_vel, holonomic_robot, y_vels, sim_granularity, vx_samples, vtheta_samples,
+escape_vel, escape_reset_dist, escape_reset_theta, holonomic_robot, y_vels, sim_granularity, vx_samples, vtheta_samples,
 controller_frequency, dwa; dwa_local_planner for max/min_vel_y, vy_samples,
 sim_time (1.7), path_distance_bias (32), goal_distance_bias (24), occdist_scale (0.01),
 forward_point_distance (0.325). The biases weigh metres as DWA does (DWA multiplies them by the
@@ -34,6 +34,8 @@ class DwaParams(Parameters):
     min_vel_theta: float = -1.0                                 # rad/s
     min_in_place_vel_theta: float = param(0.4, gt=0)            # rad/s: slower turns on the spot are not sampled
     escape_vel: float = -0.1                                    # m/s: backing up when no trajectory is legal
+    escape_reset_dist: float = param(0.10, ge=0)                # m backed (or moved) before forward samples come back
+    escape_reset_theta: float = param(math.pi / 4, ge=0)        # rad turned before forward samples come back
     holonomic_robot: bool = True                                # false: differential drive, vy is always 0
     y_vels: tuple[float, ...] = param((-0.3, -0.1, 0.1, 0.3), finite=True)  # m/s: extra strafe samples (within the window)
     # forward simulation
