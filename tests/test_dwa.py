@@ -323,6 +323,26 @@ def test_the_stop_zone_is_not_stacked_on_a_padding_that_already_holds_it():
     assert legal_from_afar(thin) == [True, False, False]
 
 
+def test_a_padding_wider_than_the_stop_zone_does_not_keep_the_robot_from_turning_round():
+    # a wall 0.35 m ahead of the centre: the padded corners (0.42 m out) would sweep it, the robot's
+    # own grown by the monitor's 0.02 m zone (0.31 m) do not; the path leads back the way it came,
+    # so the robot turns on the spot instead of backing away from the wall for good
+    padding = 0.1
+    costs, info, check = costmap(boxes=[(0.35, -1.0, 0.6, 1.0)], padding=padding)
+    padded = make_footprint(SQUARE, padding=padding)
+    planner = DwaPlanner(DwaParams(min_vel_x=0.0, holonomic_robot=False),
+                         FootprintCheck(padded.points, check, stop_padding=0.02, footprint_padding=padding))
+    back = straight(0.0, 0.0, -2.5, 0.0)
+    first = planner.compute((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), costs, info, back)
+    assert first.status == "ok" and first.cmd[0] == 0.0 and first.cmd[2] != 0.0, "turns on the spot"
+    trace, results = drive(planner, costs, info, back, (0.0, 0.0, 0.0), 200)
+    assert not any(footprint_hits_lethal(costs, info, p) for p in trace)
+    assert trace[-1, 0] < -1.5, "drove back along the path"
+    wide_zone = DwaPlanner(DwaParams(min_vel_x=0.0, holonomic_robot=False),
+                           FootprintCheck(padded.points, check, stop_padding=0.15, footprint_padding=padding))
+    assert wide_zone.compute((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), costs, info, back).status == "escape"
+
+
 def test_a_footprint_check_set_up_again_gives_what_a_fresh_one_gives_as_the_grid_changes():
     open_room, info, check = costmap()
     with_box, _, _ = costmap(boxes=[(0.3, -0.4, 0.7, 0.4)])

@@ -70,3 +70,14 @@ def test_tracks_are_predicted_to_the_tick_and_carried_into_the_planners_frame():
     assert len(movers_at(msg, 1.5, (0.0, 0.0, 0.0), 0.6)) == 0     # slower than min_speed: the costmap's
     msg.radii = np.array([0.3, 0.2])
     assert "radii has 2" in tracks_problem(msg)
+
+
+def test_backing_from_a_person_in_the_way_starts_no_escape():
+    """DWA's escape (forward samples held back until the robot has backed escape_reset_dist) is for
+    gaps it does not fit, which stay put; a person who walks on frees the way at once."""
+    planner = DwaPlanner(DwaParams(min_vel_x=0.0, holonomic_robot=False), FootprintCheck(FOOTPRINT))
+    in_the_way = movers((0.77, 0.0, 0.0, 0.0, 0.3))     # within the kept margin of the front
+    first = planner.compute((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), FREE, INFO, PATH, movers=in_the_way)
+    assert first.status == "escape"
+    gone = planner.compute((-0.02, 0.0, 0.0), (0.0, 0.0, 0.0), FREE, INFO, PATH)
+    assert gone.status == "ok" and gone.cmd[0] > 0

@@ -23,8 +23,10 @@ One control cycle (`DwaPlanner.compute`):
    forward_point_distance of the local goal as DWA does.
 With no legal trajectory, base_local_planner's last resorts are rolled out (`fallback_velocities`:
 turns on the spot and, holonomic, pure strafes, at the reachable speed nearest standing whatever
-min_vel_x), then backing up at escape_vel; else the command brakes as hard as the window allows.
-Once it backs up the planner is escaping, as base_local_planner's is: only the last resorts are
+min_vel_x) — where the footprint padding leaves none, checked with the robot's own outline grown
+by the monitor's stop zone (FootprintCheck.turn_check) — then backing up at escape_vel; else the
+command brakes as hard as the window allows. Once it backs up from a block in the costmap (not
+from a person, who walks on) the planner is escaping, as base_local_planner's is: only the last resorts are
 sampled until the robot has moved escape_reset_dist or turned escape_reset_theta from where the
 backing began, so it does not creep forward into the same gap on the next cycle.
 Distances are 16-connected around the inscribed, lethal and unknown cells; cells the flood does
@@ -449,26 +451,34 @@ class DwaPlanner:
                              "no point of the path lies on the local costmap")
         check = self.footprint_check.setup(pose, costs, info)
 
-        def evaluate(samples):
-            poses, max_cost, legal = self.rollout(samples, pose, velocity, costs, info, check)
-            cost = 0.0
+        def evaluate(samples, check=check):
+            """(poses, legal, legal against the costmap alone, scores)"""
+            poses, max_cost, static = self.rollout(samples, pose, velocity, costs, info, check)
+            legal, cost = static, 0.0
             if movers is not None and len(movers):
                 clear, cost = self._clear_of(poses, movers)
-                legal = legal & clear
-            return poses, legal, self.score(poses, max_cost, legal, maps, info) + cost
+                legal = static & clear
+            return poses, legal, static, self.score(poses, max_cost, legal, maps, info) + cost
 
-        poses, legal, scores = evaluate(samples)
+        poses, legal, static, scores = evaluate(samples)
+        # a gap the robot does not fit stays put; a person in the way walks on, so backing from one
+        # starts no escape
+        walled_in = not static.any()
         last_resorts = fallback_velocities(self.params, velocity) if not (legal.any() or escaping) else samples[:0]
         if len(last_resorts):     # base_local_planner's last resorts before backing up
             samples = last_resorts
-            poses, legal, scores = evaluate(samples)
+            poses, legal, _, scores = evaluate(samples)
+        tight = self.footprint_check.turn_check(pose, costs, info) if not legal.any() else None
+        if tight is not None:   # the padding keeps the robot from turning where the monitor would not
+            samples = fallback_velocities(self.params, velocity)
+            poses, legal, _, scores = evaluate(samples, tight)
         if legal.any():
             best = int(np.argmin(scores))
             return DwaResult("ok", samples[best].copy(), samples, poses, scores, best)
         if self.params.escape_vel < 0:
             escape = np.clip(np.array([self.params.escape_vel, 0.0, 0.0]), low, high)
             if escape[0] < 0 and evaluate(escape[None])[1][0]:
-                if not escaping:
+                if not escaping and walled_in:
                     self._escape_start = np.array(pose[:3], np.float64)
                 return DwaResult("escape", escape, samples, poses, scores, -1,
                                  f"every one of {len(samples)} trajectories collides; backing up")

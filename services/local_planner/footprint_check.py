@@ -209,8 +209,8 @@ class FootprintCheck:
         legal = np.empty(1, np.bool_)
         start = np.asarray(pose, np.float64).reshape(1, 3)
         # the monitor's stop zone lies around the robot's own outline: a footprint_padding already
-        # holds that much of it (stacked, a Jackal's 0.1 m padding and 0.05 m zone kept BARN world 30's
-        # 0.45 m gaps shut)
+        # holds that much of it (stacked, the Jackal's 0.1 m padding and 0.02 m zone kept BARN
+        # world 30's 0.45 m gaps shut)
         zone = max(0.0, self.stop_padding - self.footprint_padding)
         for padding, margin in ((zone + quarter, info.resolution), (quarter, 0.0), (0.0, 0.0)):
             clear = self._outline_check(clearance, skips, info.resolution, padding + margin, centre_limit)
@@ -218,6 +218,18 @@ class FootprintCheck:
             if legal[0]:
                 return self._outline_check(clearance, skips, info.resolution, padding, centre_limit)
         return self._outline_check(clearance, skips, info.resolution, -self.footprint_padding, centre_limit)
+
+    def turn_check(self, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck | None:
+        """What a last-resort turn is checked with when the padded footprint leaves none: the robot's
+        own outline grown by the monitor's stop zone and a quarter cell — a turn the monitor lets
+        through. None when that is no smaller than the padded footprint (a padding within the zone)."""
+        quarter = info.resolution / 4
+        padding = self.stop_padding + quarter - self.footprint_padding
+        if padding >= 0.0:
+            return None
+        check = self.setup(pose, costs, info)
+        clearance, skips = self._clearance(np.ascontiguousarray(costs, np.uint8), info.resolution)
+        return self._outline_check(clearance, skips, info.resolution, padding, check.centre_limit)
 
     def legal_poses(self, poses, costs: np.ndarray, info: MapMetaData) -> np.ndarray:
         """(N,) whether the robot may stand at each pose (N, 3), checked as from the first (`setup`)."""
