@@ -189,8 +189,8 @@ class FootprintCheck:
     def setup(self, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
         """What poses are checked with, starting from `pose`.
 
-        The outline: the footprint padded by what of stop_padding its footprint_padding does not
-        already hold, plus a quarter cell — the monitor would stop a motion into its stop zone, and
+        The outline: the footprint padded by stop_padding (nothing where footprint_padding already
+        holds the zone) plus a quarter cell — the monitor would stop a motion into its stop zone, and
         the outline's points are half a cell apart, so a cell's corner may reach a quarter cell in
         between them — while the robot stands a cell clear of that zone (at its edge every slide
         along a jagged row of obstacle cells would cross it); else the footprint padded by the
@@ -208,10 +208,12 @@ class FootprintCheck:
         quarter = info.resolution / 4
         legal = np.empty(1, np.bool_)
         start = np.asarray(pose, np.float64).reshape(1, 3)
-        # the monitor's stop zone lies around the robot's own outline: a footprint_padding already
-        # holds that much of it (stacked, the Jackal's 0.1 m padding and 0.02 m zone kept BARN
-        # world 30's 0.45 m gaps shut)
-        zone = max(0.0, self.stop_padding - self.footprint_padding)
+        # the monitor's stop zone lies around the robot's own outline: a footprint_padding at least
+        # as wide holds it (stacked, the Jackal's 0.1 m padding and 0.02 m zone kept BARN world 30's
+        # 0.45 m gaps shut); a narrower one is no margin against it, and the whole zone is kept
+        # beyond it (cut to 0.04 m, a default robot's 0.05 m zone on its 0.01 m padding let the
+        # monitor act on DWA's choices: a shoved robot ended 0.36 m off its goal)
+        zone = 0.0 if self.footprint_padding >= self.stop_padding else self.stop_padding
         for padding, margin in ((zone + quarter, info.resolution), (quarter, 0.0), (0.0, 0.0)):
             clear = self._outline_check(clearance, skips, info.resolution, padding + margin, centre_limit)
             _check_poses(start, kernel_costs(costs), clear.near, skips, grid, clear.outline, self.check_cost, centre_limit, legal)
