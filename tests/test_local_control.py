@@ -238,3 +238,24 @@ def test_the_node_publishes_the_bare_cores_commands(controller):
         assert (command.linear_x, command.linear_y, command.angular_z) == tuple(float(v) for v in answer.twist)
         assert (command.ok, command.reason, command.goal_id) == (answer.ok, answer.reason,
                                                                  path.goal_id if core.path is not None else "")
+
+
+def test_a_robot_in_a_slot_too_narrow_to_turn_in_backs_out_and_turns_by_a_maneuver():
+    # facing the closed end of a slot its footprint fits but cannot turn in, the path behind it: the
+    # shim's turn is blocked and DWA, which samples no backing but its escape, creeps to the end and
+    # backs off in turn; once it has stalled, the maneuver backs out of the slot and turns round
+    slot = costmap((0.5, 0.45, 3.5, 0.6), (0.5, -0.6, 3.5, -0.45), (3.0, -0.6, 3.2, 0.6))
+    west = polyline([(2.0, 0.0), (-1.0, 0.0)], math.pi)
+    frames = RobotFrames("map", "odom")
+    results = {}
+    for enabled in (True, False):
+        core = LocalControl(LocalControlParams(holonomic_robot=False, min_vel_x=0.0,
+                                               maneuver={"enabled": enabled}), DT)
+        core.follow(follow_path(west), frames)
+        results[enabled] = drive(core, frames, (2.0, 0.0, 0.0), slot, 1200)
+    answers, pose = results[True]
+    counted = [c for a in answers for c in a.counted]
+    assert "maneuver/planned" in counted and any(a.reason == "maneuver" for a in answers)
+    assert answers[-1].reason == GOAL_REACHED and math.hypot(pose[0] + 1.0, pose[1]) <= 0.02
+    stuck, stuck_pose = results[False]
+    assert stuck[-1].reason != GOAL_REACHED and stuck_pose[0] > 0.5     # still in the slot

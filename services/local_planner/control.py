@@ -30,9 +30,16 @@ One tick, in order:
   round while the robot crept into a dead end (BARN world 58: a replanned path led back out of a
   pocket behind the robot) is one DWA's forward samples never reach — it crept on and backed up in
   turn until the navigator gave up — while turning on the spot first leaves it facing the way out.
+- A maneuver being driven (maneuver.py) goes on: reason "maneuver", until its segments are done
+  or the pose its command heads for within MANEUVER_LOOKAHEAD_S is illegal; then DWA again.
 - Else the controller: DWA (scoring the tracker's tracks predicted to the tick, dynamic.py), the
   elastic band, or the path follower (braking, not ok, "path_blocked: …" when the path ahead is
-  illegal on the costmap).
+  illegal on the costmap). When DWA has kept the robot within maneuver.stall_radius for
+  maneuver.stall_time with no tracked mover within maneuver.mover_distance (a robot waiting for
+  people is not stuck), a maneuver is searched in (x, y, heading) for the footprint and, found,
+  driven from this tick on (counted maneuver/planned, else maneuver/none): at the mouth of a BARN
+  gap DWA's arcs reach none of the few poses the padded footprint fits in, and the robot crept and
+  turned there until a recovery moved it (docs/barn.md).
 Every pose is held to one FootprintCheck (footprint_check.py), the one DWA's rollouts use.
 """
 from __future__ import annotations
@@ -49,7 +56,8 @@ from ...geometry.se2 import compose
 from ...parameters.declare import Rule, group, param
 from ...parameters.from_mapping import load_params
 from .approach import FinalApproach
-from .dwa import DwaPlanner, reachable
+from .dwa import DwaPlanner, path_maps, reachable
+from .maneuver import ManeuverDriver, ManeuverParams, plan_maneuver
 from ...geometry.movers import Movers, movers_at
 from .dynamic import slack
 from .footprint_check import FootprintCheck, footprint_check_cost
@@ -61,6 +69,7 @@ from .shim import RotationShim, RotationShimParams
 CONTROLLERS = ("dwa", "eband", "follower")
 APPROACH_HYSTERESIS = 0.1             # m beyond final_approach_distance before an approach is given up
 START_MOVED = 0.05    # m: a path from the same goal starting farther from the last one's start is a new path
+MANEUVER_LOOKAHEAD_S = 0.1   # s of a maneuver's command whose end pose must be legal
 
 
 @dataclass(frozen=True)
@@ -73,6 +82,7 @@ class LocalControlParams(DwaParams, RotationShimParams):
     final_approach_distance: float = param(0.6, ge=0)    # m from the path's end where the final approach takes over
     rotation_shim: bool | None = None                    # turn towards a new path first (shim.py); None: with the dwa controller
     path_follower: dict = field(default_factory=dict)    # FollowerParams by name (drive: from holonomic_robot)
+    maneuver: dict = field(default_factory=dict)         # ManeuverParams by name (maneuver.py; with the dwa controller)
     elastic_band: dict = field(default_factory=dict)     # ElasticBandParams by name; limits default to the above
     # the robot, spelled as costmap_2d spells it (the local costmap's values)
     footprint: tuple[tuple[float, float], ...] = param(tuple(map(tuple, DEFAULT_FOOTPRINT.tolist())),
@@ -101,7 +111,11 @@ class LocalControlParams(DwaParams, RotationShimParams):
                              f"{self.holonomic_robot}")
         return load_params(FollowerParams, values, "path_follower")
 
-    rules = (Rule("path_follower", lambda p: bool(p.follower_params()), "FollowerParams by name"),)
+    def maneuver_params(self) -> ManeuverParams:
+        return load_params(ManeuverParams, dict(self.maneuver), "maneuver")
+
+    rules = (Rule("path_follower", lambda p: bool(p.follower_params()), "FollowerParams by name"),
+             Rule("maneuver", lambda p: bool(p.maneuver_params()), "ManeuverParams by name"))
 
 
 @dataclass(frozen=True)
@@ -144,6 +158,9 @@ class LocalControl:
         self.path_follower: PathFollower | None = None      # controller "follower", on the path in the map frame
         self.approach: FinalApproach | None = None
         self.arrived = False
+        self.maneuver_params = p.maneuver_params()
+        self.maneuver: ManeuverDriver | None = None
+        self._stall: tuple[np.ndarray, int] | None = None   # (pose, ticks since) while it stays near that pose
         self._counted: list[str] = []
 
     def _make_controller(self):
@@ -162,6 +179,8 @@ class LocalControl:
 
     def follow(self, path: Path, frames: RobotFrames) -> None:
         """Follow `path` (map or odom frame) from now on; an empty path stops."""
+        if self.path is None or not len(path.poses) or path.goal_id != self.path.goal_id:
+            self.maneuver, self._stall = None, None
         self.path = path if len(path.poses) else None
         self.approach, self.arrived, self.path_follower = None, False, None
         if self.shim is not None and self.path is not None:
@@ -202,23 +221,79 @@ class LocalControl:
         robot = frames.robot(frame)
         approach = self._approach(velocity, frames, costmap)
         if approach is not None:
+            self.maneuver, self._stall = None, None
             return approach
         movers = self._movers(inputs, frame)
+        maneuver = self._maneuver(robot, costmap)
+        if maneuver is not None:
+            return maneuver
         rotation = self._rotate(velocity, path, robot, costmap, movers)
         if rotation is not None:
             return rotation
         if self.params.controller == "follower":
             return self._follow_path(velocity, path, robot, frames, costmap)
         if self.params.controller == "dwa":
-            result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path, movers=movers)
+            maps = path_maps(path, robot, costmap.info, costmap.data, self.controller.distances)
+            result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path, maps, movers)
             if result.status in ("escape", "no_valid_trajectory") and self.shim is not None:
                 self.shim.new_path()
                 self._counted.append("shim/rearmed")
+            if maps is not None and self._stalled(robot, movers):
+                maneuver = self._plan_maneuver(robot, costmap, maps)
+                if maneuver is not None:
+                    return maneuver
         else:
             result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path)
         reason = result.status if result.status in ("ok", "escape") else f"{result.status}: {result.message}"
         return Control(result.cmd, result.status in ("ok", "escape"), "" if result.status == "ok" else reason,
                        result.trajectory)
+
+    def _stalled(self, robot: np.ndarray, movers: Movers | None) -> bool:
+        """Whether DWA has kept the robot within stall_radius for stall_time, with no tracked mover
+        within mover_distance (a robot waiting for people to pass is not stuck)."""
+        m = self.maneuver_params
+        if not m.enabled:
+            return False
+        if self._stall is None or math.hypot(*(robot[:2] - self._stall[0][:2])) > m.stall_radius:
+            self._stall = (robot.copy(), 0)
+            return False
+        self._stall = (self._stall[0], self._stall[1] + 1)
+        if self._stall[1] * self.dt < m.stall_time:
+            return False
+        self._stall = (robot.copy(), 0)
+        if movers is not None and len(movers) and \
+                np.min(np.hypot(*(movers.positions - robot[:2]).T) - movers.radii) < m.mover_distance:
+            return False
+        return True
+
+    def _plan_maneuver(self, robot: np.ndarray, costmap: Costmap, maps) -> Control | None:
+        """A maneuver (maneuver.py) out of a stall, its first command; None when none is found."""
+        check = self.footprint_check.setup(robot, costmap.data, costmap.info)
+        segments = plan_maneuver(robot, self.footprint_check, check, costmap.data, costmap.info, maps.goal_dist,
+                                 self.maneuver_params)
+        self._counted.append("maneuver/planned" if segments else "maneuver/none")
+        if not segments:
+            return None
+        self.maneuver = ManeuverDriver(segments, robot, self.maneuver_params)
+        return self._maneuver(robot, costmap)
+
+    def _maneuver(self, robot: np.ndarray, costmap: Costmap) -> Control | None:
+        """The maneuver's command while one is driven and the poses it heads for are legal; None (and
+        the maneuver dropped) once it is done or blocked."""
+        if self.maneuver is None:
+            return None
+        twist = self.maneuver.step(robot, self.dt)
+        if twist is not None:
+            ahead = compose(robot, tuple(v * MANEUVER_LOOKAHEAD_S for v in twist))
+            poses = np.array([robot, ahead])
+            check = self.footprint_check.monitor_check(costmap.data, costmap.info)
+            if self.footprint_check.check_poses(check, poses, costmap.data, costmap.info).all():
+                return Control(twist, True, "maneuver", poses)
+            self._counted.append("maneuver/blocked")
+        else:
+            self._counted.append("maneuver/done" if self.maneuver.finished else "maneuver/timeout")
+        self.maneuver, self._stall = None, None
+        return None
 
     def _movers(self, inputs: ControlInputs, frame: str) -> Movers | None:
         """The tracks in effect, predicted to this tick, in the costmap's frame."""

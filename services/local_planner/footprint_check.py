@@ -186,6 +186,14 @@ class FootprintCheck:
         outline, reach = self._outlines[resolution, padding]
         return PoseCheck(outline, clearance <= reach, skips, centre_limit)
 
+    def monitor_check(self, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
+        """The robot's own outline grown by the monitor's stop zone, whatever the centre cost: what the
+        collision monitor lets through. A maneuver planned with the padded check is driven within it,
+        its padding the slack for the robot's tracking."""
+        clearance, skips = self._clearance(np.ascontiguousarray(costs, np.uint8), info.resolution)
+        return self._outline_check(clearance, skips, info.resolution, self.stop_padding - self.footprint_padding,
+                                   LETHAL_OBSTACLE)
+
     def setup(self, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
         """What poses are checked with, starting from `pose`.
 
@@ -233,16 +241,20 @@ class FootprintCheck:
         clearance, skips = self._clearance(np.ascontiguousarray(costs, np.uint8), info.resolution)
         return self._outline_check(clearance, skips, info.resolution, padding, check.centre_limit)
 
+    def check_poses(self, check: PoseCheck, poses, costs: np.ndarray, info: MapMetaData) -> np.ndarray:
+        """(N,) whether the robot may stand at each pose (N, 3) by a check already set up."""
+        poses = np.ascontiguousarray(poses, np.float64).reshape(-1, 3)
+        legal = np.empty(len(poses), np.bool_)
+        _check_poses(poses, kernel_costs(np.ascontiguousarray(costs, np.uint8)), check.near, check.skips,
+                     kernel_grid(info), check.outline, self.check_cost, check.centre_limit, legal)
+        return legal
+
     def legal_poses(self, poses, costs: np.ndarray, info: MapMetaData) -> np.ndarray:
         """(N,) whether the robot may stand at each pose (N, 3), checked as from the first (`setup`)."""
         poses = np.ascontiguousarray(poses, np.float64).reshape(-1, 3)
-        legal = np.empty(len(poses), np.bool_)
         if len(poses) == 0:
-            return legal
-        check = self.setup(poses[0], costs, info)
-        _check_poses(poses, kernel_costs(costs), check.near, check.skips, kernel_grid(info),
-                     check.outline, self.check_cost, check.centre_limit, legal)
-        return legal
+            return np.empty(0, np.bool_)
+        return self.check_poses(self.setup(poses[0], costs, info), poses, costs, info)
 
 
 def warm_up() -> None:

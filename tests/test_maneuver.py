@@ -1,0 +1,102 @@
+"""The maneuver core (services/local_planner/maneuver.py): its search finds turns and straight drives
+whose every pose the footprint check allows, ending nearer the local goal and facing the way on;
+walled in, it finds none; its driver drives the segments as planned."""
+import math
+
+import numpy as np
+import pytest
+
+from omninav.geometry.se2 import integrate, wrap_angle
+from omninav.schemas.messages import MapMetaData, Pose2D
+from omninav.services.local_planner.dwa import path_maps
+from omninav.services.local_planner.footprint_check import FootprintCheck
+from omninav.services.local_planner.maneuver import (DRIVE_TOLERANCE, FACING, TURN_TOLERANCE, ManeuverDriver,
+                                                     ManeuverParams, Segment, plan_maneuver)
+
+INFO = MapMetaData(resolution=0.05, width=160, height=120, origin=Pose2D(-2.0, -3.0))   # x -2..6, y -3..3 m
+FOOTPRINT = np.array([[0.42, 0.32], [-0.42, 0.32], [-0.42, -0.32], [0.42, -0.32]])
+DT = 0.05
+
+
+def grid(*boxes) -> np.ndarray:
+    data = np.zeros((INFO.height, INFO.width), np.uint8)
+    for x0, y0, x1, y1 in boxes:
+        data[round((y0 + 3.0) / 0.05):round((y1 + 3.0) / 0.05), round((x0 + 2.0) / 0.05):round((x1 + 2.0) / 0.05)] = 254
+    return data
+
+
+def along(a, b, spacing=0.05) -> np.ndarray:
+    n = math.ceil(math.hypot(b[0] - a[0], b[1] - a[1]) / spacing)
+    yaw = math.atan2(b[1] - a[1], b[0] - a[0])
+    return np.array([[a[0] + (b[0] - a[0]) * k / n, a[1] + (b[1] - a[1]) * k / n, yaw] for k in range(n + 1)])
+
+
+def driven(start, segments) -> np.ndarray:
+    """The poses the segments pass through, exactly as planned, 1 cm and 1° apart."""
+    poses = [np.array(start, float)]
+    for segment in segments:
+        x, y, th = poses[-1]
+        if segment.kind == "turn":
+            turn = float(wrap_angle(segment.value - th))
+            n = max(1, math.ceil(abs(turn) / math.radians(1)))
+            poses += [np.array([x, y, th + turn * k / n]) for k in range(1, n + 1)]
+        else:
+            n = max(1, math.ceil(abs(segment.value) / 0.01))
+            poses += [np.array([x + math.cos(th) * segment.value * k / n, y + math.sin(th) * segment.value * k / n, th])
+                      for k in range(1, n + 1)]
+    return np.array(poses)
+
+
+SLOT = grid((0.5, 0.45, 3.5, 0.6), (0.5, -0.6, 3.5, -0.45), (3.0, -0.6, 3.2, 0.6))   # open to the west
+
+
+def test_the_maneuver_out_of_a_slot_backs_out_turns_round_and_every_pose_is_legal():
+    check_of = FootprintCheck(FOOTPRINT, stop_padding=0.05)
+    start = (2.0, 0.0, 0.0)                       # facing the slot's closed end; the way on lies west
+    maps = path_maps(along((2.0, 0.0), (-1.0, 0.0)), start, INFO, SLOT)
+    check = check_of.setup(start, SLOT, INFO)
+    params = ManeuverParams()
+    segments = plan_maneuver(start, check_of, check, SLOT, INFO, maps.goal_dist, params)
+    assert segments and {s.kind for s in segments} == {"turn", "drive"}
+    assert segments[0].kind == "drive" and segments[0].value < -1.0     # backs out first: no room to turn
+    poses = driven(start, segments)
+    assert check_of.check_poses(check, poses, SLOT, INFO).all()
+    end = poses[-1]
+    rows, cols = (int((end[1] + 3.0) / 0.05), int((end[0] + 2.0) / 0.05))
+    start_distance = maps.goal_dist[int(3.0 / 0.05), int(4.0 / 0.05)]
+    assert maps.goal_dist[rows, cols] <= start_distance - params.progress
+    assert abs(float(wrap_angle(end[2] - math.pi))) <= FACING            # facing west, the way on
+
+
+def test_walled_in_there_is_no_maneuver():
+    box = grid((1.4, -0.6, 2.6, -0.45), (1.4, 0.45, 2.6, 0.6), (1.4, -0.6, 1.5, 0.6), (2.5, -0.6, 2.6, 0.6))
+    check_of = FootprintCheck(FOOTPRINT)
+    start = (2.0, 0.0, 0.0)
+    maps = path_maps(along((2.0, 0.0), (-1.0, 0.0)), start, INFO, box)
+    segments = plan_maneuver(start, check_of, check_of.setup(start, box, INFO), box, INFO, maps.goal_dist,
+                             ManeuverParams(max_expansions=5000))
+    assert segments is None
+
+
+def test_the_driver_drives_the_segments_as_planned():
+    params = ManeuverParams()
+    segments = [Segment("drive", -0.4), Segment("turn", math.pi / 2), Segment("drive", 0.3)]
+    pose, ticks = np.array([1.0, 0.5, 0.0]), 0
+    driver = ManeuverDriver(segments, pose, params)
+    while (twist := driver.step(pose, DT)) is not None and ticks < 400:
+        assert abs(twist[0]) <= params.speed and abs(twist[2]) <= params.turn_speed
+        pose = integrate(pose, twist, DT)
+        ticks += 1
+    assert ticks < 400 and driver.finished
+    assert math.hypot(pose[0] - 0.6, pose[1] - 0.8) <= 2 * DRIVE_TOLERANCE + 0.01
+    assert abs(float(wrap_angle(pose[2] - math.pi / 2))) <= TURN_TOLERANCE + 0.02
+
+
+def test_a_driver_held_back_gives_up_after_twice_its_time():
+    params = ManeuverParams()
+    driver = ManeuverDriver([Segment("drive", 0.5)], (0.0, 0.0, 0.0), params)
+    ticks = 0
+    while driver.step((0.0, 0.0, 0.0), DT) is not None:     # the robot never moves
+        ticks += 1
+    assert not driver.finished
+    assert ticks * DT == pytest.approx(2 * 0.5 / params.speed + 1.0, abs=2 * DT)
