@@ -30,8 +30,9 @@ One tick, in order:
   round while the robot crept into a dead end (BARN world 58: a replanned path led back out of a
   pocket behind the robot) is one DWA's forward samples never reach — it crept on and backed up in
   turn until the navigator gave up — while turning on the spot first leaves it facing the way out.
-- A maneuver being driven (maneuver.py) goes on: reason "maneuver", until its segments are done
-  or the pose its command heads for within MANEUVER_LOOKAHEAD_S is illegal; then DWA again.
+- A maneuver being driven (maneuver.py) goes on: reason "maneuver", until its segments are done,
+  its time is up, or the pose its command heads for within MANEUVER_LOOKAHEAD_S lies outside what
+  the collision monitor lets through (FootprintCheck.monitor_check); then DWA again.
 - Else the controller: DWA (scoring the tracker's tracks predicted to the tick, dynamic.py), the
   elastic band, or the path follower (braking, not ok, "path_blocked: …" when the path ahead is
   illegal on the costmap). When DWA has kept the robot within maneuver.stall_radius for
