@@ -468,7 +468,7 @@ class DwaPlanner:
         if len(last_resorts):     # base_local_planner's last resorts before backing up
             samples = last_resorts
             poses, legal, _, scores = evaluate(samples)
-        tight = self.footprint_check.turn_check(pose, costs, info) if not legal.any() else None
+        tight = self.footprint_check.turn_check(check, costs, info) if not legal.any() else None
         if tight is not None:   # the padding keeps the robot from turning where the monitor would not
             samples = fallback_velocities(self.params, velocity)
             poses, legal, _, scores = evaluate(samples, tight)

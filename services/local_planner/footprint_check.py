@@ -186,13 +186,17 @@ class FootprintCheck:
         outline, reach = self._outlines[resolution, padding]
         return PoseCheck(outline, clearance <= reach, skips, centre_limit)
 
+    def _zone_check(self, costs: np.ndarray, info: MapMetaData, extra: float, centre_limit: int) -> PoseCheck:
+        """The robot's own outline (without footprint_padding) grown by the monitor's stop zone and `extra`."""
+        clearance, skips = self._clearance(np.ascontiguousarray(costs, np.uint8), info.resolution)
+        return self._outline_check(clearance, skips, info.resolution,
+                                   self.stop_padding + extra - self.footprint_padding, centre_limit)
+
     def monitor_check(self, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
         """The robot's own outline grown by the monitor's stop zone, whatever the centre cost: what the
         collision monitor lets through. A maneuver planned with the padded check is driven within it,
         its padding the slack for the robot's tracking."""
-        clearance, skips = self._clearance(np.ascontiguousarray(costs, np.uint8), info.resolution)
-        return self._outline_check(clearance, skips, info.resolution, self.stop_padding - self.footprint_padding,
-                                   LETHAL_OBSTACLE)
+        return self._zone_check(costs, info, 0.0, LETHAL_OBSTACLE)
 
     def setup(self, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
         """What poses are checked with, starting from `pose`.
@@ -229,17 +233,15 @@ class FootprintCheck:
                 return self._outline_check(clearance, skips, info.resolution, padding, centre_limit)
         return self._outline_check(clearance, skips, info.resolution, -self.footprint_padding, centre_limit)
 
-    def turn_check(self, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck | None:
-        """What a last-resort turn is checked with when the padded footprint leaves none: the robot's
-        own outline grown by the monitor's stop zone and a quarter cell — a turn the monitor lets
-        through. None when that is no smaller than the padded footprint (a padding within the zone)."""
+    def turn_check(self, check: PoseCheck, costs: np.ndarray, info: MapMetaData) -> PoseCheck | None:
+        """What a last-resort turn is checked with when the padded footprint (`check`, set up for the
+        pose) leaves none: the robot's own outline grown by the monitor's stop zone and a quarter cell
+        — a turn the monitor lets through — with check's centre limit. None when that is no smaller
+        than the padded footprint (a padding within the zone)."""
         quarter = info.resolution / 4
-        padding = self.stop_padding + quarter - self.footprint_padding
-        if padding >= 0.0:
+        if self.stop_padding + quarter - self.footprint_padding >= 0.0:
             return None
-        check = self.setup(pose, costs, info)
-        clearance, skips = self._clearance(np.ascontiguousarray(costs, np.uint8), info.resolution)
-        return self._outline_check(clearance, skips, info.resolution, padding, check.centre_limit)
+        return self._zone_check(costs, info, quarter, check.centre_limit)
 
     def check_poses(self, check: PoseCheck, poses, costs: np.ndarray, info: MapMetaData) -> np.ndarray:
         """(N,) whether the robot may stand at each pose (N, 3) by a check already set up."""

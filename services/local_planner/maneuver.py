@@ -132,11 +132,10 @@ def _segments(key, came_from, poses) -> list[Segment]:
     path = [poses[k] for k in reversed(chain)]
     segments: list[Segment] = []
     for (x0, y0, th0), (x1, y1, th1) in zip(path, path[1:]):
-        if th1 != th0:
+        if th1 != th0:   # consecutive turns are one turn to the last heading
             if segments and segments[-1].kind == "turn":
-                segments[-1] = Segment("turn", float(wrap_angle(th1)))
-            else:
-                segments.append(Segment("turn", float(wrap_angle(th1))))
+                segments.pop()
+            segments.append(Segment("turn", float(wrap_angle(th1))))
         else:
             ahead = math.cos(th0) * (x1 - x0) + math.sin(th0) * (y1 - y0) > 0
             step = math.hypot(x1 - x0, y1 - y0) * (1.0 if ahead else -1.0)
