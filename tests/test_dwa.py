@@ -354,3 +354,38 @@ def test_a_footprint_check_set_up_again_gives_what_a_fresh_one_gives_as_the_grid
         assert np.array_equal(got.outline, fresh.outline) and got.centre_limit == fresh.centre_limit
     assert not np.array_equal(reused.setup((0.0, 0.0, 0.0), with_box, info).near,
                               reused.setup((0.0, 0.0, 0.0), open_room, info).near)     # the grids differ where it matters
+
+
+def _wedged_against_a_wall(padding):
+    """A robot whose own front edge lies 3 cm into the first lethal column of a wall (the wall's
+    face is somewhere in that cell): as it stands after braking for an obstacle seen late."""
+    costs, info, check = costmap(boxes=[(0.22, -1.0, 0.6, 1.0)], padding=padding)
+    padded = make_footprint(SQUARE, padding=padding)
+    start = (0.03, 0.0, 0.0)
+    assert footprint_hits_lethal(costs, info, start)
+    return costs, info, FootprintCheck(padded.points, check, stop_padding=0.02, footprint_padding=padding), start
+
+
+@pytest.mark.parametrize("padding", [0.0, 0.1])
+def test_a_robot_whose_own_outline_lies_on_a_lethal_cell_may_drive_away_but_not_onto_another(padding):
+    costs, info, footprint_check, start = _wedged_against_a_wall(padding)
+    check = footprint_check.setup(start, costs, info)
+    poses = np.array([start, (-0.03, 0.0, 0.0), (0.08, 0.0, 0.0), (0.03, 0.0, 0.3), (0.03, 0.0, -0.3)])
+    legal = footprint_check.check_poses(check, poses, costs, info)
+    # where it stands and 6 cm back are legal; 5 cm on, its edge lies on the wall's next column,
+    # and turned by 0.3 rad a corner does too
+    assert legal.tolist() == [True, True, False, False, False]
+
+
+@pytest.mark.parametrize("params", [DwaParams(min_vel_x=-0.3, max_vel_y=0.5, min_vel_y=-0.5), DIFF],
+                         ids=["holonomic reversing", "diff by escape"])
+def test_a_robot_wedged_against_a_wall_backs_away_along_its_path(params):
+    costs, info, footprint_check, start = _wedged_against_a_wall(0.1)
+    planner = DwaPlanner(params, footprint_check)
+    trace, results = drive(planner, costs, info, straight(0.03, 0.0, -2.5, 0.0), start, 200)
+    assert results[0].status != "no_valid_trajectory", "the first cycle already finds a way off the wall"
+    on_wall = [footprint_hits_lethal(costs, info, p) for p in trace]
+    off = on_wall.index(False)
+    assert not any(on_wall[off:]), "once off the wall, never on a lethal cell again"
+    assert trace[:, 0].max() <= start[0] + 1e-9, "never further into the wall"
+    assert trace[-1, 0] < -1.5, "drove back along the path"
