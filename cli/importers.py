@@ -1,6 +1,6 @@
 """`omninav import FORMAT …`: convert other robots' logs into omninav MCAP recordings.
 
-Each format is a subcommand (`carmen` here; a `rosbag` converter can be added beside it), so the
+Each format is a subcommand (`carmen`, `rosbag`), so the
 arguments of one format never constrain another's.
 """
 from __future__ import annotations
@@ -31,8 +31,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                                             "(needs pip install 'omninav[rosbag]')")
     bag.add_argument("bag", help="the ROS 1 .bag file, or the ROS 2 bag folder (with metadata.yaml)")
     bag.add_argument("-o", "--output", required=True, help="the MCAP file to write")
-    bag.add_argument("--scan-topic", default="/scan", help="sensor_msgs/LaserScan topic (default /scan)")
-    bag.add_argument("--odom-topic", default="/vesc/odom", help="nav_msgs/Odometry topic (default /vesc/odom)")
+    bag.add_argument("--scan-topic", default=None,
+                     help="sensor_msgs/LaserScan topic (default: the bag's one LaserScan topic)")
+    bag.add_argument("--odom-topic", default=None,
+                     help="nav_msgs/Odometry topic (default: the bag's one Odometry topic; without one, "
+                          "odometry from /tf's odom -> base transforms)")
     bag.add_argument("--robot", default="r1", help="robot namespace of the keys (default r1)")
     bag.add_argument("--force", action="store_true", help="overwrite the output file if it exists")
     bag.set_defaults(run=_main_rosbag)
@@ -123,11 +126,14 @@ def _main_rosbag(args: argparse.Namespace) -> int:
         _write_recording(output, keyed_messages(contents, keys))
     except OSError as exc:
         return _fail(f"{output}: {exc}")
-    print(f"{output}: {len(contents.scans)} scans from {args.scan_topic} on {keys.robot('scan')}, "
-          f"{len(contents.odometry)} odometry messages from {args.odom_topic} on {keys.robot('odom')}")
+    print(f"{output}: {len(contents.scans)} scans from {contents.scan_topic} on {keys.robot('scan')}, "
+          f"{len(contents.odometry)} odometry messages from {contents.odom_source} on {keys.robot('odom')}")
+    if contents.laser_pose is not None:
+        x, y, yaw = contents.laser_pose
+        print(f"  laser mounting in the robot frame (from the bag's tf): x={x:.3f} m, y={y:.3f} m, yaw={yaw:.4f} rad")
     for topic, count in sorted(contents.unstamped.items()):
         print(f"  {count} messages on {topic} had no header stamp: stamped with the bag's record time")
-    other = sorted(t for t in contents.topics if t not in (args.scan_topic, args.odom_topic))
+    other = sorted(t for t in contents.topics if t not in contents.used_topics)
     if other:
         print(f"  not converted: {', '.join(other)}")
     return 0

@@ -27,10 +27,12 @@ The runner-up more than a metre away is reported too, with each one's scan fit (
 figure above, over the first scans); when the runner-up fits within AMBIGUOUS_FIT_GAP of the best,
 the start is ambiguous and the report says so.
 
-The laser's mounting on the car (there is no /tf in the bag) is --laser-x/-y/-yaw; the default
-0.285 m ahead of base_link (the rear axle) is the MIT racecar's base_link→laser transform
-(mit-racecar/racecar, racecar-v2 static_transforms.launch.xml); docs/localize_eval.md compares
-other values on this bag.
+The laser's mounting on the robot is --laser-x/-y/-yaw; what they leave out comes from the bag's
+/tf_static or /tf when it has the transform from the odometry's base frame to the scans' frame
+(the rosbag importer reads it), else from the MIT racecar: 0.285 m ahead of base_link (the rear
+axle), its base_link→laser transform (mit-racecar/racecar, racecar-v2
+static_transforms.launch.xml; the shipped bag has no /tf); docs/localize_eval.md compares other
+values on that bag.
 """
 from __future__ import annotations
 
@@ -95,11 +97,14 @@ class RealDataError(ValueError):
 class Run:
     scans: list[LaserScan]
     odometry: list[Odometry]
+    laser_pose: tuple[float, float, float] | None = None    # the scans' frame in the base frame, when known
 
 
-def load_run(path: str | Path, scan_topic: str, odom_topic: str, robot: str = "r1") -> Run:
-    """Scans and odometry of a ROS bag (through the rosbag importer) or of an omninav MCAP recording."""
+def load_run(path: str | Path, scan_topic: str | None = None, odom_topic: str | None = None, robot: str = "r1") -> Run:
+    """Scans and odometry of a ROS bag (through the rosbag importer: topics not given are found by
+    type, the laser's mounting read from its tf) or of an omninav MCAP recording."""
     path = Path(path)
+    laser_pose = None
     if path.suffix == ".mcap":
         keys = KeyLayout(robot)
         try:
@@ -116,10 +121,24 @@ def load_run(path: str | Path, scan_topic: str, odom_topic: str, robot: str = "r
             contents = read_bag(path, scan_topic, odom_topic)
         except RosbagError as exc:
             raise RealDataError(str(exc)) from None
-        scans, odometry = contents.scans, contents.odometry
+        scans, odometry, laser_pose = contents.scans, contents.odometry, contents.laser_pose
     if len(scans) < SEARCH_SCANS or len(odometry) < 2:
         raise RealDataError(f"{path}: {len(scans)} scans and {len(odometry)} odometry messages: too few to localize")
-    return Run(sorted(scans, key=lambda m: m.header.stamp_ns), sorted(odometry, key=lambda m: m.header.stamp_ns))
+    return Run(sorted(scans, key=lambda m: m.header.stamp_ns), sorted(odometry, key=lambda m: m.header.stamp_ns),
+               laser_pose)
+
+
+def laser_mounting(given: tuple[float | None, float | None, float | None],
+                   from_bag: tuple[float, float, float] | None) -> tuple[tuple[float, float, float], str]:
+    """(x, y, yaw, where it came from): the values given, the rest from the bag's tf, else the racecar's."""
+    fallback, source = (from_bag, "the bag's tf") if from_bag is not None else ((RACECAR_LASER_X, 0.0, 0.0),
+                                                                                 "the MIT racecar's default")
+    pose = tuple(float(g) if g is not None else float(f) for g, f in zip(given, fallback))
+    if all(g is not None for g in given):
+        source = "given"
+    elif any(g is not None for g in given):
+        source = f"given, the rest from {source}"
+    return pose, source
 
 
 def odometry_history(odometry: list[Odometry]) -> OdomHistory:
@@ -372,12 +391,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     group = parser.add_argument_group("real data (instead of the simulator)")
     group.add_argument("--bag", help="a ROS 1/2 bag or an omninav .mcap recording with scans and odometry")
     group.add_argument("--map", help="the map_server YAML of the map the robot drove in (needed with --bag)")
-    group.add_argument("--scan-topic", default="/scan", help="the bag's LaserScan topic (default /scan)")
-    group.add_argument("--odom-topic", default="/vesc/odom", help="the bag's Odometry topic (default /vesc/odom)")
-    group.add_argument("--laser-x", type=float, default=RACECAR_LASER_X,
-                       help=f"m, the laser ahead of base_link (default {RACECAR_LASER_X}, the MIT racecar's)")
-    group.add_argument("--laser-y", type=float, default=0.0, help="m, the laser left of base_link (default 0)")
-    group.add_argument("--laser-yaw", type=float, default=0.0, help="rad, the laser's turn (default 0)")
+    group.add_argument("--scan-topic", default=None, help="the bag's LaserScan topic (default: its one LaserScan topic)")
+    group.add_argument("--odom-topic", default=None,
+                       help="the bag's Odometry topic (default: its one Odometry topic, else /tf's odom -> base)")
+    group.add_argument("--laser-x", type=float, default=None,
+                       help=f"m, the laser ahead of the base frame (default: from the bag's tf, else {RACECAR_LASER_X}, "
+                            "the MIT racecar's)")
+    group.add_argument("--laser-y", type=float, default=None,
+                       help="m, the laser left of the base frame (default: from the bag's tf, else 0)")
+    group.add_argument("--laser-yaw", type=float, default=None,
+                       help="rad, the laser's turn (default: from the bag's tf, else 0)")
     group.add_argument("--initial-pose", metavar="X,Y,YAW", help="the start pose in the map (default: searched)")
     group.add_argument("--global-localization", action="store_true",
                        help="start the localizer with particles over all free space (amcl's global_localization), "
@@ -393,8 +416,10 @@ def main(args: argparse.Namespace) -> int:
         initial = parse_pose(args.initial_pose) if args.initial_pose else None
         grid = load_map(args.map)
         run = load_run(args.bag, args.scan_topic, args.odom_topic)
-        result = score_run(run, grid, args.map, (args.laser_x, args.laser_y, args.laser_yaw), args.params,
+        laser_pose, laser_source = laser_mounting((args.laser_x, args.laser_y, args.laser_yaw), run.laser_pose)
+        result = score_run(run, grid, args.map, laser_pose, args.params,
                            parse_overrides(args.set), args.seed, initial, args.global_localization)
+        result["laser_pose_from"] = laser_source
     except (RealDataError, MapError, ParamError, ValueError) as exc:
         print(f"omninav localize-eval: {exc}", file=sys.stderr)
         return 2
@@ -420,7 +445,8 @@ def parse_pose(text: str, option: str = "--initial-pose") -> tuple[float, float,
 def format_result(r: dict, source: str) -> str:
     s = r["start"]
     lines = [f"{source}: {r['scans']} scans, {r['odometry']} odometry messages, {r['scans_scored']} scans scored "
-             f"over {r['duration_s']:.2f} s; laser at {r['laser_pose']} in base_link",
+             f"over {r['duration_s']:.2f} s; laser at {r['laser_pose']} in the base frame "
+             f"({r.get('laser_pose_from', 'given')})",
              f"start pose ({s['how']}): x {s['pose'][0]:.3f} m, y {s['pose'][1]:.3f} m, yaw {s['pose'][2]:.3f} rad; "
              f"the localizer starts {s['localizer']}"]
     if "runner_up" in s:

@@ -210,6 +210,7 @@ def test_on_the_racecar_bag_the_localizer_agrees_with_the_map_better_than_odomet
     r, picture = racecar_run
     assert r["scans"] == 281 and r["odometry"] == 350 and r["scans_scored"] > 270
     assert r["start"]["how"] == "searched" and r["laser_pose"] == [0.285, 0.0, 0.0]
+    assert r["laser_pose_from"] == "the MIT racecar's default"     # the bag has no tf
     ours, odometry = r["localizer"], r["raw_odometry"]
     assert ours["mean"] > 0.5 and ours["mean"] > odometry["mean"] + 0.3
     assert ours["median"] > 0.45 and ours["p10"] > odometry["median"] + 0.3
@@ -258,3 +259,12 @@ def test_an_imported_recording_gives_the_same_run_as_its_bag(tmp_path, capsys):
         for message in getattr(from_mcap, kind):
             message.header.seq = 0   # numbered by the importer, 0 straight from the bag; the localizer ignores it
         assert [encode(m) for m in getattr(from_mcap, kind)] == [encode(m) for m in getattr(from_bag, kind)]
+
+
+def test_the_laser_mounting_is_what_is_given_then_the_bags_tf_then_the_racecars():
+    from omninav.experiments.localize_realdata import laser_mounting
+    assert laser_mounting((None, None, None), None) == ((0.285, 0.0, 0.0), "the MIT racecar's default")
+    assert laser_mounting((None, None, None), (-0.064, 0.01, 0.3)) == ((-0.064, 0.01, 0.3), "the bag's tf")
+    assert laser_mounting((0.1, None, None), (-0.064, 0.01, 0.3)) == ((0.1, 0.01, 0.3),
+                                                                       "given, the rest from the bag's tf")
+    assert laser_mounting((0.1, 0.0, 0.0), (-0.064, 0.01, 0.3)) == ((0.1, 0.0, 0.0), "given")

@@ -216,3 +216,122 @@ def test_import_rosbag_with_a_wrong_topic_writes_nothing(tmp_path, capsys):
     out = tmp_path / "bag.mcap"
     assert omninav(["import", "rosbag", str(BAG), "-o", str(out), "--odom-topic", "/odom"]) == 2
     assert "no topic /odom" in capsys.readouterr().err and not out.exists()
+
+
+# ---------------------------------------------------------------- a bag as other robots record them
+
+def _quat(store, yaw):
+    return store.types["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(yaw / 2), w=math.cos(yaw / 2))
+
+
+def _transform(store, stamp, parent, child, x, y, z, yaw):
+    t = store.types
+    return t["geometry_msgs/msg/TransformStamped"](
+        header=t["std_msgs/msg/Header"](stamp=stamp, frame_id=parent), child_frame_id=child,
+        transform=t["geometry_msgs/msg/Transform"](translation=t["geometry_msgs/msg/Vector3"](x=x, y=y, z=z),
+                                                   rotation=_quat(store, yaw)))
+
+
+# the robot's odom -> base_footprint poses on /tf, one every 0.1 s: a drive ahead while turning
+TF_POSES = [(0.0, 0.0, 0.0), (0.05, 0.0, 0.02), (0.1, 0.002, 0.04), (0.15, 0.005, 0.06)]
+
+
+def _write_tf_bag(path, scan_topics=("/scan",), leading_slash=False):
+    """A ROS 2 bag as a robot without an Odometry topic records it (a TurtleBot-like layout): scans
+    in frame base_scan, odometry only as /tf's odom -> base_footprint, and the mounting on
+    /tf_static: base_footprint -> base_link -> base_scan."""
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    t = store.types
+    Time, Header = t["builtin_interfaces/msg/Time"], t["std_msgs/msg/Header"]
+    tf_type, scan_type = "tf2_msgs/msg/TFMessage", "sensor_msgs/msg/LaserScan"
+    slash = "/" if leading_slash else ""
+    with Writer(path, version=8) as writer:
+        tf, tf_static = (writer.add_connection(topic, tf_type, typestore=store) for topic in ("/tf", "/tf_static"))
+        scans = [writer.add_connection(topic, scan_type, typestore=store) for topic in scan_topics]
+        mount = t[tf_type](transforms=[
+            _transform(store, Time(sec=50, nanosec=0), f"{slash}base_footprint", f"{slash}base_link", 0.0, 0.0, 0.01, 0.0),
+            _transform(store, Time(sec=50, nanosec=0), f"{slash}base_link", f"{slash}base_scan", -0.064, 0.01, 0.12, 0.3)])
+        writer.write(tf_static, 50 * 10 ** 9, bytes(store.serialize_cdr(mount, tf_type)))
+        for k, (x, y, yaw) in enumerate(TF_POSES):
+            stamp = Time(sec=50, nanosec=k * 100_000_000)
+            odom = t[tf_type](transforms=[_transform(store, stamp, f"{slash}odom", f"{slash}base_footprint", x, y, 0.0, yaw)])
+            writer.write(tf, 50 * 10 ** 9 + k * 10 ** 8, bytes(store.serialize_cdr(odom, tf_type)))
+            for conn in scans:
+                scan = t[scan_type](header=Header(stamp=stamp, frame_id=f"{slash}base_scan"), angle_min=0.0,
+                                    angle_max=6.28, angle_increment=3.14, time_increment=0.0, scan_time=0.2,
+                                    range_min=0.12, range_max=3.5, ranges=np.array([1.0, 2.0, 3.0], np.float32),
+                                    intensities=np.array([], np.float32))
+                writer.write(conn, 50 * 10 ** 9 + k * 10 ** 8 + 1, bytes(store.serialize_cdr(scan, scan_type)))
+
+
+@needs_rosbags
+@pytest.mark.parametrize("leading_slash", [False, True], ids=["ros2 frames", "ros1 /frames"])
+def test_a_bag_without_odometry_topic_gives_odometry_and_the_laser_mounting_from_tf(tmp_path, leading_slash):
+    path = tmp_path / "tfbag"
+    _write_tf_bag(path, leading_slash=leading_slash)
+    contents = read_bag(path)                     # no topics named: found by type
+    assert contents.scan_topic == "/scan" and contents.odom_source == "/tf (odom -> base_footprint)"
+    assert len(contents.scans) == 4
+    odom = contents.odometry
+    assert [o.header.stamp_ns for o in odom] == [50 * 10 ** 9 + k * 10 ** 8 for k in range(4)]
+    assert np.array([(o.pose.x, o.pose.y, o.pose.theta) for o in odom]) == pytest.approx(np.array(TF_POSES))
+    assert {o.child_frame_id for o in odom} == {"base_footprint"} and {o.header.frame_id for o in odom} == {"odom"}
+    # the body-frame motion over each 0.1 s: 0.5 m/s ahead, 0.2 rad/s; nothing before the first
+    assert (odom[0].twist.linear_x, odom[0].twist.angular_z) == (0.0, 0.0)
+    assert odom[1].twist.linear_x == pytest.approx(0.5 * math.cos(0.0), rel=1e-6)
+    assert [o.twist.angular_z for o in odom[1:]] == pytest.approx([0.2] * 3)
+    c, s = math.cos(0.02), math.sin(0.02)
+    dx, dy = 0.05, 0.002          # pose 2 seen from pose 1, divided by 0.1 s
+    assert odom[2].twist.linear_x == pytest.approx((c * dx + s * dy) / 0.1)
+    assert odom[2].twist.linear_y == pytest.approx((-s * dx + c * dy) / 0.1)
+    # base_footprint -> base_link -> base_scan, projected to the plane
+    assert contents.laser_pose == pytest.approx((-0.064, 0.01, 0.3))
+
+
+@needs_rosbags
+def test_import_rosbag_finds_the_topics_and_says_where_odometry_and_mounting_came_from(tmp_path, capsys):
+    bag, out = tmp_path / "tfbag", tmp_path / "bag.mcap"
+    _write_tf_bag(bag)
+    assert omninav(["import", "rosbag", str(bag), "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "4 scans from /scan" in printed and "4 odometry messages from /tf (odom -> base_footprint)" in printed
+    assert "laser mounting in the robot frame (from the bag's tf): x=-0.064 m, y=0.010 m, yaw=0.3000 rad" in printed
+    assert "not converted" not in printed
+    odoms = [decode(r.payload) for r in read_records(out) if r.key == KEYS.robot("odom")]
+    assert [o.pose.x for o in odoms] == pytest.approx([p[0] for p in TF_POSES])
+
+
+@needs_rosbags
+def test_topics_not_named_are_the_bags_one_topic_of_their_type(tmp_path):
+    path = tmp_path / "ros2bag"
+    _write_ros2_bag(path)
+    contents = read_bag(path)
+    assert (contents.scan_topic, contents.odom_source) == ("/scan", "/odom") and len(contents.odometry) == 3
+    assert contents.laser_pose is None            # no tf in that bag
+
+
+@needs_rosbags
+def test_a_bag_with_two_scan_topics_must_name_one(tmp_path):
+    path = tmp_path / "tfbag"
+    _write_tf_bag(path, scan_topics=("/front/scan", "/rear/scan"))
+    with pytest.raises(RosbagError, match=r"several sensor_msgs/msg/LaserScan topics \(/front/scan, /rear/scan\): "
+                                          r"name the one to use with --scan-topic"):
+        read_bag(path)
+    assert len(read_bag(path, scan_topic="/rear/scan").scans) == 4
+
+
+@needs_rosbags
+def test_a_bag_with_neither_odometry_nor_tf_is_a_clear_error(tmp_path):
+    from rosbags.rosbag2 import Writer
+    from rosbags.typesys import Stores, get_typestore
+
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    path = tmp_path / "scans_only"
+    with Writer(path, version=8) as writer:
+        writer.add_connection("/scan", "sensor_msgs/msg/LaserScan", typestore=store)
+    with pytest.raises(RosbagError, match=r"no nav_msgs/msg/Odometry topic and no /tf to take odometry from "
+                                          r"\(the bag has: /scan \(sensor_msgs/msg/LaserScan\)\)"):
+        read_bag(path)
