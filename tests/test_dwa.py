@@ -389,3 +389,23 @@ def test_a_robot_wedged_against_a_wall_backs_away_along_its_path(params):
     assert not any(on_wall[off:]), "once off the wall, never on a lethal cell again"
     assert trace[:, 0].max() <= start[0] + 1e-9, "never further into the wall"
     assert trace[-1, 0] < -1.5, "drove back along the path"
+
+
+def test_a_holonomic_robot_wedged_beside_a_wall_slides_off_it_before_it_drives_on():
+    # its right side 1 cm into the top lethal row of a wall along its path: driving on would
+    # slide (and turn) along the cells it touches; it first leaves them, then drives on (a
+    # differential drive there has no legal motion at all: every turn sweeps a corner deeper)
+    params = HOLO
+    padding = 0.1
+    costs, info, check = costmap(boxes=[(-3.0, -1.0, 3.0, -0.215)], padding=padding)
+    padded = make_footprint(SQUARE, padding=padding)
+    start = (-2.0, -0.06, 0.0)
+    assert footprint_hits_lethal(costs, info, start)
+    planner = DwaPlanner(params, FootprintCheck(padded.points, check, stop_padding=0.02, footprint_padding=padding))
+    path = straight(-2.0, 0.3, 2.5, 0.3)
+    trace, results = drive(planner, costs, info, path, start, 300)
+    on_wall = [footprint_hits_lethal(costs, info, p) for p in trace]
+    off = on_wall.index(False)
+    assert off > 0 and not any(on_wall[off:]), "once off the wall, never on a lethal cell again"
+    assert all(r.cmd[0] <= 0.0 for r in results[:off]), "no forward motion while on the wall's cells"
+    assert trace[-1, 0] > 1.5, "then drove on along the path"

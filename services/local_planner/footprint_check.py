@@ -42,6 +42,9 @@ class PoseCheck:
     # already stands on an inscribed cell (a tracking error put it there): then lethal, and the
     # outline alone decides, as ROS does for a polygon footprint, so the robot can drive out again
     centre_limit: int = INSCRIBED_INFLATED_OBSTACLE
+    # the robot's own outline lies on a lethal or unknown cell where it stands: those cells are not
+    # counted (`FootprintCheck._escape_check`), and it should only turn, slide or back off them
+    wedged: bool = False
 
 
 def outline_skips(clearance: np.ndarray, resolution: float) -> np.ndarray:
@@ -259,7 +262,7 @@ class FootprintCheck:
         blocked[rows[on_grid], cols[on_grid]] = False
         clearance = np.sqrt(nearest_cells(blocked)[0]) * info.resolution
         return PoseCheck(check.outline, clearance <= _reach(check.outline, info.resolution),
-                         outline_skips(clearance, info.resolution), check.centre_limit)
+                         outline_skips(clearance, info.resolution), check.centre_limit, wedged=True)
 
     def turn_check(self, check: PoseCheck, costs: np.ndarray, info: MapMetaData) -> PoseCheck | None:
         """What a last-resort turn is checked with when the padded footprint (`check`, set up for the
