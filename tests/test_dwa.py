@@ -371,7 +371,8 @@ def test_a_robot_whose_own_outline_lies_on_a_lethal_cell_may_drive_away_but_not_
     costs, info, footprint_check, start = _wedged_against_a_wall(padding)
     check = footprint_check.setup(start, costs, info)
     poses = np.array([start, (-0.03, 0.0, 0.0), (0.08, 0.0, 0.0), (0.03, 0.0, 0.3), (0.03, 0.0, -0.3)])
-    legal = footprint_check.check_poses(check, poses, costs, info)
+    assert check.wedged and not footprint_check.check_poses(check, poses[:1], costs, info)[0]
+    legal = footprint_check.check_poses(footprint_check.escape_check(check, start, costs, info), poses, costs, info)
     # where it stands and 6 cm back are legal; 5 cm on, its edge lies on the wall's next column,
     # and turned by 0.3 rad a corner does too
     assert legal.tolist() == [True, True, False, False, False]
@@ -391,21 +392,14 @@ def test_a_robot_wedged_against_a_wall_backs_away_along_its_path(params):
     assert trace[-1, 0] < -1.5, "drove back along the path"
 
 
-def test_a_holonomic_robot_wedged_beside_a_wall_slides_off_it_before_it_drives_on():
-    # its right side 1 cm into the top lethal row of a wall along its path: driving on would
-    # slide (and turn) along the cells it touches; it first leaves them, then drives on (a
-    # differential drive there has no legal motion at all: every turn sweeps a corner deeper)
-    params = HOLO
-    padding = 0.1
-    costs, info, check = costmap(boxes=[(-3.0, -1.0, 3.0, -0.215)], padding=padding)
-    padded = make_footprint(SQUARE, padding=padding)
-    start = (-2.0, -0.06, 0.0)
-    assert footprint_hits_lethal(costs, info, start)
-    planner = DwaPlanner(params, FootprintCheck(padded.points, check, stop_padding=0.02, footprint_padding=padding))
-    path = straight(-2.0, 0.3, 2.5, 0.3)
-    trace, results = drive(planner, costs, info, path, start, 300)
-    on_wall = [footprint_hits_lethal(costs, info, p) for p in trace]
-    off = on_wall.index(False)
-    assert off > 0 and not any(on_wall[off:]), "once off the wall, never on a lethal cell again"
-    assert all(r.cmd[0] <= 0.0 for r in results[:off]), "no forward motion while on the wall's cells"
-    assert trace[-1, 0] > 1.5, "then drove on along the path"
+def test_among_people_a_wedged_robot_brakes_instead_of_driving_off_the_obstacle():
+    # people shove a robot against a wall and walk on: with a tracked person about (3 m off, walking
+    # away), DWA holds a wedged robot to its own outline, as before the escape check
+    from omninav.geometry.movers import Movers
+    costs, info, footprint_check, start = _wedged_against_a_wall(0.1)
+    person = Movers(np.array([[-2.0, 2.0]]), np.array([[-0.5, 0.0]]), np.array([0.25]), np.zeros((1, 3)))
+    path = straight(0.03, 0.0, -2.5, 0.0)
+    among_people = DwaPlanner(DIFF, footprint_check).compute(start, (0.0, 0.0, 0.0), costs, info, path, movers=person)
+    alone = DwaPlanner(DIFF, footprint_check).compute(start, (0.0, 0.0, 0.0), costs, info, path)
+    assert among_people.status == "no_valid_trajectory" and not among_people.cmd.any()
+    assert alone.status != "no_valid_trajectory" and alone.cmd.any()

@@ -369,14 +369,6 @@ def fallback_velocities(params: DwaParams, velocity) -> np.ndarray:
     return _without_standing(params, np.unique(turns, axis=0))
 
 
-def wedged_velocities(params: DwaParams, velocity) -> np.ndarray:
-    """(T, 3) the samples of a robot on an obstacle's cell (PoseCheck.wedged): the last resorts and
-    the window's samples that do not drive forward — driving on along what it touches would press
-    on into it (a robot shoved against a door's jamb did)."""
-    window = sample_velocities(params, velocity)
-    return np.unique(np.vstack([fallback_velocities(params, velocity), window[window[:, 0] <= 0.0]]), axis=0)
-
-
 def _without_standing(params: DwaParams, samples: np.ndarray) -> np.ndarray:
     in_place = (samples[:, 0] == 0.0) & (samples[:, 1] == 0.0)
     return samples[~(in_place & (np.abs(samples[:, 2]) < params.min_in_place_vel_theta))]
@@ -453,12 +445,16 @@ class DwaPlanner:
         if self._escape_start is not None and self._escaped(pose):
             self._escape_start = None
         escaping = self._escape_start is not None
-        check = self.footprint_check.setup(pose, costs, info)
-        sampler = fallback_velocities if escaping else wedged_velocities if check.wedged else sample_velocities
-        samples = sampler(self.params, velocity)
+        samples = (fallback_velocities if escaping else sample_velocities)(self.params, velocity)
         if maps is None:
             return DwaResult("no_path", brake, samples, np.zeros((0, 1, 3)), np.zeros(0), -1,
                              "no point of the path lies on the local costmap")
+        check = self.footprint_check.setup(pose, costs, info)
+        if check.wedged and (movers is None or not len(movers)):
+            # alone, a robot on an obstacle's cell drives off it; among people, who shove a robot
+            # against a wall and walk on, it brakes as before (driving off along a door's jamb while
+            # a person pushed it met the jamb: generated doorway-1, a robot-fault contact)
+            check = self.footprint_check.escape_check(check, pose, costs, info)
 
         def evaluate(samples, check=check):
             """(poses, legal, legal against the costmap alone, scores)"""

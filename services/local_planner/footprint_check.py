@@ -42,8 +42,8 @@ class PoseCheck:
     # already stands on an inscribed cell (a tracking error put it there): then lethal, and the
     # outline alone decides, as ROS does for a polygon footprint, so the robot can drive out again
     centre_limit: int = INSCRIBED_INFLATED_OBSTACLE
-    # the robot's own outline lies on a lethal or unknown cell where it stands: those cells are not
-    # counted (`FootprintCheck._escape_check`), and it should only turn, slide or back off them
+    # even the robot's own outline lies on a lethal or unknown cell where it stands (`escape_check`
+    # lets it drive off them)
     wedged: bool = False
 
 
@@ -216,8 +216,8 @@ class FootprintCheck:
         between them — while the robot stands a cell clear of that zone (at its edge every slide
         along a jagged row of obstacle cells would cross it); else the footprint padded by the
         quarter cell only, or the footprint itself, or the robot's own outline without
-        footprint_padding, or at last that outline with the cells it lies on where it stands not
-        counted (`_escape_check`): the robot may still move (away).
+        footprint_padding: the robot may still move (away); when even that one lies on a lethal
+        cell, the check is `wedged` (`escape_check` then lets it drive off those cells).
         The outline is checked whatever the
         centre cost where
         `PoseCheck.near` (the circumscribed cost alone let a corner reach a cell one further). A robot
@@ -243,16 +243,18 @@ class FootprintCheck:
             _check_poses(start, kernel_costs(costs), clear.near, skips, grid, clear.outline, self.check_cost, centre_limit, legal)
             if legal[0]:
                 return self._outline_check(clearance, skips, info.resolution, padding, centre_limit)
-        return self._escape_check(self._outline_check(clearance, skips, info.resolution, own, centre_limit),
-                                  start[0], costs, info)
+        own_check = self._outline_check(clearance, skips, info.resolution, own, centre_limit)
+        return PoseCheck(own_check.outline, own_check.near, own_check.skips, centre_limit, wedged=True)
 
-    def _escape_check(self, check: PoseCheck, pose: np.ndarray, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
-        """`check` (the robot's own outline) with the lethal and unknown cells its outline lies on at
-        `pose` no longer counted: the robot braked beside an obstacle seen late, which lies somewhere
-        in those cells but not under the robot, and may drive away from it — not onto any other cell
-        (BARN world 142 seed 0 stood 1.8 cm from a cylinder until it timed out; judging every cell by
-        its centre instead let it drive on into a tighter gap). The collision monitor, which sees
-        the scan's points themselves, keeps it off the obstacle."""
+    def escape_check(self, check: PoseCheck, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
+        """A wedged `check` (the robot's own outline, set up for `pose`) with the lethal and unknown
+        cells its outline lies on at `pose` no longer counted: the robot braked beside an obstacle
+        seen late, which lies somewhere in those cells but not under the robot, and may drive away
+        from it — not onto any other cell (BARN world 142 seed 0 stood 1.8 cm from a cylinder until
+        it timed out; judging every cell by its centre instead let it drive on into a tighter gap).
+        The collision monitor, which sees the scan's points themselves, keeps it off the obstacle."""
+        costs = np.ascontiguousarray(costs, np.uint8)
+        pose = np.asarray(pose, np.float64).reshape(3)
         c, s = math.cos(pose[2]), math.sin(pose[2])
         u, v = grid_coords(info, pose[0] + c * check.outline[:, 0] - s * check.outline[:, 1],
                            pose[1] + s * check.outline[:, 0] + c * check.outline[:, 1])
@@ -262,7 +264,7 @@ class FootprintCheck:
         blocked[rows[on_grid], cols[on_grid]] = False
         clearance = np.sqrt(nearest_cells(blocked)[0]) * info.resolution
         return PoseCheck(check.outline, clearance <= _reach(check.outline, info.resolution),
-                         outline_skips(clearance, info.resolution), check.centre_limit, wedged=True)
+                         outline_skips(clearance, info.resolution), check.centre_limit)
 
     def turn_check(self, check: PoseCheck, costs: np.ndarray, info: MapMetaData) -> PoseCheck | None:
         """What a last-resort turn is checked with when the padded footprint (`check`, set up for the
