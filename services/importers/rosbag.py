@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...geometry.se2 import compose, inverse, relative
 from ...schemas.messages import Header, LaserScan, Odometry, Pose2D, Twist
 
 SCAN_TYPE = "sensor_msgs/msg/LaserScan"
@@ -99,32 +100,22 @@ def _planar_transform(transform) -> Pose2:
     return float(t.x), float(t.y), yaw_of(q.x, q.y, q.z, q.w)
 
 
-def _compose(a: Pose2, b: Pose2) -> Pose2:
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return a[0] + c * b[0] - s * b[1], a[1] + s * b[0] + c * b[1], math.atan2(math.sin(a[2] + b[2]), math.cos(a[2] + b[2]))
-
-
-def _inverse(a: Pose2) -> Pose2:
-    c, s = math.cos(a[2]), math.sin(a[2])
-    return -c * a[0] - s * a[1], s * a[0] - c * a[1], -a[2]
-
-
 def _chain(links: dict[tuple[str, str], Pose2], start: str, end: str) -> Pose2 | None:
     """Frame `end` in frame `start` through the known transforms (parent, child) -> child in parent,
     walked either way; None when they do not join the two."""
     steps: dict[str, list[tuple[str, Pose2]]] = {}
     for (parent, child), pose in links.items():
         steps.setdefault(parent, []).append((child, pose))
-        steps.setdefault(child, []).append((parent, _inverse(pose)))
-    found: dict[str, Pose2] = {start: (0.0, 0.0, 0.0)}
+        steps.setdefault(child, []).append((parent, inverse(pose)))
+    found: dict[str, np.ndarray] = {start: np.zeros(3)}
     todo = [start]
     while todo:
         frame = todo.pop()
         for other, pose in steps.get(frame, ()):
             if other not in found:
-                found[other] = _compose(found[frame], pose)
+                found[other] = compose(found[frame], pose)
                 todo.append(other)
-    return found.get(end)
+    return tuple(float(v) for v in found[end]) if end in found else None
 
 
 def _one_topic(path: Path, topics: dict[str, tuple[str, int]], wanted: str, option: str) -> list[str]:
@@ -135,10 +126,14 @@ def _one_topic(path: Path, topics: dict[str, tuple[str, int]], wanted: str, opti
     return found
 
 
+def _listed(topics: dict[str, tuple[str, int]]) -> str:
+    """The bag's topics and their types, for an error."""
+    return ", ".join(f"{t} ({k})" for t, (k, _) in sorted(topics.items())) or "none"
+
+
 def _check_topic(path: Path, topics: dict[str, tuple[str, int]], topic: str, wanted: str) -> None:
     if topic not in topics:
-        listed = ", ".join(f"{t} ({k})" for t, (k, _) in sorted(topics.items())) or "none"
-        raise RosbagError(f"{path}: no topic {topic} (the bag has: {listed})")
+        raise RosbagError(f"{path}: no topic {topic} (the bag has: {_listed(topics)})")
     if topics[topic][0] != wanted:
         raise RosbagError(f"{path}: topic {topic} carries {topics[topic][0]}, not {wanted}")
 
@@ -155,8 +150,7 @@ def tf_odometry(transforms: list[tuple[int, Pose2]], base: str) -> list[Odometry
         vx = vy = wz = 0.0
         if last is not None:
             dt = (stamp - last[0]) * 1e-9
-            dx, dy, dyaw = _compose(_inverse(last[1]), pose)
-            vx, vy, wz = dx / dt, dy / dt, dyaw / dt
+            vx, vy, wz = (float(v) / dt for v in relative(last[1], pose))
         out.append(Odometry(header=Header(stamp_ns=stamp, frame_id=ODOM_FRAME), child_frame_id=base,
                             pose=Pose2D(*pose), twist=Twist(header=Header(stamp_ns=stamp, frame_id=base),
                                                             linear_x=vx, linear_y=vy, angular_z=wz),
@@ -213,9 +207,8 @@ def read_bag(path: str | Path, scan_topic: str | None = None, odom_topic: str | 
                 if found:
                     odom_topic = found[0]
                 elif "/tf" not in tf_topics:
-                    listed = ", ".join(f"{t} ({k})" for t, (k, _) in sorted(topics.items()))
                     raise RosbagError(f"{path}: no {ODOM_TYPE} topic and no /tf to take odometry from "
-                                      f"(the bag has: {listed})")
+                                      f"(the bag has: {_listed(topics)})")
             if odom_topic is not None:
                 _check_topic(path, topics, odom_topic, ODOM_TYPE)
             contents.scan_topic = scan_topic

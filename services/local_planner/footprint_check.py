@@ -14,14 +14,14 @@ kernels here are numba's; dwa.py's rollout calls `trajectory_cost` on every traj
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 from numba import njit
 
 from ...schemas.messages import MapMetaData
-from ...geometry.footprint import pad
-from ...geometry.grid import grid_coords, in_grid, kernel_costs
+from ...geometry.footprint import pad, transform
+from ...geometry.grid import in_grid, kernel_costs, world_to_cell
 from ...geometry.distance import nearest_cells
 from ...geometry.polygons import densify
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
@@ -125,6 +125,13 @@ def _check_poses(poses, costs, near, skips, grid, outline, check_cost, centre_li
                                    centre_limit)[0] == 1
 
 
+def _clearance_and_skips(blocked: np.ndarray, resolution: float) -> tuple[np.ndarray, np.ndarray]:
+    """(clearance, skips) of the blocked (lethal or unknown) cells: m from each cell's centre to the
+    nearest blocked cell's, and outline_skips."""
+    clearance = np.sqrt(nearest_cells(blocked)[0]) * resolution
+    return clearance, outline_skips(clearance, resolution)
+
+
 def _reach(outline: np.ndarray, resolution: float) -> float:
     """How far from a lethal or unknown cell's centre a pose's centre may put a point of `outline`
     on that cell: the outline's farthest point plus a cell's diagonal (the centre anywhere in its
@@ -180,8 +187,7 @@ class FootprintCheck:
         blocked = costs >= LETHAL_OBSTACLE
         last = self._last_grid
         if last is None or last[1] != resolution or not np.array_equal(last[0], blocked):
-            clearance = np.sqrt(nearest_cells(blocked)[0]) * resolution
-            self._last_grid = last = blocked, resolution, clearance, outline_skips(clearance, resolution)
+            self._last_grid = last = blocked, resolution, *_clearance_and_skips(blocked, resolution)
         return last[2], last[3]
 
     def _outline_check(self, clearance: np.ndarray, skips: np.ndarray, resolution: float, padding: float = 0.0,
@@ -243,8 +249,7 @@ class FootprintCheck:
             _check_poses(start, kernel_costs(costs), clear.near, skips, grid, clear.outline, self.check_cost, centre_limit, legal)
             if legal[0]:
                 return self._outline_check(clearance, skips, info.resolution, padding, centre_limit)
-        own_check = self._outline_check(clearance, skips, info.resolution, own, centre_limit)
-        return PoseCheck(own_check.outline, own_check.near, own_check.skips, centre_limit, wedged=True)
+        return replace(clear, wedged=True)   # the last one tried: the robot's own outline
 
     def escape_check(self, check: PoseCheck, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
         """A wedged `check` (the robot's own outline, set up for `pose`) with the lethal and unknown
@@ -253,18 +258,13 @@ class FootprintCheck:
         from it — not onto any other cell (BARN world 142 seed 0 stood 1.8 cm from a cylinder until
         it timed out; judging every cell by its centre instead let it drive on into a tighter gap).
         The collision monitor, which sees the scan's points themselves, keeps it off the obstacle."""
-        costs = np.ascontiguousarray(costs, np.uint8)
-        pose = np.asarray(pose, np.float64).reshape(3)
-        c, s = math.cos(pose[2]), math.sin(pose[2])
-        u, v = grid_coords(info, pose[0] + c * check.outline[:, 0] - s * check.outline[:, 1],
-                           pose[1] + s * check.outline[:, 0] + c * check.outline[:, 1])
-        cols, rows = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+        points = transform(check.outline, pose)
+        rows, cols = world_to_cell(info, points[:, 0], points[:, 1])
         on_grid = in_grid(info, rows, cols)
-        blocked = costs >= LETHAL_OBSTACLE
+        blocked = np.ascontiguousarray(costs, np.uint8) >= LETHAL_OBSTACLE
         blocked[rows[on_grid], cols[on_grid]] = False
-        clearance = np.sqrt(nearest_cells(blocked)[0]) * info.resolution
-        return PoseCheck(check.outline, clearance <= _reach(check.outline, info.resolution),
-                         outline_skips(clearance, info.resolution), check.centre_limit)
+        clearance, skips = _clearance_and_skips(blocked, info.resolution)
+        return PoseCheck(check.outline, clearance <= _reach(check.outline, info.resolution), skips, check.centre_limit)
 
     def turn_check(self, check: PoseCheck, costs: np.ndarray, info: MapMetaData) -> PoseCheck | None:
         """What a last-resort turn is checked with when the padded footprint (`check`, set up for the
