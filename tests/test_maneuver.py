@@ -1,6 +1,7 @@
 """The maneuver core (services/local_planner/maneuver.py): its search finds turns and straight drives
-whose every pose the footprint check allows, ending nearer the local goal and facing the way on;
-walled in, it finds none; its driver drives the segments as planned."""
+whose every pose the footprint check allows, ending nearer the local goal and facing the way on,
+with no more changes between turning and driving than the way needs; walled in, it finds none; its
+driver drives the segments as planned, each in about the time its distance takes."""
 import math
 
 import numpy as np
@@ -16,6 +17,7 @@ from omninav.services.local_planner.maneuver import (DRIVE_TOLERANCE, FACING, TU
 INFO = MapMetaData(resolution=0.05, width=160, height=120, origin=Pose2D(-2.0, -3.0))   # x -2..6, y -3..3 m
 FOOTPRINT = np.array([[0.42, 0.32], [-0.42, 0.32], [-0.42, -0.32], [0.42, -0.32]])
 DT = 0.05
+TOP, ACCEL = (2.0, 3.0), (2.5, 3.2)   # the robot's limits: m/s and rad/s, m/s² and rad/s²
 
 
 def grid(*boxes) -> np.ndarray:
@@ -68,6 +70,21 @@ def test_the_maneuver_out_of_a_slot_backs_out_turns_round_and_every_pose_is_lega
     assert abs(float(wrap_angle(end[2] - math.pi))) <= FACING            # facing west, the way on
 
 
+def test_in_the_open_the_maneuver_turns_once_and_drives_once():
+    # facing east with the way on due north: one turn onto it and one drive, not a staircase of
+    # 5° turns and one-cell drives (each change costs a stop and a start when driven)
+    open_floor = grid()
+    check_of = FootprintCheck(FOOTPRINT, stop_padding=0.05)
+    start = (1.0, 0.0, 0.0)
+    maps = path_maps(along((1.0, 0.0), (1.0, 2.9)), start, INFO, open_floor)
+    params = ManeuverParams()
+    segments = plan_maneuver(start, check_of, check_of.setup(start, open_floor, INFO), open_floor, INFO,
+                             maps.goal_dist, params)
+    assert [s.kind for s in segments] == ["turn", "drive"]
+    assert abs(float(wrap_angle(segments[0].value - math.pi / 2))) <= FACING
+    assert segments[1].value >= params.progress
+
+
 def test_walled_in_there_is_no_maneuver():
     box = grid((1.4, -0.6, 2.6, -0.45), (1.4, 0.45, 2.6, 0.6), (1.4, -0.6, 1.5, 0.6), (2.5, -0.6, 2.6, 0.6))
     check_of = FootprintCheck(FOOTPRINT)
@@ -82,7 +99,7 @@ def test_the_driver_drives_the_segments_as_planned():
     params = ManeuverParams()
     segments = [Segment("drive", -0.4), Segment("turn", math.pi / 2), Segment("drive", 0.3)]
     pose, ticks = np.array([1.0, 0.5, 0.0]), 0
-    driver = ManeuverDriver(segments, pose, params)
+    driver = ManeuverDriver(segments, pose, params, TOP, ACCEL)
     while (twist := driver.step(pose, DT)) is not None and ticks < 400:
         assert abs(twist[0]) <= params.speed and abs(twist[2]) <= params.turn_speed
         pose = integrate(pose, twist, DT)
@@ -94,9 +111,25 @@ def test_the_driver_drives_the_segments_as_planned():
 
 def test_a_driver_held_back_gives_up_after_twice_its_time():
     params = ManeuverParams()
-    driver = ManeuverDriver([Segment("drive", 0.5)], (0.0, 0.0, 0.0), params)
+    driver = ManeuverDriver([Segment("drive", 0.5)], (0.0, 0.0, 0.0), params, TOP, ACCEL)
     ticks = 0
     while driver.step((0.0, 0.0, 0.0), DT) is not None:     # the robot never moves
         ticks += 1
     assert not driver.finished
     assert ticks * DT == pytest.approx(2 * 0.5 / params.speed + 1.0, abs=2 * DT)
+
+
+@pytest.mark.parametrize("segment, at_full_speed", [(Segment("drive", 0.5), 0.5 / ManeuverParams().speed),
+                                                    (Segment("turn", math.pi / 2), math.pi / 2 / ManeuverParams().turn_speed)])
+def test_a_segment_ends_braking_at_the_robots_limits_not_creeping_up_on_its_end(segment, at_full_speed):
+    # braking at half the limits from top speed adds top / (2 · braking): 0.2 s to a drive, 0.47 s to
+    # a turn; an approach slowing in proportion to what is left would add more than a second to each
+    params = ManeuverParams()
+    top, braking = (params.speed, 0.5 * ACCEL[0]) if segment.kind == "drive" else (params.turn_speed, 0.5 * ACCEL[1])
+    pose, ticks = np.zeros(3), 0
+    driver = ManeuverDriver([segment], pose, params, TOP, ACCEL)
+    while (twist := driver.step(pose, DT)) is not None:
+        pose = integrate(pose, twist, DT)
+        ticks += 1
+    assert driver.finished
+    assert ticks * DT <= at_full_speed + top / (2 * braking) + 3 * DT

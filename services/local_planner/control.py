@@ -275,7 +275,9 @@ class LocalControl:
         self._counted.append("maneuver/planned" if segments else "maneuver/none")
         if not segments:
             return None
-        self.maneuver = ManeuverDriver(segments, robot, self.maneuver_params)
+        dwa = self.dwa_params
+        self.maneuver = ManeuverDriver(segments, robot, self.maneuver_params, (dwa.max_vel_x, dwa.max_vel_theta),
+                                       (dwa.acc_lim_x, dwa.acc_lim_theta))
         return self._maneuver(robot, costmap)
 
     def _maneuver(self, robot: np.ndarray, costmap: Costmap) -> Control | None:

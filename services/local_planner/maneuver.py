@@ -5,11 +5,14 @@ few exact poses (BARN: a 0.53 m padded Jackal in 0.6 m gaps), which no single ar
 robot creeps and turns there until a recovery moves it (docs/barn.md). The maneuver searches the
 poses a robot reaches by the moves a differential drive can make on the spot — a step of one cell
 straight ahead or back along its heading, a turn of TURN_STEP — every pose held to the footprint
-check DWA uses, best first (hybrid A*: continuous poses, one kept per cell and heading bin), until
-a pose lies `progress` metres nearer the local goal than the start by the distances DWA scores
-with (PathMaps.goal_dist: around the cells the centre may not enter) and faces the way on (within
-FACING of the direction in which those distances fall): handed back to DWA facing away from its
-way, the robot would drive back where it came from (BARN world 58's pocket). The result is a list of
+check DWA uses, best first (hybrid A*: continuous poses, one kept per cell and heading bin; each
+change between moving ahead, back, turning left and right costs SWITCH_COST_M more, because each is
+a stop and a start when driven, and without it the way came out as a staircase of 5° turns and
+one-cell drives), until a pose lies `progress` metres nearer the local goal than the start by the
+distances DWA scores with (PathMaps.goal_dist: around the cells the centre may not enter) and faces
+the way on (within FACING of the direction in which those distances fall): handed back to DWA
+facing away from its way, the robot would drive back where it came from (BARN world 58's pocket).
+The result is a list of
 segments — turn on the spot to a heading, or drive a distance straight (negative: back) — that
 `ManeuverDriver` drives one after the other.
 
@@ -35,6 +38,7 @@ TURN_COST_M = 0.1                    # m of travel a turn of one radian costs
 TURN_TOLERANCE = math.radians(2.0)   # rad: a turn is done this near its heading
 DRIVE_TOLERANCE = 0.005              # m: a drive is done this near its distance
 HEADING_GAIN = 2.0                   # 1/s: turn rate per radian of heading error
+SWITCH_COST_M = 0.1                  # m: each change between moves (ahead, back, turn left, turn right) costs this
 FACING = math.pi / 4                 # rad: a maneuver ends facing the way on within this (the shim's threshold)
 
 
@@ -96,6 +100,7 @@ def plan_maneuver(start, footprint_check: FootprintCheck, check: PoseCheck, cost
     if not math.isfinite(target):
         return None
     came_from: dict[tuple, tuple] = {}
+    kinds: dict[tuple, int] = {}   # the move that reached a pose: ahead, back, left or right
     best: dict[tuple, float] = {_bin(start, res): 0.0}
     poses = {_bin(start, res): start}
     queue = [(goal_distance(start[0], start[1]), 0.0, _bin(start, res))]
@@ -113,13 +118,14 @@ def plan_maneuver(start, footprint_check: FootprintCheck, check: PoseCheck, cost
                  (x, y, th + TURN_STEP, TURN_COST_M * TURN_STEP), (x, y, th - TURN_STEP, TURN_COST_M * TURN_STEP))
         candidates = np.array([m[:3] for m in moves])
         legal = footprint_check.check_poses(check, candidates, costs, info)
-        for (nx, ny, nth, cost), ok in zip(moves, legal):
+        last = kinds.get(key)
+        for kind, ((nx, ny, nth, cost), ok) in enumerate(zip(moves, legal)):
             if not ok:
                 continue
             nkey = _bin((nx, ny, nth), res)
-            ng = g + cost
+            ng = g + cost + (SWITCH_COST_M if last is not None and kind != last else 0.0)
             if ng < best.get(nkey, math.inf):
-                best[nkey], poses[nkey], came_from[nkey] = ng, (nx, ny, nth), key
+                best[nkey], poses[nkey], came_from[nkey], kinds[nkey] = ng, (nx, ny, nth), key, kind
                 heapq.heappush(queue, (ng + goal_distance(nx, ny), ng, nkey))
     return None
 
@@ -149,16 +155,24 @@ def _segments(key, came_from, poses) -> list[Segment]:
 class ManeuverDriver:
     """Drives the segments one after the other: a turn on the spot towards its heading, at most
     turn_speed; a drive straight at most `speed`, its heading held to the one it started with, until
-    the distance along that heading is covered. `step` gives the twist for the robot at a pose, None
-    once every segment is done or the time it may take is up (`finished` says which)."""
+    the distance along that heading is covered — neither faster than the robot's own top speeds
+    (`top`: m/s, rad/s). Each segment ends at the speed from which the robot
+    stops in what is left of it at half its acceleration limits (`accel`: m/s², rad/s²; half,
+    because a command takes effect a tick late), and never faster than covers the rest in one tick:
+    a segment ends in about the time its distance takes, not in an exponential approach. `step`
+    gives the twist for the robot at a pose, None once every segment is done or the time it may take
+    is up (`finished` says which)."""
 
-    def __init__(self, segments: list[Segment], pose, params: ManeuverParams):
-        self.segments, self.params = list(segments), params
+    def __init__(self, segments: list[Segment], pose, params: ManeuverParams, top: tuple[float, float],
+                 accel: tuple[float, float]):
+        self.segments = list(segments)
+        self.speed, self.turn_speed = min(params.speed, top[0]), min(params.turn_speed, top[1])
+        self.braking = (0.5 * accel[0], 0.5 * accel[1])
         self.index = 0
         self.anchor = np.asarray(pose, np.float64)[:3].copy()
         # twice the time the segments take at full speed, and a second more: a robot the monitor holds
         # back (or that cannot follow) gives the maneuver up
-        full_speed = sum(abs(s.value) / (params.speed if s.kind == "drive" else params.turn_speed) for s in self.segments)
+        full_speed = sum(abs(s.value) / (self.speed if s.kind == "drive" else self.turn_speed) for s in self.segments)
         self.time_left = 2.0 * full_speed + 1.0
 
     def _next(self, pose) -> None:
@@ -167,7 +181,6 @@ class ManeuverDriver:
 
     def step(self, pose, dt: float) -> np.ndarray | None:
         """The twist for the robot at `pose` for the next dt seconds; None once done or out of time."""
-        p = self.params
         self.time_left -= dt
         if self.time_left < 0.0:
             return None
@@ -178,17 +191,24 @@ class ManeuverDriver:
                 if abs(error) <= TURN_TOLERANCE:
                     self._next(pose)
                     continue
-                return np.array([0.0, 0.0, float(np.clip(HEADING_GAIN * error, -p.turn_speed, p.turn_speed))])
+                return np.array([0.0, 0.0, self._approach(error, self.turn_speed, self.braking[1], dt)])
             heading = self.anchor[2]
             covered = math.cos(heading) * (pose[0] - self.anchor[0]) + math.sin(heading) * (pose[1] - self.anchor[1])
             remaining = segment.value - covered
             if remaining * math.copysign(1.0, segment.value) <= DRIVE_TOLERANCE:
                 self._next(pose)
                 continue
-            speed = math.copysign(min(p.speed, max(0.05, HEADING_GAIN * abs(remaining))), remaining)
-            hold = float(np.clip(HEADING_GAIN * wrap_angle(heading - pose[2]), -p.turn_speed, p.turn_speed))
+            speed = self._approach(remaining, self.speed, self.braking[0], dt)
+            hold = float(np.clip(HEADING_GAIN * wrap_angle(heading - pose[2]), -self.turn_speed, self.turn_speed))
             return np.array([speed, 0.0, hold])
         return None
+
+    @staticmethod
+    def _approach(remaining: float, top: float, braking: float, dt: float) -> float:
+        """The signed rate towards a target `remaining` away: at most top, slow enough to stop in
+        the rest at `braking`, and covering no more than the rest in one tick."""
+        size = abs(remaining)
+        return math.copysign(min(top, math.sqrt(2.0 * braking * size), size / dt), remaining)
 
     @property
     def finished(self) -> bool:
