@@ -259,3 +259,16 @@ def test_a_robot_in_a_slot_too_narrow_to_turn_in_backs_out_and_turns_by_a_maneuv
     assert answers[-1].reason == GOAL_REACHED and math.hypot(pose[0] + 1.0, pose[1]) <= 0.02
     stuck, stuck_pose = results[False]
     assert stuck[-1].reason != GOAL_REACHED and stuck_pose[0] > 0.5     # still in the slot
+
+
+@pytest.mark.parametrize("speed, stalls", [(0.05, True), (0.0, True), (0.1, False)])
+def test_a_robot_creeping_slower_than_stall_radius_over_stall_time_has_stalled(speed, stalls):
+    # the window slides: a robot creeping at 5 cm/s is stalled once stall_time has passed, wherever
+    # it started; one making 10 cm/s (0.4 m in 4 s) is not
+    core = LocalControl(LocalControlParams(holonomic_robot=False), DT)
+    m = core.maneuver_params
+    ticks = [k for k in range(int(3 * m.stall_time / DT))
+             if core._stalled(np.array([speed * k * DT, 0.0, 0.0]), None)]
+    assert bool(ticks) == stalls
+    if stalls:
+        assert ticks[0] * DT == pytest.approx(m.stall_time)

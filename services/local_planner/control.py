@@ -35,8 +35,9 @@ One tick, in order:
   the collision monitor lets through (FootprintCheck.monitor_check); then DWA again.
 - Else the controller: DWA (scoring the tracker's tracks predicted to the tick, dynamic.py), the
   elastic band, or the path follower (braking, not ok, "path_blocked: …" when the path ahead is
-  illegal on the costmap). When DWA has kept the robot within maneuver.stall_radius for
-  maneuver.stall_time with no tracked mover within maneuver.mover_distance (a robot waiting for
+  illegal on the costmap). When DWA has moved the robot less than maneuver.stall_radius over the
+  last maneuver.stall_time (creeping counts: a window that slides, not one anchored where the robot
+  stood) with no tracked mover within maneuver.mover_distance (a robot waiting for
   people is not stuck), a maneuver is searched in (x, y, heading) for the footprint and, found,
   driven from this tick on (counted maneuver/planned, else maneuver/none): at the mouth of a BARN
   gap DWA's arcs reach none of the few poses the padded footprint fits in, and the robot crept and
@@ -46,6 +47,7 @@ Every pose is held to one FootprintCheck (footprint_check.py), the one DWA's rol
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -161,7 +163,7 @@ class LocalControl:
         self.arrived = False
         self.maneuver_params = p.maneuver_params()
         self.maneuver: ManeuverDriver | None = None
-        self._stall: tuple[np.ndarray, int] | None = None   # (pose, ticks since) while it stays near that pose
+        self._stall: deque[np.ndarray] = deque()   # the robot's poses over the last stall_time under DWA
         self._counted: list[str] = []
 
     def _make_controller(self):
@@ -181,7 +183,8 @@ class LocalControl:
     def follow(self, path: Path, frames: RobotFrames) -> None:
         """Follow `path` (map or odom frame) from now on; an empty path stops."""
         if self.path is None or not len(path.poses) or path.goal_id != self.path.goal_id:
-            self.maneuver, self._stall = None, None
+            self.maneuver = None
+            self._stall.clear()
         self.path = path if len(path.poses) else None
         self.approach, self.arrived, self.path_follower = None, False, None
         if self.shim is not None and self.path is not None:
@@ -222,7 +225,8 @@ class LocalControl:
         robot = frames.robot(frame)
         approach = self._approach(velocity, frames, costmap)
         if approach is not None:
-            self.maneuver, self._stall = None, None
+            self.maneuver = None
+            self._stall.clear()
             return approach
         movers = self._movers(inputs, frame)
         maneuver = self._maneuver(robot, costmap)
@@ -230,6 +234,7 @@ class LocalControl:
             return maneuver
         rotation = self._rotate(velocity, path, robot, costmap, movers)
         if rotation is not None:
+            self._stall.clear()   # turning onto the path is no stall
             return rotation
         if self.params.controller == "follower":
             return self._follow_path(velocity, path, robot, frames, costmap)
@@ -250,18 +255,18 @@ class LocalControl:
                        result.trajectory)
 
     def _stalled(self, robot: np.ndarray, movers: Movers | None) -> bool:
-        """Whether DWA has kept the robot within stall_radius for stall_time, with no tracked mover
-        within mover_distance (a robot waiting for people to pass is not stuck)."""
+        """Whether DWA has moved the robot less than stall_radius over the last stall_time, with no
+        tracked mover within mover_distance (a robot waiting for people to pass is not stuck)."""
         m = self.maneuver_params
         if not m.enabled:
             return False
-        if self._stall is None or math.hypot(*(robot[:2] - self._stall[0][:2])) > m.stall_radius:
-            self._stall = (robot.copy(), 0)
+        self._stall.append(robot.copy())
+        if (len(self._stall) - 1) * self.dt < m.stall_time:
             return False
-        self._stall = (self._stall[0], self._stall[1] + 1)
-        if self._stall[1] * self.dt < m.stall_time:
+        then = self._stall.popleft()
+        if math.hypot(*(robot[:2] - then[:2])) > m.stall_radius:
             return False
-        self._stall = (robot.copy(), 0)
+        self._stall.clear()
         if movers is not None and len(movers) and \
                 np.min(np.hypot(*(movers.positions - robot[:2]).T) - movers.radii) < m.mover_distance:
             return False
@@ -295,7 +300,8 @@ class LocalControl:
             self._counted.append("maneuver/blocked")
         else:
             self._counted.append("maneuver/done" if self.maneuver.finished else "maneuver/timeout")
-        self.maneuver, self._stall = None, None
+        self.maneuver = None
+        self._stall.clear()
         return None
 
     def _movers(self, inputs: ControlInputs, frame: str) -> Movers | None:

@@ -48,7 +48,7 @@ class ManeuverParams(Parameters):
     navigator's oscillation_timeout (10 s), so the maneuver comes before its recoveries; progress:
     the padded footprint's length and more past the tight spot."""
     enabled: bool = True
-    stall_time: float = param(8.0, gt=0)          # s the robot stays within stall_radius under DWA first
+    stall_time: float = param(4.0, gt=0)          # s over which DWA has moved the robot less than stall_radius
     stall_radius: float = param(0.25, gt=0)       # m
     mover_distance: float = param(3.0, ge=0)      # m: none with a tracked mover this near (it waits for people)
     progress: float = param(1.0, gt=0)            # m nearer the local goal than the start (DWA's goal distances)
