@@ -53,8 +53,8 @@ class ManeuverParams(Parameters):
     mover_distance: float = param(3.0, ge=0)      # m: none with a tracked mover this near (it waits for people)
     progress: float = param(1.0, gt=0)            # m nearer the local goal than the start (DWA's goal distances)
     max_expansions: int = param(20000, ge=1)      # poses expanded before the search gives up
-    speed: float = param(0.25, gt=0)              # m/s of a drive
-    turn_speed: float = param(1.0, gt=0)          # rad/s of a turn
+    speed: float = param(0.5, gt=0)               # m/s of a drive (at most the robot's max_vel_x)
+    turn_speed: float = param(1.5, gt=0)          # rad/s of a turn (at most its max_vel_theta)
 
 
 @dataclass(frozen=True)
