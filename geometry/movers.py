@@ -26,6 +26,12 @@ class Movers:
     def __len__(self) -> int:
         return len(self.radii)
 
+    def nearest_edge(self, xy) -> float:
+        """Distance from the point xy to the nearest mover's edge (inf when there is none)."""
+        if not len(self):
+            return math.inf
+        return float(np.min(np.hypot(*(self.positions - np.asarray(xy, np.float64)[:2]).T) - self.radii))
+
 
 def tracks_problem(msg: Tracks) -> str:
     """Why a Tracks message cannot be used (its arrays disagree in length), or ''."""

@@ -81,3 +81,9 @@ def test_backing_from_a_person_in_the_way_starts_no_escape():
     assert first.status == "escape"
     gone = planner.compute((-0.02, 0.0, 0.0), (0.0, 0.0, 0.0), FREE, INFO, PATH)
     assert gone.status == "ok" and gone.cmd[0] > 0
+
+
+def test_the_nearest_movers_edge_is_measured_from_a_point_and_is_infinite_without_movers():
+    movers = Movers(np.array([[3.0, 4.0], [0.0, -1.0]]), np.zeros((2, 2)), np.array([0.5, 0.25]), np.zeros((2, 3)))
+    assert movers.nearest_edge((0.0, 0.0, 1.2)) == pytest.approx(0.75)      # the second, 1 m off, radius 0.25
+    assert Movers(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), np.zeros((0, 3))).nearest_edge((0.0, 0.0)) == np.inf

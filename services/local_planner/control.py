@@ -267,8 +267,7 @@ class LocalControl:
         if math.hypot(*(robot[:2] - then[:2])) > m.stall_radius:
             return False
         self._stall.clear()
-        if movers is not None and len(movers) and \
-                np.min(np.hypot(*(movers.positions - robot[:2]).T) - movers.radii) < m.mover_distance:
+        if movers is not None and movers.nearest_edge(robot) < m.mover_distance:
             return False
         return True
 
