@@ -12,9 +12,8 @@ one-cell drives), until a pose lies `progress` metres nearer the local goal than
 distances DWA scores with (PathMaps.goal_dist: around the cells the centre may not enter) and faces
 the way on (within FACING of the direction in which those distances fall): handed back to DWA
 facing away from its way, the robot would drive back where it came from (BARN world 58's pocket).
-The result is a list of
-segments — turn on the spot to a heading, or drive a distance straight (negative: back) — that
-`ManeuverDriver` drives one after the other.
+The result is a list of segments — turn on the spot to a heading, or drive a distance straight
+(negative: back) — that `ManeuverDriver` drives one after the other.
 
 Pure: numpy and the footprint check's kernels; poses in the local costmap's frame.
 """
