@@ -392,14 +392,34 @@ def test_a_robot_wedged_against_a_wall_backs_away_along_its_path(params):
     assert trace[-1, 0] < -1.5, "drove back along the path"
 
 
-def test_among_people_a_wedged_robot_brakes_instead_of_driving_off_the_obstacle():
-    # people shove a robot against a wall and walk on: with a tracked person about (3 m off, walking
-    # away), DWA holds a wedged robot to its own outline, as before the escape check
+@pytest.mark.parametrize("person_at, drives_off", [((-0.5, 0.6), False), ((-2.0, 2.0), True)],
+                         ids=["person at hand", "person walked on"])
+def test_a_wedged_robot_brakes_with_a_person_at_hand_and_drives_off_once_they_walk_on(person_at, drives_off):
+    # people shove a robot against a wall: with a tracked person within wedged_mover_distance DWA
+    # holds the wedged robot to its own outline, as before the escape check; 2.6 m off, walking
+    # away, the person has walked on and the robot drives off the wall as it does alone
     from omninav.geometry.movers import Movers
     costs, info, footprint_check, start = _wedged_against_a_wall(0.1)
-    person = Movers(np.array([[-2.0, 2.0]]), np.array([[-0.5, 0.0]]), np.array([0.25]), np.zeros((1, 3)))
+    person = Movers(np.array([person_at]), np.array([[-0.5, 0.0]]), np.array([0.25]), np.zeros((1, 3)))
     path = straight(0.03, 0.0, -2.5, 0.0)
-    among_people = DwaPlanner(DIFF, footprint_check).compute(start, (0.0, 0.0, 0.0), costs, info, path, movers=person)
+    with_person = DwaPlanner(DIFF, footprint_check).compute(start, (0.0, 0.0, 0.0), costs, info, path, movers=person)
     alone = DwaPlanner(DIFF, footprint_check).compute(start, (0.0, 0.0, 0.0), costs, info, path)
-    assert among_people.status == "no_valid_trajectory" and not among_people.cmd.any()
     assert alone.status != "no_valid_trajectory" and alone.cmd.any()
+    if drives_off:
+        assert with_person.status != "no_valid_trajectory" and with_person.cmd.any()
+    else:
+        assert with_person.status == "no_valid_trajectory" and not with_person.cmd.any()
+
+
+def test_a_wedged_robot_is_forgiven_the_cells_where_it_became_wedged_not_new_ones_each_cycle():
+    # forgiven afresh every cycle, a robot creeping along a wall could creep on (generated
+    # doorway-65: 15 robot-fault contacts sliding along a door's jamb); anchored, the robot moved 6 cm
+    # along the wall lies on cells it was not forgiven and brakes, where a planner that has just
+    # met it there (wedged there first) drives off
+    costs, info, footprint_check, start = _wedged_against_a_wall(0.1)
+    path = straight(0.03, 0.0, -2.5, 0.0)
+    slid = (start[0], start[1] + 0.06, start[2])
+    planner = DwaPlanner(DIFF, footprint_check)
+    assert planner.compute(start, (0.0, 0.0, 0.0), costs, info, path).status != "no_valid_trajectory"
+    assert planner.compute(slid, (0.0, 0.0, 0.0), costs, info, path).status == "no_valid_trajectory"
+    assert DwaPlanner(DIFF, footprint_check).compute(slid, (0.0, 0.0, 0.0), costs, info, path).status != "no_valid_trajectory"

@@ -383,6 +383,7 @@ class DwaPlanner:
         self.footprint_check = footprint_check
         self.distances = DistanceCache()
         self._escape_start: np.ndarray | None = None   # the pose where backing up began, while escaping
+        self._wedged_at: np.ndarray | None = None      # where the robot stood when it became wedged
 
     def _escaped(self, pose) -> bool:
         start, p = self._escape_start, self.params
@@ -450,11 +451,10 @@ class DwaPlanner:
             return DwaResult("no_path", brake, samples, np.zeros((0, 1, 3)), np.zeros(0), -1,
                              "no point of the path lies on the local costmap")
         check = self.footprint_check.setup(pose, costs, info)
-        if check.wedged and (movers is None or not len(movers)):
-            # alone, a robot on an obstacle's cell drives off it; among people, who shove a robot
-            # against a wall and walk on, it brakes as before (driving off along a door's jamb while
-            # a person pushed it met the jamb: generated doorway-1, a robot-fault contact)
-            check = self.footprint_check.escape_check(check, pose, costs, info)
+        if not check.wedged:
+            self._wedged_at = None
+        else:
+            check = self._escape(check, pose, costs, info, movers)
 
         def evaluate(samples, check=check):
             """(poses, legal, legal against the costmap alone, scores)"""
@@ -492,6 +492,20 @@ class DwaPlanner:
             return self.compute(pose, velocity, costs, info, path, maps, movers)
         return DwaResult("no_valid_trajectory", brake, samples, poses, scores, -1,
                          f"every one of {len(samples)} trajectories collides; braking")
+
+    def _escape(self, check: PoseCheck, pose, costs: np.ndarray, info: MapMetaData, movers: Movers | None) -> PoseCheck:
+        """What a wedged robot is checked with: the escape check of the cells its outline lay on
+        where it became wedged (not where it stands now: forgiven afresh every cycle, a robot creeping
+        along a wall may creep on; generated doorway-65) — anew where it was moved off those cells (a
+        person shoved it) — while no tracked person's edge is within wedged_mover_distance; people
+        shove a robot against a wall (driving off along a door's jamb while a person pushed it met
+        the jamb: generated doorway-1), but once they have walked on it may drive off (generated
+        crossing-79 braked on a wall for 100 s while a person patrolled past)."""
+        if self._wedged_at is None:
+            self._wedged_at = np.array(pose[:3], np.float64)
+        if movers is not None and movers.nearest_edge(pose) < self.params.wedged_mover_distance:
+            return check
+        return self.footprint_check.escape_check(check, self._wedged_at, costs, info)
 
     def _clear_of(self, poses: np.ndarray, movers: Movers) -> tuple[np.ndarray, np.ndarray]:
         """(legal (T,), cost (T,)) of rollouts against the predicted movers (dynamic.py)."""

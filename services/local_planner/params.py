@@ -57,6 +57,7 @@ class DwaParams(Parameters):
     dynamic_obstacle_scale: float = param(20.0, ge=0)           # per unit of intrusion into dynamic_influence_distance
     dynamic_influence_distance: float = param(0.8, gt=0)        # m beyond the kept distance within which a track costs
     dynamic_min_speed: float = param(0.1, ge=0)                 # m/s: slower tracks are left to the costmap (a standing person is in it)
+    wedged_mover_distance: float = param(1.0, ge=0)             # m: a robot wedged on an obstacle's cells drives off them only with no track's edge nearer
 
     rules = tuple(Rule(high, lambda p, low=low, high=high: getattr(p, low) <= getattr(p, high),
                        f"≥ {low} ({{p.{low}}})")
