@@ -496,11 +496,11 @@ class DwaPlanner:
     def _escape(self, check: PoseCheck, pose, costs: np.ndarray, info: MapMetaData, movers: Movers | None) -> PoseCheck:
         """What a wedged robot is checked with: the escape check of the cells its outline lay on
         where it became wedged (not where it stands now: forgiven afresh every cycle, a robot creeping
-        along a wall may creep on; generated doorway-65) — anew where it was moved off those cells (a
-        person shoved it) — while no tracked person's edge is within wedged_mover_distance; people
-        shove a robot against a wall (driving off along a door's jamb while a person pushed it met
-        the jamb: generated doorway-1), but once they have walked on it may drive off (generated
-        crossing-79 braked on a wall for 100 s while a person patrolled past)."""
+        along a wall may creep on; generated doorway-65; shoved into another wedge without coming
+        free, it keeps that anchor and brakes), while no tracked person's edge is within
+        wedged_mover_distance; people shove a robot against a wall (driving off along a door's jamb
+        while a person pushed it met the jamb: generated doorway-1), but once they have walked on it
+        may drive off (generated crossing-79 braked on a wall for 100 s while a person patrolled past)."""
         if self._wedged_at is None:
             self._wedged_at = np.array(pose[:3], np.float64)
         if movers is not None and movers.nearest_edge(pose) < self.params.wedged_mover_distance:

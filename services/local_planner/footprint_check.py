@@ -252,10 +252,10 @@ class FootprintCheck:
         return replace(clear, wedged=True)   # the last one tried: the robot's own outline
 
     def escape_check(self, check: PoseCheck, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
-        """A wedged `check` (the robot's own outline, set up for `pose`) with the lethal and unknown
-        cells its outline lies on at `pose` no longer counted: the robot braked beside an obstacle
-        seen late, which lies somewhere in those cells but not under the robot, and may drive away
-        from it — not onto any other cell (BARN world 142 seed 0 stood 1.8 cm from a cylinder until
+        """A wedged `check` (the robot's own outline) with the lethal and unknown cells its outline
+        lies on at `pose` (where the robot became wedged) no longer counted: the robot braked beside
+        an obstacle seen late, which lies somewhere in those cells but not under the robot, and may
+        drive away from it — not onto any other cell (BARN world 142 seed 0 stood 1.8 cm from a cylinder until
         it timed out; judging every cell by its centre instead let it drive on into a tighter gap).
         The collision monitor, which sees the scan's points themselves, keeps it off the obstacle."""
         points = transform(check.outline, pose)
