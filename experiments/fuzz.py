@@ -12,7 +12,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from typing import Iterator
 
-import msgpack
+import msgspec
 import numpy as np
 
 from ..schemas import MessageError, all_types, decode, encode
@@ -66,7 +66,7 @@ def _leaves(wire: dict, path: tuple = ()) -> Iterator[tuple[tuple, object]]:
 
 def mutated_payloads(msg) -> Iterator[bytes]:
     """The message with one field at a time set to each of its edge values."""
-    wire = msgpack.unpackb(encode(msg), raw=False)      # plain maps and bytes, safe to copy
+    wire = msgspec.msgpack.decode(encode(msg))      # plain maps and bytes, safe to copy
     for path, value in _leaves(wire):
         for edge in _edge_values(value):
             changed = copy.deepcopy(wire)
@@ -74,7 +74,7 @@ def mutated_payloads(msg) -> Iterator[bytes]:
             for name in path[:-1]:
                 node = node[name]
             node[path[-1]] = edge
-            yield msgpack.packb(changed, use_bin_type=True)
+            yield msgspec.msgpack.encode(changed)
 
 
 @dataclass

@@ -1,14 +1,15 @@
 import math
 from concurrent.futures import ThreadPoolExecutor
 
-import msgpack
+import msgspec
 import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from omninav.schemas import MessageError, all_types, decode, encode, peek_type
-from omninav.schemas.codec import describe, to_wire
+from omninav.schemas.codec import _checked_decode, _fast_decoder, describe, to_wire
+from omninav.experiments.fuzz import example, mutated_payloads
 from omninav.schemas.messages import (Chatter, Clock, Costmap, LaserScan, MapMetaData, Obstacles, OccupancyGrid,
                                       Odometry, ParticleCloud, Path, PoseWithCovariance, WheelCommand, WheelState)
 
@@ -60,6 +61,39 @@ def test_damaged_payloads_raise_message_error_only(name, cls, data):
         pass                                 # a clean refusal; anything else fails the test
 
 
+@pytest.mark.parametrize("name,cls", ALL_TYPES)
+def test_the_fast_decoder_accepts_only_what_the_checking_decoder_accepts_and_as_the_same_message(name, cls):
+    """Every one-field mutation of a sound message, and every other type's payload: where the fast
+    path (msgspec) gives a message, the checking decoder gives the same; where it doubts, decode()
+    answers as the checking decoder does."""
+    fast = _fast_decoder(cls)
+    accepted = 0
+    for payload in [encode(example(cls)), *mutated_payloads(example(cls)),
+                    *(encode(example(other)) for _, other in ALL_TYPES)]:
+        try:
+            checked = _checked_decode(msgspec.msgpack.decode(payload), cls)
+        except MessageError:
+            checked = None
+        quick = fast(payload)
+        if quick is not None:
+            accepted += 1
+            assert checked is not None, payload
+            assert_same(quick, checked)
+        if checked is None:
+            with pytest.raises(MessageError):
+                decode(payload, cls)
+    assert accepted >= 2        # the sound example, and at least one harmless edge value
+
+
+def test_a_payload_changed_after_decoding_leaves_the_message_alone():
+    ranges = np.ones(10, np.float32).tobytes()
+    payload = bytearray(encode(scan_of(np.ones(10))))
+    scan = decode(payload, LaserScan)
+    start = payload.index(ranges)
+    payload[start:start + len(ranges)] = bytes(len(ranges))
+    assert scan.ranges.tolist() == [1.0] * 10
+
+
 def scan_of(ranges, angle_increment=0.01, **fields) -> LaserScan:
     ranges = np.asarray(ranges, np.float32)
     return LaserScan(ranges=ranges, angle_increment=angle_increment, range_max=30.0,
@@ -81,7 +115,7 @@ def wire_with(msg, **changes):
         for p in parents:
             node = node[p]
         node[leaf] = value
-    return msgpack.packb(wire, use_bin_type=True)
+    return msgspec.msgpack.encode(wire)
 
 
 @pytest.mark.parametrize("msg,change,field", [
@@ -106,14 +140,14 @@ def test_missing_field_and_wrong_type_and_version():
     wire = to_wire(Chatter())
     del wire["text"]
     with pytest.raises(MessageError, match=r"Chatter\.text: missing"):
-        decode(msgpack.packb(wire))
+        decode(msgspec.msgpack.encode(wire))
     with pytest.raises(MessageError, match="expected LaserScan"):
         decode(encode(Chatter()), LaserScan)
     with pytest.raises(MessageError, match="version"):
         decode(wire_with(Chatter(), _version=99))
     with pytest.raises(MessageError, match="unknown message type"):
-        decode(msgpack.packb({"_type": "Nope", "_version": 1}))
-    for junk in (b"", b"\xc1", msgpack.packb([1, 2]), msgpack.packb("text")):
+        decode(msgspec.msgpack.encode({"_type": "Nope", "_version": 1}))
+    for junk in (b"", b"\xc1", msgspec.msgpack.encode([1, 2]), msgspec.msgpack.encode("text")):
         with pytest.raises(MessageError):
             decode(junk)
 
