@@ -64,52 +64,78 @@ def _plan(cls: type) -> tuple[_Field, ...]:
     return tuple(plan)
 
 
-# ---------------------------------------------------------------- encode
-# Each type gets an encoder generated from its plan (one function building one literal map), so
-# encoding a small message costs one call instead of one per field: the stack publishes odometry,
-# wheel states and the clock at the sim rate, and per-field calls were most of their cost.
+# ---------------------------------------------------------------- mirrors
+# msgspec encodes and parses Structs in C. Each message type has a mirror Struct: the same fields
+# in the same order, nested types mirrored, arrays as {dtype, shape, data}, and for a top-level
+# type `_type` and `_version` first, as literals. Parsing into a mirror checks every field's type,
+# refuses missing and unknown fields; encoding one writes the map a payload is.
 
-def _array_wire(value: Any, dtype: np.dtype) -> dict:
-    arr = np.ascontiguousarray(value, dtype=dtype)
-    # the array's own buffer: msgspec copies it once into the payload, tobytes() would copy twice
-    return {"dtype": dtype.str, "shape": list(arr.shape), "data": arr.data}
-
-
-def _wire_items(cls: type, var: str, lines: list[str], names: dict[str, Any]) -> str:
-    """The items of the map literal of the struct held in local `var` (nested structs get locals of
-    their own, assigned in `lines`; constants the code needs go into `names`)."""
-    items = []
-    for f in _plan(cls):
-        value = f"{var}.{f.name}"
-        if f.kind == "array":
-            names[f"dtype_{var}_{f.name}"] = np.dtype(f.array.dtype)
-            items.append(f"{f.name!r}: _array_wire({value}, dtype_{var}_{f.name})")
-        elif f.kind == "struct":
-            lines.append(f"    {var}_{f.name} = {value}")
-            items.append(f"{f.name!r}: {{{_wire_items(f.struct, f'{var}_{f.name}', lines, names)}}}")
-        elif f.kind in ("float", "int", "dict"):
-            items.append(f"{f.name!r}: {f.kind}({value})")
-        else:
-            items.append(f"{f.name!r}: {value}")
-    return ", ".join(items)
+_SIZE = Annotated[int, msgspec.Meta(ge=0)]
 
 
 @cache
-def _wire_builder(cls: type):
-    """to_wire for one message type, generated: {_type, _version, fields…} in field order."""
+def _wire_array(spec: ArraySpec) -> type:
+    """The mirror of an array map: dtype and the sizes of fixed axes as literals."""
+    shape = tuple[tuple(_SIZE if n is None else Literal[n] for n in spec.shape)] if spec.shape else tuple[()]
+    return msgspec.defstruct("WireArray", [("dtype", Literal[spec.dtype]), ("shape", shape), ("data", memoryview)],
+                             forbid_unknown_fields=True)
+
+
+_SCALARS = {"float": float, "int": int, "str": str, "bool": bool, "dict": dict[str, Union[int, float, str]]}
+
+
+@cache
+def _mirror(cls: type, envelope: tuple[tuple[str, Any], ...] = ()) -> type:
+    fields = [*((name, Literal[value]) for name, value in envelope)]
+    for f in _plan(cls):
+        kind = (_wire_array(f.array) if f.kind == "array" else _mirror(f.struct) if f.kind == "struct"
+                else _SCALARS[f.kind])
+        fields.append((f.name, kind))
+    return msgspec.defstruct("Wire" + cls.__name__, fields, forbid_unknown_fields=True)
+
+
+def _envelope_mirror(cls: type) -> type:
+    """The mirror of a top-level message: its type name and version first."""
+    name, version = type_info(cls)
+    return _mirror(cls, ((TYPE_FIELD, name), (VERSION_FIELD, version)))
+
+
+# ---------------------------------------------------------------- encode
+# Each type gets a generated function building its mirror from a message (one call, no per-field
+# calls): the stack publishes odometry, wheel states and the clock at the sim rate.
+
+def _mirror_args(cls: type, var: str, lines: list[str], names: dict[str, Any]) -> str:
+    """The arguments building the mirror of the struct held in local `var` (arrays and nested
+    structs get locals of their own, assigned in `lines`; constants the code needs go into `names`)."""
+    args = []
+    for f in _plan(cls):
+        value, local = f"{var}.{f.name}", f"{var}_{f.name}"
+        if f.kind == "array":
+            names[f"dtype_{local}"], names[f"Array_{local}"] = np.dtype(f.array.dtype), _wire_array(f.array)
+            # the array's own buffer: msgspec copies it once into the payload, tobytes() would copy twice
+            lines.append(f"    {local} = ascontiguousarray({value}, dtype_{local})")
+            args.append(f"Array_{local}({f.array.dtype!r}, {local}.shape, {local}.data)")
+        elif f.kind == "struct":
+            names[f"Wire_{local}"] = _mirror(f.struct)
+            lines.append(f"    {local} = {value}")
+            args.append(f"Wire_{local}({_mirror_args(f.struct, local, lines, names)})")
+        elif f.kind in ("float", "int", "dict"):
+            args.append(f"{f.kind}({value})")
+        else:
+            args.append(value)
+    return ", ".join(args)
+
+
+@cache
+def _wire_builder(cls: type) -> Callable[[Any], Any]:
+    """The mirror of a message of this type, generated: _type, _version, its fields."""
     name, version = type_info(cls)
     lines: list[str] = []
-    names: dict[str, Any] = {"_array_wire": _array_wire}
-    items = _wire_items(cls, "m", lines, names)
-    source = "\n".join(["def to_wire(m):", *lines,
-                        f"    return {{{TYPE_FIELD!r}: {name!r}, {VERSION_FIELD!r}: {version!r}, {items}}}"])
-    exec(compile(source, f"<to_wire {name}>", "exec"), names)
-    return names["to_wire"]
-
-
-def to_wire(msg: Any) -> dict:
-    """The msgpack-ready map of a message, with its type name and version first."""
-    return _wire_builder(type(msg))(msg)
+    names: dict[str, Any] = {"ascontiguousarray": np.ascontiguousarray, "Wire": _envelope_mirror(cls)}
+    args = _mirror_args(cls, "m", lines, names)
+    source = "\n".join(["def to_mirror(m):", *lines, f"    return Wire({name!r}, {version!r}, {args})"])
+    exec(compile(source, f"<to_mirror {name}>", "exec"), names)
+    return names["to_mirror"]
 
 
 _encoder = msgspec.msgpack.Encoder()
@@ -117,6 +143,12 @@ _encoder = msgspec.msgpack.Encoder()
 
 def encode(msg: Any) -> bytes:
     return _encoder.encode(_wire_builder(type(msg))(msg))
+
+
+def to_wire(msg: Any) -> dict:
+    """The map a message's payload holds, in plain Python (maps, lists, bytes): for building
+    payloads by hand."""
+    return msgspec.msgpack.decode(encode(msg))
 
 
 # ---------------------------------------------------------------- decode
@@ -243,30 +275,6 @@ def _struct_decoder(cls: type, envelope: tuple[str, ...] = ()):
 # sizes, the type's `problem()`), giving up (None) at the first doubt; the checking decoder then
 # runs and names it. Whatever the fast path accepts, the checking one accepts as the same message.
 
-_SIZE = Annotated[int, msgspec.Meta(ge=0)]
-
-
-@cache
-def _wire_array(spec: ArraySpec) -> type:
-    """The mirror of an array map: dtype and the sizes of fixed axes as literals."""
-    shape = tuple[tuple(_SIZE if n is None else Literal[n] for n in spec.shape)] if spec.shape else tuple[()]
-    return msgspec.defstruct("WireArray", [("dtype", Literal[spec.dtype]), ("shape", shape), ("data", memoryview)],
-                             forbid_unknown_fields=True)
-
-
-_SCALARS = {"float": float, "int": int, "str": str, "bool": bool, "dict": dict[str, Union[int, float, str]]}
-
-
-@cache
-def _mirror(cls: type, envelope: tuple[tuple[str, Any], ...] = ()) -> type:
-    fields = [*((name, Literal[value]) for name, value in envelope)]
-    for f in _plan(cls):
-        kind = (_wire_array(f.array) if f.kind == "array" else _mirror(f.struct) if f.kind == "struct"
-                else _SCALARS[f.kind])
-        fields.append((f.name, kind))
-    return msgspec.defstruct("Wire" + cls.__name__, fields, forbid_unknown_fields=True)
-
-
 def _from_mirror(cls: type, var: str, lines: list[str], names: dict[str, Any]) -> str:
     """Statements turning the mirror in local `var` into a `cls`; returns the expression building it.
     Constants the code needs go into `names`."""
@@ -320,8 +328,8 @@ def _finite_sum(flat: np.ndarray) -> bool:
 def _fast_decoder(cls: type) -> Callable[[Any], Any]:
     """The happy-path decoder of a message type: payload → its message, or None at the first doubt
     (msgspec's own errors included)."""
-    name, version = type_info(cls)
-    parse = msgspec.msgpack.Decoder(_mirror(cls, ((TYPE_FIELD, name), (VERSION_FIELD, version)))).decode
+    name = type_info(cls)[0]
+    parse = msgspec.msgpack.Decoder(_envelope_mirror(cls)).decode
     lines: list[str] = []
     names: dict[str, Any] = {"isfinite": math.isfinite, "frombuffer": np.frombuffer, "parse": parse,
                              "Invalid": msgspec.MsgspecError, "finite_sum": _finite_sum}
