@@ -33,7 +33,7 @@ import sys
 
 CLI = "omninav.cli.main"     # what `up` starts: `python -m omninav.cli.main run …`
 # imported once in the server: what most services import and is slow to import
-PRELOAD = ("numpy", "numba", "scipy.optimize", "scipy.sparse.csgraph", "scipy.spatial", "zenoh", "msgpack", "yaml",
+PRELOAD = ("numpy", "numba", "scipy.optimize", "scipy.sparse.csgraph", "scipy.spatial", "zenoh", "msgspec", "yaml",
            CLI, "omninav.services.runtime.run", "omninav.services.runtime.live",
            "omninav.services.runtime.preloaded")
 
