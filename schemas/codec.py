@@ -1,4 +1,4 @@
-"""msgpack codec for wire messages.
+"""msgpack codec for wire messages, on msgspec.
 
 A payload is a msgpack map: {"_type": name, "_version": v, <field>: <value>, …} in field order, so
 the same message always encodes to the same bytes. ndarrays travel as {"dtype", "shape", "data"}
@@ -152,8 +152,9 @@ def to_wire(msg: Any) -> dict:
 
 
 # ---------------------------------------------------------------- decode
-# Each type gets a decoder built once from its plan: a closure per field, so the hot path is a
-# few type checks per field. Field paths are assembled only when something is wrong.
+# The checking decoder: built once per type from its plan, a closure per field, over the payload
+# unpacked into plain maps; it runs when the fast path below doubts a payload and names what is
+# wrong. Field paths are assembled only when something is.
 
 class _Bad(Exception):
     def __init__(self, reason: str):
