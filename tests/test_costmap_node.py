@@ -398,3 +398,15 @@ def test_a_live_run_replays_byte_for_byte_into_the_costmap_and_the_planner(proce
         proc = processes.omninav("replay", str(recording), "--into", service, "--compare", *extra)
         assert proc.wait(120) == 0, processes.log_of(proc)
         assert "replay reproduces the recorded outputs byte for byte" in processes.log_of(proc)
+
+
+def test_the_default_parameter_files_are_found_from_any_folder_and_a_missing_one_is_named(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)     # no compose/params here: the checkout's samples are read
+    node = build_node("costmap")
+    assert node.params.global_costmap_files[0] == "compose/params/costmap_common_params.yaml"   # recorded as given
+    assert (node.costmaps["global"].frame, node.costmaps["local"].frame) == ("map", "odom")
+    (tmp_path / "compose" / "params").mkdir(parents=True)
+    (tmp_path / "compose" / "params" / "costmap_common_params.yaml").write_text("robot_radius: 0.1\n")
+    with pytest.raises(ParamError, match="costmap_global_params.yaml: no such file"):
+        build_node("costmap", overrides={"global_costmap_files": ["compose/params/costmap_common_params.yaml",
+                                                                  "costmap_global_params.yaml"]})

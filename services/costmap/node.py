@@ -66,7 +66,8 @@ TIMES_KEPT = 10_000     # update times per layer kept for the diagnostic's media
 
 @dataclass(frozen=True)
 class CostmapNodeParams(FrameParams):
-    # ROS costmap parameter files, later ones overriding earlier ones (relative to the working directory)
+    # ROS costmap parameter files, later ones overriding earlier ones (relative: to the working
+    # directory, else to the checkout, where the samples are)
     global_costmap_files: tuple[str, ...] = (SAMPLES + "costmap_common_params.yaml",
                                              SAMPLES + "costmap_global_params.yaml")
     local_costmap_files: tuple[str, ...] = (SAMPLES + "costmap_common_params.yaml",

@@ -31,7 +31,7 @@ from typing import Any, Union
 
 import yaml
 
-from ..runtime.params import read_yaml
+from ..runtime.params import read_yaml, sample_or_given
 from ...parameters.declare import Parameters, ParamError, Rule, param
 from ...parameters.from_mapping import load_params, unknown_names
 
@@ -233,7 +233,7 @@ def load_costmap_params(paths, name: str = "global_costmap") -> CostmapParams:
     paths = [paths] if isinstance(paths, (str, Path)) else list(paths)
     merged: dict = {}
     for path in paths:
-        doc = read_yaml(path)
+        doc = read_yaml(sample_or_given(path))
         if not isinstance(doc, dict):
             raise ParamError(f"{path}: expected a mapping of parameter names to values")
         merged = _merge(merged, costmap_section(doc, name, str(path)))

@@ -18,6 +18,20 @@ from ...parameters.declare import ParamError
 from ...parameters.from_mapping import load_params
 
 
+# the checkout's own folder: the sample parameter files (compose/params) that services name by
+# default, relative, so that a recording's parameters read the same in any checkout
+CHECKOUT = Path(__file__).resolve().parents[2]
+
+
+def sample_or_given(path: str | Path) -> Path:
+    """A relative path not found from the working directory is looked up in the checkout too, as
+    ROS finds a package's own files: a service's default parameter files work from any folder."""
+    path = Path(path)
+    if path.is_absolute() or path.is_file() or not (CHECKOUT / path).is_file():
+        return path
+    return CHECKOUT / path
+
+
 def read_yaml(path: str | Path) -> Any:
     path = Path(path)
     if not path.is_file():
