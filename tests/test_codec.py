@@ -176,6 +176,14 @@ def test_threads_encoding_at_once_get_the_bytes_one_thread_gets():
             assert list(pool.map(encode, messages)) == expected
 
 
+def test_threads_decoding_at_once_get_the_messages_one_thread_gets():
+    scans = [encode(scan_of(np.full(n + 1, n, np.float32))) for n in range(200)]
+    with ThreadPoolExecutor(4) as pool:
+        for _ in range(5):
+            decoded = list(pool.map(lambda payload: decode(payload, LaserScan), scans))
+            assert [scan.ranges.tolist() for scan in decoded] == [[float(n)] * (n + 1) for n in range(200)]
+
+
 @pytest.mark.parametrize("name,cls", ALL_TYPES)
 def test_every_type_has_a_schema(name, cls):
     schema = describe(cls)
