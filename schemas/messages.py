@@ -15,7 +15,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .fields import array, real
+from .fields import array, real, sign_bytes
 from .registry import message
 
 Problem = tuple[str, str] | None        # (field, reason) of the first inconsistency, or None
@@ -164,8 +164,9 @@ class LaserScan:
         if abs(len(self.ranges) - beams) > SCAN_BEAM_SLACK:
             return "ranges", (f"{len(self.ranges)} ranges, but angle_min..angle_max in steps of angle_increment "
                               f"make {beams} beams")
-        # fmin skips NaN: below zero only with a negative number or -inf (one reduction per decode)
-        if len(self.ranges) and np.fmin.reduce(self.ranges) < 0:
+        # no sign bit set: nothing below zero; else fmin, which skips NaN, is below zero only with a
+        # negative number or -inf
+        if len(self.ranges) and not sign_bytes(self.ranges).isascii() and np.fmin.reduce(self.ranges) < 0:
             negative = self.ranges[(self.ranges < 0) & np.isfinite(self.ranges)]
             if negative.size:
                 return "ranges", f"{negative.size} negative range(s), e.g. {float(negative[0])}"

@@ -9,6 +9,7 @@ from hypothesis import strategies as st
 
 from omninav.schemas import MessageError, all_types, decode, encode, peek_type
 from omninav.schemas.codec import _checked_decode, _fast_decoder, describe, to_wire
+from omninav.schemas.fields import sign_bytes, surely_finite
 from omninav.experiments.fuzz import example, mutated_payloads
 from omninav.schemas.messages import (Chatter, Clock, Costmap, LaserScan, MapMetaData, Obstacles, OccupancyGrid,
                                       Odometry, ParticleCloud, Path, PoseWithCovariance, WheelCommand, WheelState)
@@ -230,3 +231,14 @@ def test_rep_117_ranges_and_a_last_beam_convention_are_accepted():
     assert decode(encode(scan)).ranges.size == 5
     clockwise = scan_of([1.0, 2.0, 3.0], angle_increment=-0.01)      # angle_max below angle_min
     assert decode(encode(clockwise)).angle_increment == -0.01
+
+
+@settings(max_examples=300)
+@given(dtype=st.sampled_from(["<f4", "<f8", ">f8"]), data=st.data())
+def test_sign_bytes_tell_signs_and_finiteness_as_numpy_does(dtype, data):
+    values = np.array(data.draw(st.lists(st.floats(width=32 if dtype == "<f4" else 64), max_size=40)), dtype)
+    assert sign_bytes(values).isascii() == (not np.signbit(values).any())
+    if surely_finite(values):
+        assert np.isfinite(values).all()
+    if len(values) and np.abs(values[np.isfinite(values)]).max(initial=0.0) < 1e38:
+        assert surely_finite(values) == np.isfinite(values).all()   # exact below the float32 exponent's top
