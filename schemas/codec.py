@@ -309,7 +309,7 @@ def _array_from_mirror(spec: ArraySpec, var: str, lines: list[str], names: dict[
     out(f"{indent}if len({var}.data) != {' * '.join([*sizes, str(dtype.itemsize)])}: return None")
     out(f"{indent}{var}_flat = frombuffer({var}.data, dtype_{var})")
     if not spec.allow_nonfinite and dtype.kind == "f":
-        out(f"{indent}if not finite_sum({var}_flat): return None")
+        out(f"{indent}if not all_finite({var}_flat): return None")
     # frombuffer already gives the one axis of a 1-D field
     out(f"{indent}{var} = {var}_flat" + (f".reshape({var}.shape)" if len(spec.shape) != 1 else ""))
 
@@ -317,7 +317,7 @@ def _array_from_mirror(spec: ArraySpec, var: str, lines: list[str], names: dict[
 _SHORT_ARRAY = 32
 
 
-def _finite_sum(flat: np.ndarray) -> bool:
+def _all_finite(flat: np.ndarray) -> bool:
     """Whether a float array holds only finite values: its sign bytes (fields.surely_finite), else
     one sum (NaN and infinities make it non-finite; a sum that overflows from finite values only
     sends the payload to the checking decoder). A short array is summed in Python: numpy's
@@ -336,7 +336,7 @@ def _fast_decoder(cls: type) -> Callable[[Any], Any]:
     parse = msgspec.msgpack.Decoder(_envelope_mirror(cls)).decode
     lines: list[str] = []
     names: dict[str, Any] = {"isfinite": math.isfinite, "frombuffer": np.frombuffer, "parse": parse,
-                             "Invalid": msgspec.MsgspecError, "finite_sum": _finite_sum}
+                             "Invalid": msgspec.MsgspecError, "all_finite": _all_finite}
     built = _from_mirror(cls, "w", lines, names)
     source = "\n".join(["def decode_fast(data):", "    try:", "        w = parse(data)",
                         "    except Invalid:", "        return None", *lines, f"    return {built}"])
