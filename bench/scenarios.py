@@ -22,7 +22,7 @@ from ..services.runtime.errors import exits_2_on_user_error
 from ..sim.world import load_world
 from ..experiments.lockstep_mission import run_mission
 from ..experiments.workers import run_in_workers
-from ..experiments.scenarios import ScenarioError, check_kind, generate_world, world_text
+from ..experiments.scenarios import EXPLORE_KINDS, ScenarioError, check_kind, generate_world, world_text
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -101,6 +101,9 @@ def overall(rows: list[dict]) -> dict:
 @exits_2_on_user_error("bench scenarios")
 def main(args: argparse.Namespace) -> int:
     check_kind(args.kind)
+    if args.kind in EXPLORE_KINDS:   # with no goal every mission would count as a success
+        raise ScenarioError(f"{args.kind} worlds have no goal to drive to; they are for exploring: "
+                            f"omninav bench explore --kind {args.kind}")
     if args.count < 1 or args.workers < 1 or args.seed < 0:
         raise ScenarioError(f"--count and --workers must be >= 1 and --seed >= 0, got {args.count}, "
                             f"{args.workers} and {args.seed}")

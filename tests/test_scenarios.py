@@ -9,13 +9,13 @@ import pytest
 from scipy import ndimage
 
 from omninav.cli.main import main as cli_main
-from omninav.experiments.scenarios import DYNAMIC_KINDS, KINDS, ScenarioError, generate_world, world_text
+from omninav.experiments.scenarios import DYNAMIC_KINDS, EXPLORE_KINDS, KINDS, ScenarioError, generate_world, world_text
 from omninav.bench.scenarios import overall
 from omninav.experiments.scenarios.route import TIMING
 from omninav.services.global_planner.astar import GlobalPlanner
 from omninav.services.global_planner.params import GlobalPlannerParams
 from omninav.geometry.grid import world_to_cell
-from omninav.sim.world import load_world
+from omninav.sim.world import load_world, world_from_mapping
 from omninav.geometry.polygons import point_segment_distance
 
 SEEDS = range(10)
@@ -53,7 +53,7 @@ def _drivable(world):
     return grid, (grid.data == 0) & (clear > inscribed)
 
 
-@pytest.mark.parametrize("kind", sorted(set(KINDS) - {"maze"}))     # a maze has no goal: tests/test_maze.py
+@pytest.mark.parametrize("kind", sorted(set(KINDS) - set(EXPLORE_KINDS)))     # a maze has no goal: tests/test_maze.py
 def test_every_world_is_solvable(worlds, kind):
     for seed in SEEDS:
         world = worlds[kind, seed]
@@ -69,7 +69,7 @@ def test_every_world_is_solvable(worlds, kind):
             assert world.distance(loop).min() > radius, (kind, seed)
 
 
-@pytest.mark.parametrize("kind", sorted(set(KINDS) - {"maze"}))
+@pytest.mark.parametrize("kind", sorted(set(KINDS) - set(EXPLORE_KINDS)))
 def test_movers_never_give_way_and_their_numbers_fit_the_kind(worlds, kind):
     low, high = MOVERS[kind]
     for seed in SEEDS:
@@ -139,3 +139,17 @@ def test_bench_scenarios_refuses_an_unknown_kind_or_no_worlds(capsys):
     assert "unknown scenario kind 'maize'" in capsys.readouterr().err
     assert cli_main(["bench", "scenarios", "--kind", "crowd", "--count", "0"]) == 2
     assert "--count and --workers must be >= 1" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("kind", EXPLORE_KINDS)
+def test_bench_scenarios_refuses_worlds_without_a_goal(kind, tmp_path, capsys):
+    # driven, each would end at once and count as a success: every requested goal (none) reached
+    assert cli_main(["bench", "scenarios", "--kind", kind, "--count", "1", "-o", str(tmp_path)]) == 2
+    assert f"{kind} worlds have no goal to drive to" in capsys.readouterr().err
+    assert not any(tmp_path.iterdir())
+
+
+def test_every_kind_to_drive_has_a_goal_and_those_to_explore_none():
+    for kind in KINDS:
+        goals = world_from_mapping(generate_world(kind, 3), f"<{kind}>").goals
+        assert (len(goals) == 0) == (kind in EXPLORE_KINDS), kind

@@ -1,8 +1,8 @@
 """Worlds nobody wrote by hand: `omninav scenario generate --kind K --seed N -o W.yaml`.
 
 Each kind is a module with `generate(rng: numpy.random.Generator) -> dict` returning a world
-file's mapping (docs/worlds.md) with the robot's start and one goal; KINDS maps the kind's name to
-it. `generate_world` draws from the seed, checks the world is fair (check.py) and otherwise draws
+file's mapping (docs/worlds.md) with the robot's start and one goal, but for the kinds to explore
+(EXPLORE_KINDS), which have no goal; KINDS maps the kind's name to it. `generate_world` draws from the seed, checks the world is fair (check.py) and otherwise draws
 again from the next sub-seed, so one seed always gives the same world, byte for byte.
 """
 from __future__ import annotations
@@ -27,6 +27,7 @@ KINDS: dict[str, Callable[[np.random.Generator], dict]] = {
     "maze": maze.generate,
 }
 DYNAMIC_KINDS = ("crossing", "headon", "overtake", "crowd", "doorway")
+EXPLORE_KINDS = ("maze",)      # worlds without a goal: `omninav bench explore` maps them
 ATTEMPTS = 100          # sub-seeds tried before a seed is given up
 
 
