@@ -423,3 +423,17 @@ def test_a_wedged_robot_is_forgiven_the_cells_where_it_became_wedged_not_new_one
     assert planner.compute(start, (0.0, 0.0, 0.0), costs, info, path).status != "no_valid_trajectory"
     assert planner.compute(slid, (0.0, 0.0, 0.0), costs, info, path).status == "no_valid_trajectory"
     assert DwaPlanner(DIFF, footprint_check).compute(slid, (0.0, 0.0, 0.0), costs, info, path).status != "no_valid_trajectory"
+
+
+def test_a_wedged_robot_drives_off_clear_of_the_wall_not_along_it():
+    # the escape forgives the cells the robot is wedged on; a holonomic robot whose path runs along
+    # the wall would strafe along it, touching it all the way (generated doorway-7048, -7068: the
+    # simulator counts each renewed touch to the robot); a way off must end clear of the wall
+    costs, info, footprint_check, start = _wedged_against_a_wall(0.1)
+    along = straight(0.03, 0.0, 0.03, 2.5)
+    along[:, 2] = 0.0          # the robot keeps facing the wall
+    planner = DwaPlanner(DwaParams(max_vel_y=0.5, min_vel_y=-0.5), footprint_check)
+    result = planner.compute(start, (0.0, 0.0, 0.0), costs, info, along)
+    assert result.status != "no_valid_trajectory" and result.cmd.any()
+    held = np.array(start) + result.cmd * planner.params.sim_time    # the command held for a rollout (facing +x)
+    assert not footprint_hits_lethal(costs, info, held), f"{result.cmd} does not end clear of the wall"

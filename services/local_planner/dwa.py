@@ -451,7 +451,8 @@ class DwaPlanner:
             return DwaResult("no_path", brake, samples, np.zeros((0, 1, 3)), np.zeros(0), -1,
                              "no point of the path lies on the local costmap")
         check = self.footprint_check.setup(pose, costs, info)
-        if not check.wedged:
+        wedged = check if check.wedged else None   # the robot's own outline against every lethal cell
+        if wedged is None:
             self._wedged_at = None
         else:
             check = self._escape(check, pose, costs, info, movers)
@@ -459,6 +460,8 @@ class DwaPlanner:
         def evaluate(samples, check=check):
             """(poses, legal, legal against the costmap alone, scores)"""
             poses, max_cost, static = self.rollout(samples, pose, velocity, costs, info, check)
+            if wedged is not None:   # a way off the cells the robot is wedged on must end clear of them
+                static = static & self.footprint_check.check_poses(wedged, poses[:, -1], costs, info)
             legal, cost = static, 0.0
             if movers is not None and len(movers):
                 clear, cost = self._clear_of(poses, movers)
@@ -500,7 +503,10 @@ class DwaPlanner:
         free, it keeps that anchor and brakes), while no tracked person's edge is within
         wedged_mover_distance; people shove a robot against a wall (driving off along a door's jamb
         while a person pushed it met the jamb: generated doorway-1), but once they have walked on it
-        may drive off (generated crossing-79 braked on a wall for 100 s while a person patrolled past)."""
+        may drive off (generated crossing-79 braked on a wall for 100 s while a person patrolled past).
+        A way off must end clear (compute: its last pose legal by the robot's own outline against every
+        lethal cell): forgiven all the way, the robot strafed along the jamb it was shoved onto, touching
+        it (generated doorway-7048, -7068)."""
         if self._wedged_at is None:
             self._wedged_at = np.array(pose[:3], np.float64)
         if movers is not None and movers.nearest_edge(pose) < self.params.wedged_mover_distance:
