@@ -2,8 +2,9 @@
 
 Each kind is a module with `generate(rng: numpy.random.Generator) -> dict` returning a world
 file's mapping (docs/worlds.md) with the robot's start and one goal, but for the kinds to explore
-(EXPLORE_KINDS), which have no goal; KINDS maps the kind's name to it. `generate_world` draws from the seed, checks the world is fair (check.py) and otherwise draws
-again from the next sub-seed, so one seed always gives the same world, byte for byte.
+(EXPLORE_KINDS), which have no goal; KINDS maps the kind's name to it. `generate_world` draws from
+the seed, checks the world is fair (check.py) and otherwise draws again from the next sub-seed, so
+one seed always gives the same world, byte for byte.
 """
 from __future__ import annotations
 
