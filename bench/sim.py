@@ -20,6 +20,7 @@ over seeds; the follower-wheel odometry (followers + gyro) likewise.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import statistics
@@ -30,12 +31,16 @@ from pathlib import Path
 
 import numpy as np
 
+from ..cli.profile import load_profile
+from ..experiments.barn import PROFILE as BARN_PROFILE, SIM_DT as BARN_SIM_DT
+from ..geometry.se2 import wrap_angle
+from ..parameters.from_mapping import load_params
 from ..services.chassis.follower_wheels import follower_odometry
 from ..services.chassis.kinematics import ChassisParams, Kinematics
 from ..services.chassis.odometry import wheel_odometry
-from ..geometry.se2 import wrap_angle
+from ..sim.body import BodyParams
 from ..sim.physics import SimParams, Simulation
-from ..sim.world import World, WorldError, load_world, world_path
+from ..sim.world import World, WorldError, load_world, shared_data_dir, world_path
 
 WORLDS = ("room", "warehouse", "willow")
 SPIN = (0.0, 0.0, 0.5)                          # m/s, m/s, rad/s while measuring speed
@@ -55,28 +60,35 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--seeds", type=int, default=3, help="60 s drift runs, seeds 0..N-1 (default 3)")
 
 
-def step_rates(world: World, steps: int, repeats: int) -> tuple[float, float, float]:
-    """Median steps/s of Simulation.step() and of the bare pymunk Space of an identical simulation,
-    and the exact clearance queries per 1000 timed steps."""
-    sim, bare = Simulation(world), Simulation(world)
-    sim.set_wheel_command(sim.kinematics.ik(SPIN))
+def step_rates(world: World, steps: int, repeats: int, params: SimParams = SimParams(),
+               body: BodyParams = BodyParams()) -> tuple[float, float, float, float]:
+    """Median steps/s of Simulation.step(), of the same simulation looking for contacts once a
+    step (max_substep = dt: the physics before substeps) and of the bare pymunk Space of an
+    identical simulation, and the exact clearance queries per 1000 timed steps."""
+    sim = Simulation(world, params, body=body)
+    once = Simulation(world, dataclasses.replace(params, max_substep=params.dt), body=body)
+    bare = Simulation(world, params, body=body)
+    for s in (sim, once):
+        s.set_wheel_command(s.kinematics.ik(SPIN))
     dt = sim.params.dt
     for _ in range(round(2 * math.pi / SPIN[2] / dt) + 1):   # one full turn: the clearance minimum is set
         sim.step()
+        once.step()
         bare.space.step(dt)
     queries_before = sim.clearance_queries
-    ours, reference = [], []
-    for _ in range(repeats):                    # interleaved, so load changes hit both alike
-        start = time.process_time()
-        for _ in range(steps):
-            sim.step()
-        ours.append(steps / (time.process_time() - start))
+    ours, single, reference = [], [], []
+    for _ in range(repeats):                    # interleaved, so load changes hit all alike
+        for simulation, rates in ((sim, ours), (once, single)):
+            start = time.process_time()
+            for _ in range(steps):
+                simulation.step()
+            rates.append(steps / (time.process_time() - start))
         start = time.process_time()
         for _ in range(steps):
             bare.space.step(dt)
         reference.append(steps / (time.process_time() - start))
     queries = (sim.clearance_queries - queries_before) * 1000 / (steps * repeats)
-    return statistics.median(ours), statistics.median(reference), queries
+    return statistics.median(ours), statistics.median(single), statistics.median(reference), queries
 
 
 def clearance_query_ms(world: World, calls: int = 50) -> float:
@@ -121,16 +133,32 @@ def _errors(estimate: np.ndarray, truth: np.ndarray) -> tuple[float, float]:
             float(np.degrees(abs(wrap_angle(estimate[2] - truth[2])))))
 
 
+def barn_case() -> tuple[World, SimParams, BodyParams] | None:
+    """BARN world 0 with the Jackal's body at BARN's step, as `bench barn` simulates it; None
+    without the shared data."""
+    data = shared_data_dir(Path(__file__))
+    path = data / "barn" / "worlds" / "world_0.world" if data is not None else None
+    if path is None or not path.is_file():
+        return None
+    body = load_params(BodyParams, load_profile(BARN_PROFILE).body, "jackal body")
+    return load_world(path), SimParams(dt=BARN_SIM_DT, drive="diff"), body
+
+
 def measure(steps: int, repeats: int, seeds: int) -> dict:
-    figures: dict = {"steps_per_s": {}, "reference_steps_per_s": {}, "clearance_query_ms": {},
-                     "clearance_queries_per_1000_steps": {}}
-    for name in WORLDS:
-        world = load_world(world_path(name))
-        ours, reference, queries = step_rates(world, steps, repeats)
+    figures: dict = {"steps_per_s": {}, "one_check_steps_per_s": {}, "reference_steps_per_s": {},
+                     "substeps": {}, "clearance_query_ms": {}, "clearance_queries_per_1000_steps": {}}
+    cases = [(name, load_world(world_path(name)), SimParams(), BodyParams()) for name in WORLDS]
+    barn = barn_case()
+    if barn is not None:
+        cases.append(("barn-0 jackal", *barn))
+    for name, world, params, body in cases:
+        ours, single, reference, queries = step_rates(world, steps, repeats, params, body)
         figures["steps_per_s"][name] = round(ours)
+        figures["one_check_steps_per_s"][name] = round(single)
         figures["reference_steps_per_s"][name] = round(reference)
+        figures["substeps"][name] = params.substeps
         figures["clearance_queries_per_1000_steps"][name] = round(queries, 1)
-        figures["clearance_query_ms"][name] = round(clearance_query_ms(world), 3)
+        figures["clearance_query_ms"][name] = round(clearance_query_ms(Simulation(world, params, body=body).world), 3)
     with tempfile.TemporaryDirectory() as folder:
         arena = Path(folder) / "arena.yaml"
         arena.write_text(ARENA)
@@ -142,19 +170,21 @@ def measure(steps: int, repeats: int, seeds: int) -> dict:
     figures["drift_seeds"] = seeds
     figures["sim_params"] = {k: getattr(SimParams(), k) for k in
                              ("dt", "wheel_slip_std", "encoder_noise_std", "encoder_ticks_per_rev",
-                              "gyro_noise_std", "gyro_bias", "wheel_acc_limit")}
+                              "gyro_noise_std", "gyro_bias", "max_substep")}
     return figures
 
 
 def report(fig: dict) -> str:
-    lines = [f"{'world':12s}{'sim steps/s':>14s}{'bare pymunk steps/s':>22s}{'clearance query':>18s}"
-             f"{'queries/1000 steps':>21s}"]
-    for name in WORLDS:
-        lines.append(f"{name:12s}{fig['steps_per_s'][name]:14d}{fig['reference_steps_per_s'][name]:22d}"
-                     f"{fig['clearance_query_ms'][name]:15.3f} ms{fig['clearance_queries_per_1000_steps'][name]:21.1f}")
+    lines = [f"{'world':15s}{'substeps':>9s}{'sim steps/s':>13s}{'one check/step':>16s}{'bare pymunk':>13s}"
+             f"{'clearance query':>17s}{'queries/1000 steps':>20s}"]
+    for name in fig["steps_per_s"]:
+        lines.append(f"{name:15s}{fig['substeps'][name]:9d}{fig['steps_per_s'][name]:13d}"
+                     f"{fig['one_check_steps_per_s'][name]:16d}{fig['reference_steps_per_s'][name]:13d}"
+                     f"{fig['clearance_query_ms'][name]:14.3f} ms{fig['clearance_queries_per_1000_steps'][name]:20.1f}")
     lines += [
-        "(robot turning on the spot at its start, after one full turn; medians; the bare reference has",
-        " no motors, noise, sensors or clearance tracking)",
+        "(robot turning on the spot at its start, after one full turn; medians; 'one check/step' is the",
+        " same simulation looking for contacts once a step, as before substeps; the bare reference is",
+        " one pymunk step of an identical space: no substeps, motors, noise, sensors or clearance tracking)",
         f"odometry drift after 60 s (figure-eights and a strafe, default noise, median of "
         f"{fig['drift_seeds']} seeds):",
         f"  wheel odometry:    final {fig['drift_60s_m']:.4f} m, {fig['drift_60s_deg']:.3f} deg; "

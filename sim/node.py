@@ -18,6 +18,7 @@ from ..schemas.messages import Clock, Diagnostic, Obstacles, Odometry, Pose2D, T
 from ..services.chassis.kinematics import ChassisParams
 from ..services.runtime.node import NS_PER_S, Node
 from ..parameters.from_mapping import load_params
+from .body import BodyParams
 from .physics import Readings, SimParams, Simulation
 from .world import World, WorldError, load_world, shipped_worlds, world_path
 from ..geometry.polygons import polygon_area
@@ -30,15 +31,20 @@ class SimNodeParams(SimParams):
     rate: float = param(1.0, ge=0)                              # sim seconds per wall second; 0: as fast as it may (in lockstep: as the services compute)
     footprint: tuple[tuple[float, float], ...] = param((), min_items=3, or_empty=True)  # m, robot frame (a robot profile's); () = the world's
     chassis: dict = field(default_factory=dict)                 # ChassisParams by name: the wheels the chassis drives
+    body: dict = field(default_factory=dict)                    # BodyParams by name (sim/body.py): the robot as it is; {} = ideal
     wheel_cmd_timeout_s: float = param(0.5, ge=0)               # sim s of steps without a wheel command that stop the wheels; 0: never
 
     def chassis_params(self) -> ChassisParams:
-        """The simulated wheels (geometry, speed limit): the chassis service's parameters."""
+        """The wheels the chassis service drives (the body's own `wheels` override them)."""
         return load_params(ChassisParams, self.chassis, "sim.chassis")
+
+    def body_params(self) -> BodyParams:
+        return load_params(BodyParams, self.body, "sim.body")
 
     rules = (Rule("footprint", lambda p: not p.footprint or abs(polygon_area(np.array(p.footprint))) >= 1e-6,
                   "a polygon enclosing an area"),
-             Rule("chassis", lambda p: bool(p.chassis_params()), "ChassisParams by name"))
+             Rule("chassis", lambda p: bool(p.chassis_params()), "ChassisParams by name"),
+             Rule("body", lambda p: bool(p.body_params()), "BodyParams by name"))
 
     def robot_world(self, world: World) -> World:
         """The world with this robot's footprint (counter-clockwise) in place of the world file's."""
@@ -66,7 +72,7 @@ class SimNode(Node):
     def setup(self) -> None:
         p = self.params
         self.world = p.robot_world(open_world(p.world))
-        self.sim = Simulation(self.world, p, p.chassis_params())
+        self.sim = Simulation(self.world, p, p.chassis_params(), body=p.body_params())
         self.step_ns = round(p.dt * NS_PER_S)
         self.wheel_state = self.publisher("wheel_state")
         self.truth = self.publisher("sim/truth")
@@ -131,9 +137,11 @@ class SimNode(Node):
 
     def diagnostic(self) -> Diagnostic:
         diag = super().diagnostic()
+        contacts = self.sim.contacts
         diag.values.update(collisions=self.sim.collisions, robot_fault_collisions=self.sim.robot_fault_collisions,
                            mover_fault_collisions=self.sim.mover_fault_collisions,
                            shoved_collisions=self.sim.shoved_collisions, contact_steps=self.sim.contact_steps,
+                           contact_s=contacts.contact_s, robot_contact_s=contacts.robot_contact_s,
                            min_clearance_m=self.sim.min_clearance, world=str(self.world.source),
                            drive=self.sim.drive)
         rejected = sorted(k for k in self.counters if k.startswith("rejected/"))

@@ -11,6 +11,7 @@ from omninav.services.chassis.follower_wheels import follower_odometry
 from omninav.services.chassis.kinematics import ChassisParams
 from omninav.services.chassis.odometry import wheel_odometry
 from omninav.geometry.se2 import relative
+from omninav.sim.body import BodyParams
 from omninav.sim.physics import CONTACT_SLOP, SimParams, Simulation, occupied_rectangles, se2_log
 from omninav.sim.world import YIELD_MARGIN, load_world, world_path
 from omninav.geometry.polygons import point_segment_distance, points_in_polygons, transform_points
@@ -103,7 +104,7 @@ def test_motors_approach_the_command_at_their_acceleration_limit(open_world):
     target = sim.kinematics.ik((0.5, 0.0, 0.0))
     sim.set_wheel_command(target)
     first = sim.step().wheel_speeds
-    assert first == pytest.approx(np.full(4, NO_NOISE.wheel_acc_limit * NO_NOISE.dt))
+    assert first == pytest.approx(np.full(4, BodyParams().wheel_acc_limit * NO_NOISE.dt))
     for _ in range(200):
         r = sim.step()
     assert r.wheel_speeds == pytest.approx(target)
@@ -326,12 +327,16 @@ def test_a_mover_without_yield_distance_drives_into_the_robot(tmp_path):
     assert sim.collisions >= 1 and min(gap_to_mover(world, r) for r in readings) < 0.01
 
 
-def test_a_mover_driving_into_a_parked_robot_is_the_movers_fault(tmp_path):
+def test_a_parked_robot_in_the_lane_of_a_mover_it_saw_coming_shares_the_contact(tmp_path):
+    # the mover walks straight at the robot for seconds: the robot could have moved clear
     world = make_world(tmp_path, LANE_WORLD % "")
     sim = Simulation(world, NO_NOISE)
     drive(sim, [(900, (0.0, 0.0, 0.0))])
-    assert sim.mover_fault_collisions >= 1 and sim.robot_fault_collisions == 0
-    assert sim.collisions == sim.mover_fault_collisions
+    assert sim.collisions >= 1 and sim.robot_fault_collisions == sim.collisions
+    # without foresight the same contacts are the mover's alone
+    blind = Simulation(world, dataclasses.replace(NO_NOISE, foresight_s=0.0))
+    drive(blind, [(900, (0.0, 0.0, 0.0))])
+    assert blind.collisions >= 1 and blind.mover_fault_collisions == blind.collisions
 
 
 @pytest.mark.parametrize("robot_x, mover_from, mover_speed, robot_speed, robots_fault", [
@@ -354,15 +359,15 @@ def test_every_wall_contact_the_robot_drives_into_is_its_fault(wall_world):
     assert sim.robot_fault_collisions == sim.collisions == 2 and sim.mover_fault_collisions == 0
 
 
-def test_a_parked_robot_shoved_into_a_wall_by_a_mover_is_the_movers_fault(tmp_path):
-    # the robot parked 0.13 m before a wall (face at x = 4.95), a mover walking into its back
+def test_a_parked_robot_shoved_into_a_wall_by_a_mover_is_not_the_robots_wall_contact(tmp_path):
+    # the robot parked 0.13 m before a wall (face at x = 4.95), a mover walking into its back: the
+    # mover's contact the robot saw coming (its share), the wall's not (its wheels stood still)
     world = make_world(tmp_path, "bounds: [8.0, 6.0]\nwalls: [[5.0, 0.5, 5.0, 5.5]]\nrobot: {start: [4.4, 3.0, 0.0]}\n"
                                  "movers: [{radius: 0.3, speed: 0.8, path: [[1.0, 3.0], [7.0, 3.0]], loop: false}]\n")
     sim = Simulation(world, NO_NOISE)
     readings = drive(sim, [(700, (0.0, 0.0, 0.0))])
     assert readings[-1].pose[0] > 4.4 + 0.05                    # shoved towards the wall
-    assert sim.mover_fault_collisions == sim.collisions == 2 and sim.robot_fault_collisions == 0
-    assert sim.shoved_collisions == 1
+    assert (sim.collisions, sim.robot_fault_collisions, sim.mover_fault_collisions, sim.shoved_collisions) == (2, 1, 1, 1)
 
 
 def test_a_robot_behind_or_beside_a_yielding_mover_does_not_stop_it(tmp_path):
@@ -418,7 +423,7 @@ def test_drive_override_and_parameter_checks(open_world):
     assert sim.drive == "diff" and sim.kinematics.n_wheels == 2 and sim.chassis.drive == "diff"
     assert Simulation(open_world).drive == open_world.robot.drive
     for bad in [dict(dt=0), dict(dt=0.0100000001), dict(drive="tank"), dict(wheel_slip_std=-1.0),
-                dict(encoder_ticks_per_rev=-1), dict(wheel_acc_limit=0.0), dict(seed=-1)]:
+                dict(encoder_ticks_per_rev=-1), dict(max_substep=0.0), dict(seed=-1)]:
         with pytest.raises(ValueError):
             SimParams(**bad)
 
