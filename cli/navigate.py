@@ -225,8 +225,9 @@ def drive_params(drive: str) -> dict:
 
 def robot_params(profile: Profile | None) -> dict[str, dict]:
     """Per service, the parameters a robot profile sets: its footprint where a service takes one,
-    then the profile's own `params`; the simulator's wheels are the chassis's, and the collision
-    monitor's model of how the robot follows its commands is the chassis's too (unless set)."""
+    then the profile's own `params`; the simulator drives the wheels the chassis drives and moves
+    the profile's `body` (its real outline, mass and ground: no other service sees it), and the
+    collision monitor's model of how the robot follows its commands is the chassis's (unless set)."""
     if profile is None:
         return {}
     footprint = [list(p) for p in profile.footprint]
@@ -235,6 +236,8 @@ def robot_params(profile: Profile | None) -> dict[str, dict]:
     for service, values in profile.params.items():
         out[service] = {**out.get(service, {}), **values}
     out["sim"]["chassis"] = out.get("chassis", {})      # the simulated wheels are the chassis's
+    if profile.body:
+        out["sim"]["body"] = profile.body
     response = {k: v for k, v in out["sim"]["chassis"].items() if k in CHASSIS_RESPONSE}
     out["collision_monitor"] = {**response, **out["collision_monitor"]}
     return out

@@ -4,7 +4,9 @@ A profile names the robot's drive, its footprint and costmap footprint_padding, 
 common parameter file and optionally the local costmap's (in compose/params), and parameters merged over the services' compose
 parameters (`params: {service: {name: value}}`). `compose_for` (cli/navigate.py) applies it: the
 footprint goes to the simulator, the local planner and the collision monitor, the padding to the
-local planner; the costmaps read theirs from the common file.
+local planner; the costmaps read theirs from the common file. `body` (sim/body.py's BodyParams)
+is the robot as it is — its real outline, mass, wheels and how the floor carries it — and goes
+to the simulator alone: the navigation stack works with the footprint and parameters it is given.
 """
 from __future__ import annotations
 
@@ -14,8 +16,11 @@ from pathlib import Path
 
 import yaml
 
+from ..parameters.declare import ParamError
+from ..parameters.from_mapping import load_params
 from ..services.chassis.kinematics import DRIVES
 from ..services.runtime.errors import UserError
+from ..sim.body import BodyParams
 
 REPO = Path(__file__).resolve().parents[1]
 PROFILES_DIR = REPO / "compose" / "profiles"
@@ -35,6 +40,7 @@ class Profile:
     costmap_common_params: Path
     costmap_local_params: Path | None = None       # None: the sample local costmap (compose/params)
     params: dict = field(default_factory=dict)     # service name -> parameters
+    body: dict = field(default_factory=dict)       # BodyParams by name: the simulator's robot
 
 
 def profile_path(name_or_path: str) -> Path:
@@ -83,8 +89,15 @@ def load_profile(name_or_path: str) -> Profile:
     params = doc.get("params") or {}
     if not isinstance(params, dict) or not all(isinstance(v, dict) for v in params.values()):
         fail("params", f"expected a mapping of service names to parameter mappings, got {params!r}")
+    body = doc.get("body") or {}
+    if not isinstance(body, dict):
+        fail("body", f"expected a mapping of BodyParams names to values (sim/body.py), got {body!r}")
+    try:
+        load_params(BodyParams, body, "BodyParams")
+    except ParamError as exc:
+        fail("body", str(exc))
     return Profile(name=path.stem, drive=drive, footprint=tuple((float(x), float(y)) for x, y in footprint),
-                   footprint_padding=float(padding), params=params, **files)
+                   footprint_padding=float(padding), params=params, body=body, **files)
 
 
 def _finite(value) -> bool:
