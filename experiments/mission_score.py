@@ -21,8 +21,9 @@ A goal is reached when the navigator said succeeded and the truth agrees: the ro
 ARRIVED_M of it. A navigator misled by its pose (a shove, a localizer settled on a wrong pose) can
 declare a goal reached metres away from it; that is a false arrival, not a reached goal.
 
-success: every requested goal reached and no collision that was the robot's fault; a recording
-whose sim does not split its collisions counts every one as the robot's.
+success: every requested goal reached and no contact of any kind (BARN's rule): the robot's and
+the movers' shares (sim/contacts.py) and the seconds in contact are reported beside it; a
+recording without the sim's counts is no success.
 
 restarts: per service named to load_mission, how many times it was restarted during the mission:
 the distinct runs (run_started_ns) its Diagnostics came from, minus one. A run that died before
@@ -101,15 +102,17 @@ class MissionSummary:
     plan_length_m: float | None     # the first global plans of the goals sent, summed
     final_xy_error_m: float | None
     final_yaw_error_deg: float | None
-    collisions: int | None          # None: the recording holds no sim Diagnostic
-    robot_fault_collisions: int | None   # the robot moved towards what it touched (a static contact unless shoved)
-    mover_fault_collisions: int | None   # a mover drove into the robot standing still or moving away
-    shoved_collisions: int | None        # of those, static contacts while a mover shoved the robot
+    collisions: int | None          # contacts begun; None: the recording holds no sim Diagnostic
+    robot_fault_collisions: int | None   # contacts with a substep of the robot's (it moved towards it, or stayed in a way it saw coming)
+    mover_fault_collisions: int | None   # contacts all the movers' (one walked into a robot standing or leaving)
+    shoved_collisions: int | None        # static contacts begun while a mover touched the robot
     min_clearance_m: float
     min_mover_clearance_m: float | None     # the closest the footprint came to a mover; None: no movers
     recording: str
     goals: list[GoalOutcome]
     restarts: dict[str, int] = field(default_factory=dict)   # service -> times restarted (only those that were)
+    contact_s: float | None = None          # s in contact with anything (None: a sim from before it was counted)
+    robot_contact_s: float | None = None    # s of that the robot's
 
     def to_json(self) -> dict:
         mapping = asdict(self)
@@ -259,6 +262,11 @@ def _sim_count(record: MissionRecord, name: str) -> int | None:
     return int(value) if isinstance(value, (int, float)) else None
 
 
+def _sim_seconds(record: MissionRecord, name: str) -> float | None:
+    value = record.sim_values.get(name)
+    return float(value) if isinstance(value, (int, float)) else None
+
+
 def _first_within(record: MissionRecord, goal: np.ndarray, sent_ns: int, ended_ns: int) -> float | None:
     """Sim s from sent_ns until the first true pose (up to ended_ns) within WITHIN_M of the goal."""
     span = (record.truth_stamps >= sent_ns) & (record.truth_stamps <= ended_ns)
@@ -295,10 +303,11 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
         "collisions", "robot_fault_collisions", "mover_fault_collisions", "shoved_collisions"))
     if robot_fault is None:
         robot_fault = collisions
+    contact_s, robot_contact_s = (_sim_seconds(record, name) for name in ("contact_s", "robot_contact_s"))
     plan_lengths = [o.plan_length_m for o in outcomes if o.plan_length_m is not None]
     clearance, mover_clearance = clearance_along(world, poses, _movers_at(record, stamps))
     return MissionSummary(
-        success=reached == goals_total and robot_fault == 0,
+        success=reached == goals_total and collisions == 0,
         goals_reached=reached, goals_total=goals_total,
         time_s=((last_end_ns if last_end_ns is not None else end_ns) - start_ns) / NS_PER_S,
         path_length_m=path_length(poses),
@@ -307,7 +316,8 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
         final_yaw_error_deg=outcomes[-1].yaw_error_deg if outcomes else None,
         collisions=collisions, robot_fault_collisions=robot_fault, mover_fault_collisions=mover_fault,
         shoved_collisions=shoved, min_clearance_m=clearance, min_mover_clearance_m=mover_clearance if math.isfinite(mover_clearance) else None,
-        recording=recording, goals=outcomes, restarts=dict(record.restarts))
+        recording=recording, goals=outcomes, restarts=dict(record.restarts), contact_s=contact_s,
+        robot_contact_s=robot_contact_s)
 
 
 def summary_lines(summary: MissionSummary) -> list[str]:
@@ -317,8 +327,9 @@ def summary_lines(summary: MissionSummary) -> list[str]:
 
     lines = [f"{'SUCCESS' if summary.success else 'FAILED'}: {summary.goals_reached}/{summary.goals_total} goals "
              f"reached, {num(summary.collisions, 'd')} collisions ({num(summary.robot_fault_collisions, 'd')} "
-             f"the robot's fault, {num(summary.mover_fault_collisions, 'd')} a mover's, of which "
-             f"{num(summary.shoved_collisions, 'd')} shoved into a wall)",
+             f"the robot's fault, {num(summary.mover_fault_collisions, 'd')} a mover's, "
+             f"{num(summary.shoved_collisions, 'd')} shoved into a wall; in contact "
+             f"{num(summary.contact_s, '.2f')} s, the robot's {num(summary.robot_contact_s, '.2f')} s)",
              f"time {summary.time_s:.1f} sim s, driven {summary.path_length_m:.2f} m "
              f"(first global plans {num(summary.plan_length_m, '.2f')} m), min clearance {summary.min_clearance_m:.3f} m"
              + (f" ({summary.min_mover_clearance_m:.3f} m to a mover)" if summary.min_mover_clearance_m is not None else ""),

@@ -185,11 +185,13 @@ def test_a_goal_declared_reached_far_from_the_truth_is_a_false_arrival(box_world
 
 
 @pytest.mark.parametrize("values, success", [
-    ({"collisions": 2, "robot_fault_collisions": 0, "mover_fault_collisions": 2, "shoved_collisions": 1}, True),
+    ({"collisions": 0, "robot_fault_collisions": 0, "mover_fault_collisions": 0, "contact_s": 0.0}, True),
+    ({"collisions": 2, "robot_fault_collisions": 0, "mover_fault_collisions": 2, "shoved_collisions": 1,
+      "contact_s": 0.5, "robot_contact_s": 0.0}, False),      # the people's contacts fail it too
     ({"collisions": 3, "robot_fault_collisions": 1, "mover_fault_collisions": 2}, False),
     ({"collisions": 1}, False),                 # a sim that does not split: the robot's fault
 ])
-def test_only_collisions_that_were_the_robots_fault_fail_a_mission(box_world, values, success):
+def test_any_contact_fails_a_mission_and_the_shares_are_told(box_world, values, success):
     stamps, poses = straight_run(np.arange(0.0, 4.01, 0.01))
     record = MissionRecord(stamps, poses, goals=[goal("g1", 4.0, 1.0, 0.5, 0.5)],
                            statuses=[status("g1", "succeeded", 4.0)], sim_values=values)
@@ -199,6 +201,7 @@ def test_only_collisions_that_were_the_robots_fault_fail_a_mission(box_world, va
     assert s.mover_fault_collisions == values.get("mover_fault_collisions")
     assert s.shoved_collisions == values.get("shoved_collisions")
     assert f"{values['collisions']} collisions ({s.robot_fault_collisions} the robot's fault" in summary_lines(s)[0]
+    assert s.contact_s == values.get("contact_s") and s.robot_contact_s == values.get("robot_contact_s")
 
 
 def test_clearance_counts_movers_and_overlaps(box_world):
