@@ -331,6 +331,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--rate", type=float, help="sim seconds per wall second (default 1; with --lockstep: as "
                                                    "fast as the services compute, and at most this fast if given)")
     parser.add_argument("--robot", default=DEFAULT_ROBOT, help="robot namespace (default r1)")
+    parser.add_argument("--sim-dt", type=float, metavar="S",
+                        help="the simulator's step, s (default its own, 0.01; contacts are looked for in "
+                             "substeps of at most 2 ms whatever the step)")
     stepping = parser.add_mutually_exclusive_group()
     stepping.add_argument("--lockstep", action="store_true",
                           help="step the simulator only when every service is done with the last step "
@@ -398,7 +401,8 @@ def check_and_prepare(map_file: Path, world: World, goals: np.ndarray, compose: 
 
 
 def check_numbers(args: argparse.Namespace) -> None:
-    for name, value in (("--timeout", args.timeout), ("--rate", 1.0 if args.rate is None else args.rate)):
+    for name, value in (("--timeout", args.timeout), ("--rate", 1.0 if args.rate is None else args.rate),
+                        ("--sim-dt", 0.01 if args.sim_dt is None else args.sim_dt)):
         if not (math.isfinite(value) and value > 0):
             raise NavigateError(f"{name} must be a positive number, got {value:g}")
     if args.seed < 0:
@@ -597,7 +601,7 @@ def main(args: argparse.Namespace) -> int:
     # 0: as fast as it may (the Clock says so; in one process the pace does not apply anyway)
     rate = args.rate if args.rate is not None else 0.0 if args.lockstep or args.in_process else 1.0
     compose = compose_for(world, world_file, map_file, drive, args.localization, recording, args.seed,
-                          rate, args.robot, profile, state_dir=state_dir)
+                          rate, args.robot, profile, sim_dt=args.sim_dt, state_dir=state_dir)
     if args.composed:
         compose["services"] = in_containers(compose["services"], args.composed)
     compose_file = out / "compose.yaml"

@@ -20,6 +20,7 @@ import json
 import multiprocessing
 import re
 import sys
+import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -32,8 +33,11 @@ from ..schemas.keys import KeyLayout, type_for_key
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..sim.barn_world import GOAL, START
 from ..sim.world import World, load_world, shared_data_dir
+from ..services.recorder.mcap_io import read_records
 from .lockstep_mission import START_S, run_mission
+from .realtime import run_live
 
+REPO = Path(__file__).resolve().parents[1]
 CELL = 0.15                    # m, BARN's lattice
 CELL_OFFSET = (-0.075 - 4.5, 0.075 + 5.0)   # m: cell (x, y) is at (x·CELL + offset x, y·CELL + offset y)
 TOP_SPEED = 2.0                # m/s: OT = reference length / TOP_SPEED
@@ -127,14 +131,30 @@ def barn_mission(world: World, seed: int) -> list[dict]:
 
 
 def run_world(world_file: Path, path_file: Path, seed: int) -> WorldResult:
-    number = world_number(world_file)
+    """One BARN run in lockstep, in this process."""
     world = load_world(world_file)
-    ot = optimal_time(np.load(path_file))
     watch = ArrivalWatch(START, GOAL, ROBOT)
     run = run_mission(barn_mission(world, seed), world, np.array([GOAL]), timeout_s=TIME_LIMIT_S + START_WAIT_S,
                       robot=ROBOT, max_sim_s=START_S + TIME_LIMIT_S + START_WAIT_S, watch=watch.see,
                       until=lambda: watch.done)
     collision = bool(run.summary.collisions) or run.summary.min_clearance_m <= 0.0
+    return judge(world_number(world_file), watch, collision, optimal_time(np.load(path_file)))
+
+
+def run_world_live(world_file: Path, path_file: Path, seed: int, out: Path) -> WorldResult:
+    """One BARN run on the wall clock, every service its own process (experiments/realtime.py)."""
+    run = run_live(world_file, np.array([GOAL]), out, profile=PROFILE, localization="odom",
+                   timeout_s=TIME_LIMIT_S + START_WAIT_S, seed=seed, sim_dt=SIM_DT)
+    watch = ArrivalWatch(START, GOAL, ROBOT)
+    for record in read_records(run.recording, [watch.truth_key]):
+        watch.see(record.key, record.payload, record.stamp_ns)
+    summary = run.summary or {}
+    collision = summary.get("collisions") != 0 or summary.get("min_clearance_m", 0.0) <= 0.0
+    return judge(world_number(world_file), watch, collision, optimal_time(np.load(path_file)))
+
+
+def judge(number: int, watch: ArrivalWatch, collision: bool, ot: float) -> WorldResult:
+    """A run by the challenge's rules, from when the robot moved and arrived."""
     time_s = None if not watch.arrived else watch.arrived_s - (watch.moved_s or START_S)
     in_time = time_s is not None and time_s <= TIME_LIMIT_S
     success = in_time and not collision
@@ -198,6 +218,44 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="run only the even or odd worlds of the range (tune on one half, check on the other)")
     parser.add_argument("--runs", type=int, default=1, help="runs per world, seeds 0..N-1 (default 1)")
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
+    parser.add_argument("--real-time", action="store_true",
+                        help="also run every world on the wall clock, every service its own process, one "
+                             "world at a time, and report it beside the lockstep figure")
+
+
+def say_result(say, result: WorldResult, how: str = "") -> None:
+    t = "-" if result.time_s is None else f"{result.time_s:6.1f} s"
+    say(f"{how}world {result.world:3d}: {'success' if result.success else 'FAIL   '} collision "
+        f"{result.collision!s:5} timeout {result.timeout!s:5} time {t} (OT {result.ot_s:.1f} s) "
+        f"score {result.score:.3f}")
+
+
+def halves(results: list[WorldResult]) -> dict:
+    return {"all": tally(results), "even": tally([r for r in results if r.world % 2 == 0]),
+            "odd": tally([r for r in results if r.world % 2 == 1])}
+
+
+def run_real_time(jobs: list[tuple[str, str, int]], say) -> tuple[list[WorldResult], bool]:
+    """The runs on the wall clock, one at a time (each has the machine to itself, as a Gazebo run
+    with its stack has), in a fresh folder under out/; (results, interrupted)."""
+    out = REPO / "out" / time.strftime("barn-real-time-%Y%m%d-%H%M%S")
+    results = []
+    try:
+        for world_file, path_file, seed in jobs:
+            number = world_number(Path(world_file))
+            results.append(run_world_live(Path(world_file), Path(path_file), seed, out / f"world_{number}-{seed}"))
+            say_result(say, results[-1], "real time ")
+    except KeyboardInterrupt:
+        return results, True
+    return results, False
+
+
+def print_tallies(figures: dict, how: str) -> None:
+    for name in ("all", "even", "odd"):
+        f = figures[name]
+        if f["runs"]:
+            print(f"{how}{name:5}: {f['runs']} runs, success {f['success_rate']:.3f}, collisions {f['collisions']}, "
+                  f"timeouts {f['timeouts']}, mean score {f['mean_score']:.3f}")
 
 
 @exits_2_on_user_error("bench barn")
@@ -216,28 +274,26 @@ def main(args: argparse.Namespace) -> int:
         try:
             for result in pool.imap(_run_one, jobs):
                 results.append(result)
-                t = "-" if result.time_s is None else f"{result.time_s:6.1f} s"
-                say(f"world {result.world:3d}: {'success' if result.success else 'FAIL   '} collision "
-                    f"{result.collision!s:5} timeout {result.timeout!s:5} time {t} (OT {result.ot_s:.1f} s) "
-                    f"score {result.score:.3f}")
+                say_result(say, result, "lockstep " if args.real_time else "")
         except KeyboardInterrupt:       # Ctrl-C: the figures of the worlds run so far, marked as such
             interrupted = True
             pool.terminate()
-    figures = {"interrupted": interrupted, "all": tally(results), "even": tally([r for r in results if r.world % 2 == 0]),
-               "odd": tally([r for r in results if r.world % 2 == 1]), "reference": REFERENCE,
+    figures = {"interrupted": interrupted, **halves(results), "reference": REFERENCE,
                "range": args.range, "only": args.only, "runs_per_world": args.runs,
                "worlds": [asdict(r) for r in results]}
+    if args.real_time and not interrupted:
+        live, interrupted = run_real_time(jobs, say)
+        figures["interrupted"] = interrupted
+        figures["real_time"] = {**halves(live), "worlds": [asdict(r) for r in live]}
     if args.json:
         print(json.dumps(figures))
-    else:
-        if interrupted:
-            print(f"interrupted: the figures of the {len(results)} of {len(jobs)} runs that finished")
-        for name in ("all", "even", "odd"):
-            f = figures[name]
-            if f["runs"]:
-                print(f"{name:5}: {f['runs']} runs, success {f['success_rate']:.3f}, collisions {f['collisions']}, "
-                      f"timeouts {f['timeouts']}, mean score {f['mean_score']:.3f}")
-        r = REFERENCE
-        print(f"reference, {r['name']}: success {r['success_rate']}, collisions {r['collision_rate']}, "
-              f"timeouts {r['timeout_rate']}, mean score {r['mean_score']}")
+        return 0
+    if interrupted:
+        print("interrupted: the figures of the runs that finished")
+    print_tallies(figures, "lockstep  " if args.real_time else "")
+    if "real_time" in figures:
+        print_tallies(figures["real_time"], "real time ")
+    r = REFERENCE
+    print(f"reference, {r['name']}: success {r['success_rate']}, collisions {r['collision_rate']}, "
+          f"timeouts {r['timeout_rate']}, mean score {r['mean_score']}")
     return 0
