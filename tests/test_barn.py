@@ -108,6 +108,12 @@ def test_the_jackal_profile_sets_the_robot_of_every_service(tmp_path):
         assert sorted(params.footprint) == sorted(profile.footprint)
         assert params.footprint_padding == profile.footprint_padding
     assert load_costmap_params(costmap["global_costmap_files"], "global_costmap").track_unknown_space
+    # the simulator alone moves the Jackal as it is: its URDF collision shape, larger than the footprint
+    body = sim.body_params()
+    assert np.ptp(np.array(body.outline), axis=0).tolist() == pytest.approx([0.458, 0.41559])
+    assert body.track_multiplier == 1.5 and body.traction_mu == 0.5
+    assert all("body" not in s.get("params", {}) and "outline" not in s.get("params", {})
+               for name, s in services.items() if name != "sim")
 
 
 def test_a_broken_profile_is_one_clear_line(tmp_path):
@@ -117,6 +123,13 @@ def test_a_broken_profile_is_one_clear_line(tmp_path):
         load_profile(str(bad))
     with pytest.raises(ProfileError, match="no such file"):
         load_profile("no_such_robot")
+    sound = "drive: diff\nfootprint: [[0, 0], [1, 0], [1, 1]]\ncostmap_common_params: jackal_costmap_common_params.yaml\n"
+    bad.write_text(sound + "body: {mass: -3}\n")
+    with pytest.raises(ProfileError, match="body: .*mass must be > 0"):
+        load_profile(str(bad))
+    bad.write_text(sound + "body: {traction: 0.5}\n")
+    with pytest.raises(ProfileError, match="body: .*traction_mu"):
+        load_profile(str(bad))
 
 
 @needs_barn
