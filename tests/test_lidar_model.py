@@ -1,6 +1,6 @@
 """The lidar's sensor model: σ growing with range, dropouts beyond the rated range and at grazing
 incidence (with the incidence the ray cast finds), mixed pixels at edges, the old sensor kept
-exactly when these are off, a fixed number of draws per scan."""
+exactly when these are off, a fixed number of draws per scan, and the Jackal's UST-10LX."""
 import dataclasses
 import math
 
@@ -8,6 +8,9 @@ import numpy as np
 import pytest
 import yaml
 
+from omninav.cli.profile import load_profile
+from omninav.parameters.from_mapping import load_params
+from omninav.services.lidar.node import LidarNodeParams
 from omninav.sim.lidar import (LidarParams, cast, cast_with_incidence, dropout_chance, laser_pose, scan,
                                sensor_model)
 from omninav.sim.world import load_world, world_path
@@ -183,7 +186,7 @@ def test_mixed_pixels_need_the_footprint():
         sensor_model(np.ones(3), LidarParams(beam_divergence=0.01, mixed_pixel_prob=0.5), np.random.default_rng(0))
 
 
-# ---------------------------------------------------------------- parameters
+# ---------------------------------------------------------------- parameters and the Jackal's UST-10LX
 
 @pytest.mark.parametrize("bad", [dict(noise_std_per_m=-0.1), dict(range_dropout_prob=1.5),
                                  dict(range_dropout_start=12.0), dict(incidence_dropout_start=math.pi / 2),
@@ -193,3 +196,15 @@ def test_bad_sensor_model_params_are_refused(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         LidarParams(**bad)
 
+
+def test_the_jackal_profile_has_a_ust_10lx():
+    params = load_params(LidarNodeParams, load_profile("jackal").params["lidar"])
+    assert params.beams == 1081 and params.rate_hz == 40.0
+    assert params.angle_increment == pytest.approx(math.radians(0.25))
+    assert (params.angle_min, params.angle_max) == (pytest.approx(math.radians(-135)), pytest.approx(math.radians(135)))
+    assert (params.range_min, params.range_max) == (0.06, 30.0)
+    assert 3 * params.noise_std == pytest.approx(0.04, abs=1e-3)            # ±40 mm as 3σ
+    assert params.range_dropout_start == 10.0
+    room = load_world(world_path("room"))
+    ranges = scan(room, room.robot.start, None, params, np.random.default_rng(0))
+    assert ranges.shape == (1081,) and np.isfinite(ranges).mean() > 0.9
