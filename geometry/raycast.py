@@ -53,7 +53,7 @@ def cast_shapes(ox, oy, angles, segments, circles, max_range):
     return out, cosines
 
 
-@njit(cache=True, inline="always")
+@njit(cache=True, inline="always")  # not a call per ray: cast_grid, in the localizer's hot loop, kept its speed
 def _grid_hit(u0, v0, du, dv, occupied, max_t):
     """The distance in cells from (u0, v0) along the unit direction (du, dv) to the first occupied
     cell (inf: none within max_t), and the axis of the step that entered it: 0 along u, 1 along v,
