@@ -16,6 +16,13 @@ its commands shaped by the chassis's own limits (Kinematics.limit) every step, a
 odometry integrated by services.chassis.odometry from the sim's encoders, as the chassis runs
 it. Reported: final and largest position (m) and heading (deg) error against the truth, median
 over seeds; the follower-wheel odometry (followers + gyro) likewise.
+
+Lidar: CPU ms of one scan of the Jackal profile's lidar (a Hokuyo UST-10LX: 1081 beams, range
+noise, dropouts beyond its rated range) in BARN world 0 from the robot's start, median over
+repeats, beside the reference in the same run: the same beams through the old sensor model (the
+new effects off, constant noise only, which the tests hold byte-identical to the model before
+them); and the profile's lidar as it was (541 beams at 10 Hz). Each also as CPU ms per sim second
+at its rate.
 """
 from __future__ import annotations
 
@@ -38,7 +45,9 @@ from ..parameters.from_mapping import load_params
 from ..services.chassis.follower_wheels import follower_odometry
 from ..services.chassis.kinematics import ChassisParams, Kinematics
 from ..services.chassis.odometry import wheel_odometry
+from ..services.lidar.node import LidarNodeParams
 from ..sim.body import BodyParams
+from ..sim.lidar import LidarParams, scan
 from ..sim.physics import SimParams, Simulation
 from ..sim.world import World, WorldError, load_world, shared_data_dir, world_path
 
@@ -52,12 +61,14 @@ DRIFT_PATTERN = (                               # (seconds, twist) — 60 s in a
     (60.0 - 4 * CIRCLE_S - 6.0, (0.0, 0.0, 0.0)),
 )
 ARENA = "name: arena\nbounds: [20.0, 20.0]\nrobot: {start: [10.0, 10.0, 0.0], drive: mecanum}\n"
+BARN_WORLD = Path("barn") / "worlds" / "world_0.world"     # in the shared data folder
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--steps", type=int, default=1000, help="steps per timed repeat (default 1000)")
     parser.add_argument("--repeats", type=int, default=5, help="timed repeats per world (default 5)")
     parser.add_argument("--seeds", type=int, default=3, help="60 s drift runs, seeds 0..N-1 (default 3)")
+    parser.add_argument("--scans", type=int, default=200, help="lidar scans per timed repeat (default 200)")
 
 
 def step_rates(world: World, steps: int, repeats: int, params: SimParams = SimParams(),
@@ -102,6 +113,31 @@ def clearance_query_ms(world: World, calls: int = 50) -> float:
     return statistics.median(times) * 1e3
 
 
+def scan_costs(scans: int, repeats: int) -> dict:
+    """Median CPU ms per scan of the Jackal's lidar, of the old sensor model on the same beams and
+    of the Jackal's lidar as it was, and each one's rate (module docstring)."""
+    world = load_world((shared_data_dir(Path(__file__)) or Path("shared/data")) / BARN_WORLD)
+    ust = load_params(LidarNodeParams, load_profile("jackal").params["lidar"])
+    old_model = LidarParams(beams=ust.beams, fov=ust.fov, range_min=ust.range_min, range_max=ust.range_max,
+                            noise_std=ust.noise_std, rate_hz=ust.rate_hz)
+    old_profile = LidarParams(beams=541, fov=ust.fov, range_min=0.06, range_max=30.0, noise_std=0.01)
+    lidars = {"ust10lx": ust, "reference_old_model": old_model, "old_profile_541_beams": old_profile}
+    rng = np.random.default_rng(0)
+    for params in lidars.values():              # compile, or load the cached kernels
+        scan(world, world.robot.start, None, params, rng)
+    times: dict[str, list[float]] = {name: [] for name in lidars}
+    for _ in range(repeats):                    # interleaved, so load changes hit all alike
+        for name, params in lidars.items():
+            start = time.process_time()
+            for _ in range(scans):
+                scan(world, world.robot.start, None, params, rng)
+            times[name].append((time.process_time() - start) / scans * 1e3)
+    return {name: {"beams": params.beams, "rate_hz": params.rate_hz,
+                   "scan_ms": round(statistics.median(times[name]), 4),
+                   "ms_per_sim_s": round(statistics.median(times[name]) * params.rate_hz, 3)}
+            for name, params in lidars.items()}
+
+
 def drift_run(world: World, seed: int) -> dict:
     """Drive DRIFT_PATTERN with the default noise; errors of wheel and follower odometry vs truth."""
     sim = Simulation(world, SimParams(seed=seed), ChassisParams(drive="mecanum"))
@@ -137,14 +173,14 @@ def barn_case() -> tuple[World, SimParams, BodyParams] | None:
     """BARN world 0 with the Jackal's body at BARN's step, as `bench barn` simulates it; None
     without the shared data."""
     data = shared_data_dir(Path(__file__))
-    path = data / "barn" / "worlds" / "world_0.world" if data is not None else None
+    path = data / BARN_WORLD if data is not None else None
     if path is None or not path.is_file():
         return None
     body = load_params(BodyParams, load_profile(BARN_PROFILE).body, "jackal body")
     return load_world(path), SimParams(dt=BARN_SIM_DT, drive="diff"), body
 
 
-def measure(steps: int, repeats: int, seeds: int) -> dict:
+def measure(steps: int, repeats: int, seeds: int, scans: int) -> dict:
     figures: dict = {"steps_per_s": {}, "one_check_steps_per_s": {}, "reference_steps_per_s": {},
                      "substeps": {}, "clearance_query_ms": {}, "clearance_queries_per_1000_steps": {}}
     cases = [(name, load_world(world_path(name)), SimParams(), BodyParams()) for name in WORLDS]
@@ -166,6 +202,7 @@ def measure(steps: int, repeats: int, seeds: int) -> dict:
     for name, prefix in (("wheel", "drift_60s"), ("follower", "follower_drift_60s")):
         for key, suffix in (("final_m", "m"), ("final_deg", "deg"), ("max_m", "max_m"), ("max_deg", "max_deg")):
             figures[f"{prefix}_{suffix}"] = round(statistics.median(run[name][key] for run in runs), 4)
+    figures["lidar_barn_world_0"] = scan_costs(scans, repeats)
     figures["drift_collisions"] = sum(run["wheel"]["collisions"] for run in runs)
     figures["drift_seeds"] = seeds
     figures["sim_params"] = {k: getattr(SimParams(), k) for k in
@@ -192,16 +229,22 @@ def report(fig: dict) -> str:
         f"  follower + gyro:   final {fig['follower_drift_60s_m']:.4f} m, {fig['follower_drift_60s_deg']:.3f} deg; "
         f"max {fig['follower_drift_60s_max_m']:.4f} m, {fig['follower_drift_60s_max_deg']:.3f} deg",
         "  noise: " + ", ".join(f"{k} {v}" for k, v in fig["sim_params"].items()),
+        "lidar scan in BARN world 0 from the robot's start (CPU ms, medians):",
     ]
+    labels = {"ust10lx": "Jackal profile (UST-10LX model)", "reference_old_model": "the same beams, old model",
+              "old_profile_541_beams": "Jackal profile as it was"}
+    for name, row in fig["lidar_barn_world_0"].items():
+        lines.append(f"  {labels[name]:33s}{row['beams']:5d} beams {row['scan_ms']:8.3f} ms/scan "
+                     f"{row['ms_per_sim_s']:8.2f} ms per sim s at {row['rate_hz']:g} Hz")
     return "\n".join(lines)
 
 
 def main(args: argparse.Namespace) -> int:
-    if min(args.steps, args.repeats, args.seeds) < 1:
-        print("omninav bench sim: --steps, --repeats and --seeds must be at least 1", file=sys.stderr)
+    if min(args.steps, args.repeats, args.seeds, args.scans) < 1:
+        print("omninav bench sim: --steps, --repeats, --seeds and --scans must be at least 1", file=sys.stderr)
         return 2
     try:
-        figures = measure(args.steps, args.repeats, args.seeds)
+        figures = measure(args.steps, args.repeats, args.seeds, args.scans)
     except WorldError as exc:                   # e.g. willow's map missing from the shared data folder
         print(f"omninav bench sim: {exc}", file=sys.stderr)
         return 2

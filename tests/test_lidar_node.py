@@ -1,5 +1,5 @@
 """The lidar node in-process: scans on the sim-time schedule, equal to a direct ray cast, movers
-seen, seeded noise reproducible, a broken world refused clearly."""
+seen, seeded noise (and the rest of the sensor model) reproducible, a broken world refused clearly."""
 import math
 
 import numpy as np
@@ -89,18 +89,22 @@ def test_a_mover_in_front_is_seen():
     assert with_mover == pytest.approx(1.25, abs=1e-6) and without > 1.5
 
 
-def _noisy_run(seed):
-    node = LidarNode(LidarNodeParams(seed=seed, noise_std=0.05, dropout_prob=0.1))
+def _noisy_run(seed, model):
+    node = LidarNode(LidarNodeParams(seed=seed, **model))
     out = capture(node)
     feed(node, 0, 50)
     return out
 
 
-def test_noise_is_seeded_and_reproducible():
-    first, again, other = _noisy_run(7), _noisy_run(7), _noisy_run(8)
+@pytest.mark.parametrize("model", [dict(noise_std=0.05, dropout_prob=0.1),
+                                   dict(noise_std=0.01, noise_std_per_m=0.005, dropout_prob=0.05, range_dropout_start=4.0,
+                                        range_dropout_prob=0.5, incidence_dropout_start=1.0, incidence_dropout_prob=0.8,
+                                        beam_divergence=0.01, mixed_pixel_prob=0.5)])
+def test_noise_is_seeded_and_reproducible(model):
+    first, again, other = _noisy_run(7, model), _noisy_run(7, model), _noisy_run(8, model)
     assert len(first) == 5 and first == again and first != other
     # the node's generator is exactly the documented one: default_rng(seed), drawn by each scan in turn
-    params = LidarNodeParams(seed=7, noise_std=0.05, dropout_prob=0.1)
+    params = LidarNodeParams(seed=7, **model)
     rng, world = np.random.default_rng(7), load_world(world_path("room"))
     for payload in first:
         s = decode(payload)

@@ -3,8 +3,9 @@
 Inputs are the sim's movers and ground truth, both synced and in that order, so the movers at t
 are known when the truth at t is handled. Scans are due at multiples of 1 / rate_hz of sim time
 (whenever the lidar started, its scans fall on the same instants); the first truth at or after a
-due time is scanned. Noise and dropouts come from the node's own seeded Generator, advanced only
-by scans, so a replay reproduces every range.
+due time is scanned. The sensor model's randomness (noise, dropouts, mixed pixels) comes from the
+node's own seeded Generator, advanced only by scans and by the same number of draws in each, so a
+replay reproduces every range.
 """
 from __future__ import annotations
 
