@@ -32,7 +32,7 @@ from ..schemas.keys import KeyLayout, type_for_key
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..sim.barn_world import GOAL, START
 from ..sim.world import World, load_world, shared_data_dir
-from .lockstep_mission import START_S, run_mission
+from .lockstep_mission import START_S, LockstepRun, run_mission
 
 CELL = 0.15                    # m, BARN's lattice
 CELL_OFFSET = (-0.075 - 4.5, 0.075 + 5.0)   # m: cell (x, y) is at (x·CELL + offset x, y·CELL + offset y)
@@ -75,17 +75,6 @@ def barn_score(success: bool, time_s: float, ot_s: float) -> float:
 
 # ---------------------------------------------------------------- one world
 
-@dataclass
-class WorldResult:
-    world: int
-    success: bool
-    collision: bool
-    timeout: bool
-    time_s: float | None       # from starting to move to within 1 m of the goal (None: never)
-    ot_s: float
-    score: float
-
-
 class ArrivalWatch:
     """Follows the ground truth of a run: when the robot first moved, when it first came within
     SUCCESS_RADIUS of the goal."""
@@ -118,6 +107,31 @@ class ArrivalWatch:
         return self.arrived or (self.moved_s is not None and self.now_s - self.moved_s > TIME_LIMIT_S)
 
 
+@dataclass
+class Verdict:
+    """A run judged by the challenge's rules."""
+    success: bool
+    collision: bool
+    timeout: bool
+    time_s: float | None       # from starting to move to within 1 m of the goal (None: never)
+    ot_s: float
+    score: float
+
+
+def judge(watch: ArrivalWatch, collision: bool, ot_s: float) -> Verdict:
+    """Success: within SUCCESS_RADIUS of the goal within TIME_LIMIT_S of starting to move, and no collision."""
+    time_s = None if not watch.arrived else watch.arrived_s - (watch.moved_s or START_S)
+    in_time = time_s is not None and time_s <= TIME_LIMIT_S
+    success = in_time and not collision
+    return Verdict(success=success, collision=collision, timeout=not in_time and not collision, time_s=time_s,
+                   ot_s=ot_s, score=barn_score(success, time_s or 0.0, ot_s))
+
+
+@dataclass
+class WorldResult(Verdict):
+    world: int
+
+
 def barn_mission(world: World, seed: int) -> list[dict]:
     """The services of a BARN run: the Jackal, no map, goal from the rules."""
     profile = load_profile(PROFILE)
@@ -126,20 +140,23 @@ def barn_mission(world: World, seed: int) -> list[dict]:
                        sim_dt=SIM_DT)["services"]
 
 
+def drive_to_goal(world: World, seed: int, start, goal) -> tuple[ArrivalWatch, LockstepRun]:
+    """One run as the challenge runs it: the Jackal's stack driven in lockstep from start to goal,
+    ended once the robot is within SUCCESS_RADIUS of the goal or out of time; the watch knows when
+    it moved and when it arrived."""
+    watch = ArrivalWatch(start, goal, ROBOT)
+    run = run_mission(barn_mission(world, seed), world, np.array([goal]), timeout_s=TIME_LIMIT_S + START_WAIT_S,
+                      robot=ROBOT, max_sim_s=START_S + TIME_LIMIT_S + START_WAIT_S, watch=watch.see,
+                      until=lambda: watch.done)
+    return watch, run
+
+
 def run_world(world_file: Path, path_file: Path, seed: int) -> WorldResult:
     number = world_number(world_file)
     world = load_world(world_file)
-    ot = optimal_time(np.load(path_file))
-    watch = ArrivalWatch(START, GOAL, ROBOT)
-    run = run_mission(barn_mission(world, seed), world, np.array([GOAL]), timeout_s=TIME_LIMIT_S + START_WAIT_S,
-                      robot=ROBOT, max_sim_s=START_S + TIME_LIMIT_S + START_WAIT_S, watch=watch.see,
-                      until=lambda: watch.done)
+    watch, run = drive_to_goal(world, seed, START, GOAL)
     collision = bool(run.summary.collisions) or run.summary.min_clearance_m <= 0.0
-    time_s = None if not watch.arrived else watch.arrived_s - (watch.moved_s or START_S)
-    in_time = time_s is not None and time_s <= TIME_LIMIT_S
-    success = in_time and not collision
-    return WorldResult(world=number, success=success, collision=collision, timeout=not in_time and not collision,
-                       time_s=time_s, ot_s=ot, score=barn_score(success, time_s or 0.0, ot))
+    return WorldResult(world=number, **asdict(judge(watch, collision, optimal_time(np.load(path_file)))))
 
 
 def world_number(path: Path) -> int:
