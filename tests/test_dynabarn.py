@@ -1,4 +1,4 @@
-"""DynaBARN (experiments/scenarios/dynabarn.py, experiments/dynabarn.py): the generator's worlds —
+"""DynaBARN (experiments/scenarios/dynabarn.py, experiments/dynabarn_bench.py): the generator's worlds —
 the same seed gives the same bytes, obstacle counts and segment speeds lie in each difficulty's
 band, obstacles stay in the world and off the robot at the start, the arena is DynaBARN's — the
 fairness check for keyframe movers, and `bench dynabarn`: judging by BARN's rules (any contact
@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from omninav.cli.main import main as cli_main
-from omninav.experiments import dynabarn as bench
+from omninav.experiments import dynabarn_bench as bench
 from omninav.experiments.barn import ArrivalWatch, judge
 from omninav.experiments.mission_score import movers_clearance
 from omninav.experiments.scenarios import ScenarioError, generate_world, world_text
