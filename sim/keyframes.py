@@ -27,6 +27,7 @@ itself; that micrometre is not reproduced.
 """
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
@@ -63,35 +64,54 @@ class Keyframes:
             m[0], m[-1] = (p[1] - p[0]) / 2, (p[-1] - p[-2]) / 2
         return m
 
-    def _segment(self, i: np.ndarray, u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Position (..., 2) and derivative by u (..., 2) on segments i at parameters u."""
-        p0, p1 = self.points[i], self.points[i + 1]
-        u = u[..., None]
-        if self.interpolation == "linear":
-            return p0 + u * (p1 - p0), p1 - p0
-        m0, m1 = self.tangents[i], self.tangents[i + 1]
-        u2, u3 = u * u, u * u * u
-        position = (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * m0 + (3 * u2 - 2 * u3) * p1 + (u3 - u2) * m1
-        slope = (6 * u2 - 6 * u) * (p0 - p1) + (3 * u2 - 4 * u + 1) * m0 + (3 * u2 - 2 * u) * m1
-        return position, slope
+    @cached_property
+    def _alone(self) -> Tracks:
+        return Tracks((self,))
 
     def state(self, t) -> tuple[np.ndarray, np.ndarray]:
         """Positions (..., 2) and velocities (..., 2, m/s) at sim times t (any shape, s ≥ 0)."""
-        t = np.asarray(t, np.float64)
-        tau = np.mod(t, self.period) if self.loop else np.clip(t, 0.0, self.period)
-        i = np.clip(np.searchsorted(self.times, tau, side="right") - 1, 0, len(self.times) - 2)
-        duration = self.times[i + 1] - self.times[i]
-        position, slope = self._segment(i, (tau - self.times[i]) / duration)
-        velocity = slope / duration[..., None]
-        if not self.loop:
-            velocity = np.where((t >= self.period)[..., None], 0.0, velocity)
-        return position, velocity
+        position, velocity = self._alone.state(np.asarray(t, np.float64)[..., None])
+        return position[..., 0, :], velocity[..., 0, :]
 
     def trace(self) -> np.ndarray:
         """The polyline (M, 2) the mover's centre follows over one period, keyframes included:
         the keyframes themselves for `linear`, TRACE_STEPS points a segment for `gazebo`."""
         steps = 1 if self.interpolation == "linear" else TRACE_STEPS
-        segments = len(self.times) - 1
-        i = np.repeat(np.arange(segments), steps)
-        u = np.tile(np.arange(steps) / steps, segments)
-        return np.vstack([self._segment(i, u)[0], self.points[-1:]])
+        within = self.times[:-1, None] + np.diff(self.times)[:, None] * (np.arange(steps) / steps)
+        return np.vstack([self.state(within.ravel())[0], self.points[-1:]])
+
+
+class Tracks:
+    """Several tracks evaluated together, each at its own time, in one vectorised call (the
+    simulator asks where every keyframe mover is at every step); shorter tracks are padded."""
+
+    def __init__(self, tracks: Sequence[Keyframes]):
+        count = max(len(track.times) for track in tracks)
+        self.times = np.full((len(tracks), count), np.inf)     # never at or before any time
+        self.points = np.zeros((len(tracks), count, 2))
+        self.tangents = np.zeros((len(tracks), count, 2))
+        for k, track in enumerate(tracks):
+            n = len(track.times)
+            self.times[k, :n], self.points[k, :n], self.tangents[k, :n] = track.times, track.points, track.tangents
+        self.last_segment = np.array([len(track.times) - 2 for track in tracks])
+        self.period = np.array([track.period for track in tracks])
+        self.loop = np.array([track.loop for track in tracks], bool)
+        self.linear = np.array([track.interpolation == "linear" for track in tracks], bool)
+
+    def state(self, t) -> tuple[np.ndarray, np.ndarray]:
+        """Positions (..., K, 2) and velocities (..., K, 2, m/s) of the K tracks at times t (..., K)."""
+        t = np.asarray(t, np.float64)
+        tau = np.where(self.loop, np.mod(t, self.period), np.clip(t, 0.0, self.period))
+        k = np.arange(len(self.period))
+        i = np.clip((self.times <= tau[..., None]).sum(axis=-1) - 1, 0, self.last_segment)
+        start, duration = self.times[k, i], self.times[k, i + 1] - self.times[k, i]
+        u = ((tau - start) / duration)[..., None]
+        p0, p1, m0, m1 = self.points[k, i], self.points[k, i + 1], self.tangents[k, i], self.tangents[k, i + 1]
+        u2, u3 = u * u, u * u * u
+        hermite = (2 * u3 - 3 * u2 + 1) * p0 + (u3 - 2 * u2 + u) * m0 + (3 * u2 - 2 * u3) * p1 + (u3 - u2) * m1
+        hermite_slope = (6 * u2 - 6 * u) * (p0 - p1) + (3 * u2 - 4 * u + 1) * m0 + (3 * u2 - 2 * u) * m1
+        linear = self.linear[:, None]
+        position = np.where(linear, p0 + u * (p1 - p0), hermite)
+        velocity = np.where(linear, p1 - p0, hermite_slope) / duration[..., None]
+        held = (~self.loop & (t >= self.period))[..., None]            # a track that does not loop, ended
+        return position, np.where(held, 0.0, velocity)

@@ -27,7 +27,7 @@ from ..geometry.polygons import (point_segment_distance, points_in_polygons, pol
                                  transform_points)
 from ..geometry.grid import GRID_OBSTACLE, cell_to_world, grid_coords, world_to_cell
 from .barn_world import BarnWorldError, barn_world_doc
-from .keyframes import INTERPOLATIONS, Keyframes
+from .keyframes import INTERPOLATIONS, Keyframes, Tracks
 
 WALL_THICKNESS = 0.1          # m, walls and the outer walls along the bounds
 # The mecanum paper's robot: 0.832 m long (x) and 0.636 m wide (y), centred on the robot's origin.
@@ -102,13 +102,15 @@ class Movers:
     def __len__(self) -> int:
         return len(self.loops)
 
-    @property
+    @cached_property
     def on_keyframes(self) -> np.ndarray:
         """Which movers (K,) move on timed keyframes."""
-        return np.array([self._track(k) is not None for k in range(len(self))], bool)
+        return np.array([bool(self.tracks) and self.tracks[k] is not None for k in range(len(self))], bool)
 
-    def _track(self, k: int) -> Keyframes | None:
-        return self.tracks[k] if self.tracks else None
+    @cached_property
+    def _keyframe_tracks(self) -> Tracks | None:
+        """The keyframe movers' tracks, evaluated together."""
+        return Tracks([self.tracks[k] for k in np.flatnonzero(self.on_keyframes)]) if self.on_keyframes.any() else None
 
     @cached_property
     def _segments(self) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
@@ -124,19 +126,21 @@ class Movers:
         step = loop[i + 1] - loop[i]
         return loop[i] + step * ((s - (ends[i] - lengths[i])) / lengths[i]), step / lengths[i], i
 
-    def _where(self, moving_s: np.ndarray):
-        for k, speed in enumerate(self.speed):
-            track = self._track(k)
-            if track is not None:
-                yield track.state(moving_s[k])
-                continue
-            point, direction, _ = self._point(k, speed * moving_s[k])
-            yield point, direction * speed
+    def _state(self, moving_s) -> tuple[np.ndarray, np.ndarray]:
+        """Every mover's position and velocity (K, 2 each) after moving for moving_s[k] seconds."""
+        moving_s = np.broadcast_to(np.asarray(moving_s, np.float64), (len(self),))
+        positions, velocities = np.zeros((len(self), 2)), np.zeros((len(self), 2))
+        if self._keyframe_tracks is not None:
+            keyed = self.on_keyframes
+            positions[keyed], velocities[keyed] = self._keyframe_tracks.state(moving_s[keyed])
+        for k in np.flatnonzero(~self.on_keyframes):
+            point, direction, _ = self._point(k, self.speed[k] * moving_s[k])
+            positions[k], velocities[k] = point, direction * self.speed[k]
+        return positions, velocities
 
     def pose_after(self, moving_s) -> np.ndarray:
-        """Every mover's position (K, 2) after moving for moving_s[k] seconds from its path's start."""
-        moving_s = np.broadcast_to(np.asarray(moving_s, np.float64), (len(self),))
-        return np.array([p for p, _ in self._where(moving_s)]).reshape(-1, 2)
+        """Every mover's position (K, 2) after moving for moving_s[k] seconds from its start."""
+        return self._state(moving_s)[0]
 
     def pose_at(self, t: float) -> np.ndarray:
         """Every mover's position (K, 2) at sim time t had none of them stopped (all start at their
@@ -145,7 +149,7 @@ class Movers:
 
     def velocity_at(self, t: float) -> np.ndarray:
         """Every mover's velocity (K, 2) at sim time t had none of them stopped."""
-        return np.array([v for _, v in self._where(np.full(len(self), t))]).reshape(-1, 2)
+        return self._state(t)[1]
 
     def circles_at(self, t: float) -> np.ndarray:
         """Movers as circles (K, 3) of (x, y, r) at time t had none of them stopped, as the ray
