@@ -121,14 +121,16 @@ def test_a_world_mixes_path_and_keyframe_movers(tmp_path):
     world = keyframe_world(tmp_path, [
         {"radius": 0.5, "keyframes": frames, "interpolation": "gazebo"},
         {"radius": 0.3, "speed": 1.0, "path": [[1, 6], [5, 6]]},
-        {"radius": 0.4, "keyframes": frames, "loop": False}])
+        {"radius": 0.4, "keyframes": frames, "loop": False},
+        {"radius": 0.2, "keyframes": [[0, 1, 7], [4, 5, 7]]}])             # a shorter track beside the others
     movers = world.movers
-    assert movers.on_keyframes.tolist() == [True, False, True]
-    np.testing.assert_allclose(movers.pose_at(1.0), [[3.0, 0.875], [2.0, 6.0], [3.0, 1.0]])
-    np.testing.assert_allclose(movers.velocity_at(1.0), [[2.5, -0.125], [1.0, 0.0], [2.0, 0.0]])
-    np.testing.assert_allclose(movers.pose_at(6.0)[[0, 2]], [[3.0, 0.875], [1.0, 3.0]])   # looped; held
-    np.testing.assert_allclose(movers.circles_at(4.0), [[3.0, 3.125, 0.5], [5.0, 6.0, 0.3], [3.0, 3.0, 0.4]])
-    np.testing.assert_allclose(movers.pose_after([1.0, 2.0, 4.0]), [[3.0, 0.875], [3.0, 6.0], [3.0, 3.0]])
+    assert movers.on_keyframes.tolist() == [True, False, True, True]
+    np.testing.assert_allclose(movers.pose_at(1.0), [[3.0, 0.875], [2.0, 6.0], [3.0, 1.0], [2.0, 7.0]])
+    np.testing.assert_allclose(movers.velocity_at(1.0), [[2.5, -0.125], [1.0, 0.0], [2.0, 0.0], [1.0, 0.0]])
+    np.testing.assert_allclose(movers.pose_at(6.0)[[0, 2, 3]], [[3.0, 0.875], [1.0, 3.0], [3.0, 7.0]])  # looped; held; looped
+    np.testing.assert_allclose(movers.circles_at(4.0), [[3.0, 3.125, 0.5], [5.0, 6.0, 0.3], [3.0, 3.0, 0.4],
+                                                        [1.0, 7.0, 0.2]])
+    np.testing.assert_allclose(movers.pose_after([1.0, 2.0, 4.0, 3.0]), [[3.0, 0.875], [3.0, 6.0], [3.0, 3.0], [4.0, 7.0]])
     np.testing.assert_allclose(movers.loops[2], POINTS + 1.0)                # the lanes a keyframe mover sweeps
     assert not movers.yield_distance.any()
 
