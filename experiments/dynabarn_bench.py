@@ -87,7 +87,7 @@ def main(args: argparse.Namespace) -> int:
         results = run_in_workers(run_seed, jobs, args.workers, None if args.json else lambda r: print(run_line(r), flush=True))
     by_difficulty = {d: figures([r for r in results if r.difficulty == d]) for d in difficulties}
     if args.json:
-        print(json.dumps({"seeds": [args.seed, args.seed + args.count - 1], "ot_s": OT_S, **by_difficulty,
+        print(json.dumps({"seeds": [args.seed, args.seed + args.count - 1], "ot_s": OT_S, "difficulties": by_difficulty,
                           "runs": [asdict(r) for r in results]}))
         return 0
     for d, f in by_difficulty.items():
