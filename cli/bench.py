@@ -18,6 +18,7 @@ BENCHES: dict[str, str] = {
     "paper": "omninav.bench.paper",
     "scenarios": "omninav.bench.scenarios",
     "barn": "omninav.experiments.barn",
+    "dynabarn": "omninav.experiments.dynabarn_bench",
     "explore": "omninav.bench.explore",
     "kills": "omninav.experiments.kills",
     "footprint": "omninav.bench.process_footprint",

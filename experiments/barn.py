@@ -34,7 +34,7 @@ from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..sim.barn_world import GOAL, START
 from ..sim.world import World, load_world, shared_data_dir
 from ..services.recorder.mcap_io import read_records
-from .lockstep_mission import START_S, run_mission
+from .lockstep_mission import START_S, LockstepRun, run_mission
 from .realtime import run_live
 
 REPO = Path(__file__).resolve().parents[1]
@@ -79,17 +79,6 @@ def barn_score(success: bool, time_s: float, ot_s: float) -> float:
 
 # ---------------------------------------------------------------- one world
 
-@dataclass
-class WorldResult:
-    world: int
-    success: bool
-    collision: bool
-    timeout: bool
-    time_s: float | None       # from starting to move to within 1 m of the goal (None: never)
-    ot_s: float
-    score: float
-
-
 class ArrivalWatch:
     """Follows the ground truth of a run: when the robot first moved, when it first came within
     SUCCESS_RADIUS of the goal."""
@@ -122,6 +111,31 @@ class ArrivalWatch:
         return self.arrived or (self.moved_s is not None and self.now_s - self.moved_s > TIME_LIMIT_S)
 
 
+@dataclass
+class Verdict:
+    """A run judged by the challenge's rules."""
+    success: bool
+    collision: bool
+    timeout: bool
+    time_s: float | None       # from starting to move to within 1 m of the goal (None: never)
+    ot_s: float
+    score: float
+
+
+def judge(watch: ArrivalWatch, collision: bool, ot_s: float) -> Verdict:
+    """Success: within SUCCESS_RADIUS of the goal within TIME_LIMIT_S of starting to move, and no collision."""
+    time_s = None if not watch.arrived else watch.arrived_s - (watch.moved_s or START_S)
+    in_time = time_s is not None and time_s <= TIME_LIMIT_S
+    success = in_time and not collision
+    return Verdict(success=success, collision=collision, timeout=not in_time and not collision, time_s=time_s,
+                   ot_s=ot_s, score=barn_score(success, time_s or 0.0, ot_s))
+
+
+@dataclass
+class WorldResult(Verdict):
+    world: int
+
+
 def barn_mission(world: World, seed: int) -> list[dict]:
     """The services of a BARN run: the Jackal, no map, goal from the rules."""
     profile = load_profile(PROFILE)
@@ -130,15 +144,23 @@ def barn_mission(world: World, seed: int) -> list[dict]:
                        sim_dt=SIM_DT)["services"]
 
 
+def drive_to_goal(world: World, seed: int, start, goal) -> tuple[ArrivalWatch, LockstepRun]:
+    """One run as the challenge runs it: the Jackal's stack driven in lockstep from start to goal,
+    ended once the robot is within SUCCESS_RADIUS of the goal or out of time; the watch knows when
+    it moved and when it arrived."""
+    watch = ArrivalWatch(start, goal, ROBOT)
+    run = run_mission(barn_mission(world, seed), world, np.array([goal]), timeout_s=TIME_LIMIT_S + START_WAIT_S,
+                      robot=ROBOT, max_sim_s=START_S + TIME_LIMIT_S + START_WAIT_S, watch=watch.see,
+                      until=lambda: watch.done)
+    return watch, run
+
+
 def run_world(world_file: Path, path_file: Path, seed: int) -> WorldResult:
     """One BARN run in lockstep, in this process."""
     world = load_world(world_file)
-    watch = ArrivalWatch(START, GOAL, ROBOT)
-    run = run_mission(barn_mission(world, seed), world, np.array([GOAL]), timeout_s=TIME_LIMIT_S + START_WAIT_S,
-                      robot=ROBOT, max_sim_s=START_S + TIME_LIMIT_S + START_WAIT_S, watch=watch.see,
-                      until=lambda: watch.done)
+    watch, run = drive_to_goal(world, seed, START, GOAL)
     collision = bool(run.summary.collisions) or run.summary.min_clearance_m <= 0.0
-    return judge(world_number(world_file), watch, collision, optimal_time(np.load(path_file)))
+    return WorldResult(world=world_number(world_file), **asdict(judge(watch, collision, optimal_time(np.load(path_file)))))
 
 
 def run_world_live(world_file: Path, path_file: Path, seed: int, out: Path) -> WorldResult:
@@ -150,16 +172,7 @@ def run_world_live(world_file: Path, path_file: Path, seed: int, out: Path) -> W
         watch.see(record.key, record.payload, record.stamp_ns)
     summary = run.summary or {}
     collision = summary.get("collisions") != 0 or summary.get("min_clearance_m", 0.0) <= 0.0
-    return judge(world_number(world_file), watch, collision, optimal_time(np.load(path_file)))
-
-
-def judge(number: int, watch: ArrivalWatch, collision: bool, ot: float) -> WorldResult:
-    """A run by the challenge's rules, from when the robot moved and arrived."""
-    time_s = None if not watch.arrived else watch.arrived_s - (watch.moved_s or START_S)
-    in_time = time_s is not None and time_s <= TIME_LIMIT_S
-    success = in_time and not collision
-    return WorldResult(world=number, success=success, collision=collision, timeout=not in_time and not collision,
-                       time_s=time_s, ot_s=ot, score=barn_score(success, time_s or 0.0, ot))
+    return WorldResult(world=world_number(world_file), **asdict(judge(watch, collision, optimal_time(np.load(path_file)))))
 
 
 def world_number(path: Path) -> int:

@@ -2,7 +2,9 @@
 
 A contact is the robot touching one object — the static world counts as one object (sliding along
 a wall built of several map boxes is one contact), each mover as one — from the physics step in
-which it starts touching it to the one in which it stops. Every physics substep of a contact is
+which it starts touching it to the one in which it stops; touching the same object again within
+REJOIN_S continues that contact (a mover pushing the robot along separates from it and meets it
+again substep after substep: one push, not fifty contacts). Every physics substep of a contact is
 judged on its own (Simulation decides, this ledger adds up): the substep is the robot's when the
 robot moved towards the contact point at any speed, or when it stayed in a mover's way although
 it had seen the mover coming; otherwise the mover's (it walked into a robot standing or leaving,
@@ -18,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 STATIC = -1          # what a contact touched when it is no mover
+REJOIN_S = 0.1       # s: touching an object again this soon continues the contact
 
 
 @dataclass
@@ -36,6 +39,7 @@ class ContactLedger:
 
     def __init__(self) -> None:
         self.open: dict[int, Contact] = {}
+        self._ended: dict[int, tuple[Contact, float]] = {}    # object -> its last contact, when it ended
         self.contacts = 0               # contacts begun
         self.robot_contacts = 0         # of those, with at least one substep of the robot's
         self.shoved_contacts = 0        # static contacts begun while a mover touched the robot
@@ -49,13 +53,19 @@ class ContactLedger:
         return self.contacts - self.robot_contacts
 
     def begin(self, touched: int, now_s: float, *, foreseen: bool = False) -> None:
+        last, ended_s = self._ended.pop(touched, (None, -float("inf")))
+        if last is not None and now_s - ended_s <= REJOIN_S:
+            self.open[touched] = last
+            return
         shoved = touched == STATIC and any(k != STATIC for k in self.open)
         self.open[touched] = Contact(touched, now_s, foreseen=foreseen, shoved=shoved)
         self.contacts += 1
         self.shoved_contacts += shoved
 
-    def end(self, touched: int) -> None:
-        self.open.pop(touched, None)
+    def end(self, touched: int, now_s: float) -> None:
+        contact = self.open.pop(touched, None)
+        if contact is not None:
+            self._ended[touched] = (contact, now_s)
 
     def substep(self, robots: dict[int, bool], dt: float) -> None:
         """One physics substep of dt in which the robot touched the objects of `robots`, each

@@ -307,7 +307,7 @@ class Simulation:
         touched = self._touched(arbiter)
         self._touching[touched] = max(0, self._touching.get(touched, 0) - 1)
         if self._touching[touched] == 0:
-            self.contacts.end(touched)
+            self.contacts.end(touched, self._now_s)
 
     def _robot_approach_speed(self, arbiter: pymunk.Arbiter) -> float:
         """How fast the wheels move the robot's contact point along the contact normal towards

@@ -5,8 +5,9 @@ The format is described in docs/worlds.md. A World holds its static geometry in 
     outside the bounds), counter-clockwise; `segments` (4K, 4) are their edges, for ray casting;
   - `circles` (M, 3): static cylinders (x, y, r);
 and optionally an occupancy grid from a ROS map (`map:`), whose occupied cells are obstacles.
-Movers are circles moving at constant speed along a closed polyline; one with a yield distance
-stops while the robot is in its way, so where it is depends on the robot (`Movers.pose_after`).
+Movers are circles moving at constant speed along a closed polyline, or on timed keyframes
+(sim/keyframes.py); a path mover with a yield distance stops while the robot is in its way, so where
+it is depends on the robot (`Movers.pose_after`).
 """
 from __future__ import annotations
 
@@ -26,6 +27,7 @@ from ..geometry.polygons import (point_segment_distance, points_in_polygons, pol
                                  transform_points)
 from ..geometry.grid import GRID_OBSTACLE, cell_to_world, grid_coords, world_to_cell
 from .barn_world import BarnWorldError, barn_world_doc
+from .keyframes import INTERPOLATIONS, Keyframes, Tracks
 
 WALL_THICKNESS = 0.1          # m, walls and the outer walls along the bounds
 # The mecanum paper's robot: 0.832 m long (x) and 0.636 m wide (y), centred on the robot's origin.
@@ -78,22 +80,37 @@ YIELD_MARGIN = 0.1   # m beyond its radius that a yielding mover keeps clear ahe
 
 @dataclass(frozen=True, eq=False)
 class Movers:
-    """Circular obstacles moving at constant speed along closed polylines, looping forever.
+    """Circular obstacles: path movers, at constant speed along closed polylines, looping forever,
+    and keyframe movers, on timed keyframes (sim/keyframes.py).
 
-    A mover whose path is not a loop (`loop: false`) goes back and forth: its closed polyline is
-    the path followed by the path reversed. Where a mover is depends on how long it has moved:
+    A path mover whose path is not a loop (`loop: false`) goes back and forth: its closed polyline
+    is the path followed by the path reversed. Where a mover is depends on how long it has moved:
     `pose_after(moving_s)`. One that never stops has moved for the whole sim time (`pose_at(t)`);
     one with a yield distance stops while the robot is in its way (`yielding`), so the simulation
     keeps each mover's moving time as its state (`Simulation.mover_circles`, the sim/movers key).
+    A keyframe mover never stops: its moving time is the sim time.
     """
 
     radius: np.ndarray = field(default_factory=lambda: np.zeros(0))   # (K,)
-    speed: np.ndarray = field(default_factory=lambda: np.zeros(0))    # (K,) m/s
-    loops: tuple[np.ndarray, ...] = ()                                # closed polylines, first == last
+    speed: np.ndarray = field(default_factory=lambda: np.zeros(0))    # (K,) m/s of a path mover (0 on keyframes)
+    # the polyline each centre follows: a path mover's closed loop (first == last), a keyframe
+    # mover's trace over one period (open where its loop jumps back)
+    loops: tuple[np.ndarray, ...] = ()
     yield_distance: np.ndarray = field(default_factory=lambda: np.zeros(0))  # (K,) m; 0: never yields
+    tracks: tuple[Keyframes | None, ...] = ()                          # (K,) a keyframe mover's; none: all path movers
 
     def __len__(self) -> int:
         return len(self.loops)
+
+    @cached_property
+    def on_keyframes(self) -> np.ndarray:
+        """Which movers (K,) move on timed keyframes."""
+        return np.array([bool(self.tracks) and self.tracks[k] is not None for k in range(len(self))], bool)
+
+    @cached_property
+    def _keyframe_tracks(self) -> Tracks | None:
+        """The keyframe movers' tracks, evaluated together."""
+        return Tracks([self.tracks[k] for k in np.flatnonzero(self.on_keyframes)]) if self.on_keyframes.any() else None
 
     @cached_property
     def _segments(self) -> tuple[tuple[np.ndarray, np.ndarray], ...]:
@@ -109,15 +126,21 @@ class Movers:
         step = loop[i + 1] - loop[i]
         return loop[i] + step * ((s - (ends[i] - lengths[i])) / lengths[i]), step / lengths[i], i
 
-    def _where(self, moving_s: np.ndarray):
-        for k, speed in enumerate(self.speed):
-            point, direction, _ = self._point(k, speed * moving_s[k])
-            yield point, direction * speed
+    def _state(self, moving_s) -> tuple[np.ndarray, np.ndarray]:
+        """Every mover's position and velocity (K, 2 each) after moving for moving_s[k] seconds."""
+        moving_s = np.broadcast_to(np.asarray(moving_s, np.float64), (len(self),))
+        positions, velocities = np.zeros((len(self), 2)), np.zeros((len(self), 2))
+        if self._keyframe_tracks is not None:
+            keyed = self.on_keyframes
+            positions[keyed], velocities[keyed] = self._keyframe_tracks.state(moving_s[keyed])
+        for k in np.flatnonzero(~self.on_keyframes):
+            point, direction, _ = self._point(k, self.speed[k] * moving_s[k])
+            positions[k], velocities[k] = point, direction * self.speed[k]
+        return positions, velocities
 
     def pose_after(self, moving_s) -> np.ndarray:
-        """Every mover's position (K, 2) after moving for moving_s[k] seconds from its path's start."""
-        moving_s = np.broadcast_to(np.asarray(moving_s, np.float64), (len(self),))
-        return np.array([p for p, _ in self._where(moving_s)]).reshape(-1, 2)
+        """Every mover's position (K, 2) after moving for moving_s[k] seconds from its start."""
+        return self._state(moving_s)[0]
 
     def pose_at(self, t: float) -> np.ndarray:
         """Every mover's position (K, 2) at sim time t had none of them stopped (all start at their
@@ -126,7 +149,7 @@ class Movers:
 
     def velocity_at(self, t: float) -> np.ndarray:
         """Every mover's velocity (K, 2) at sim time t had none of them stopped."""
-        return np.array([v for _, v in self._where(np.full(len(self), t))]).reshape(-1, 2)
+        return self._state(t)[1]
 
     def circles_at(self, t: float) -> np.ndarray:
         """Movers as circles (K, 3) of (x, y, r) at time t had none of them stopped, as the ray
@@ -459,6 +482,34 @@ def _grid_extent(grid: OccupancyGrid) -> tuple[tuple[float, float], tuple[float,
     return (float(xs.min()), float(ys.min())), (float(xs.max() - xs.min()), float(ys.max() - ys.min()))
 
 
+MOVER_KEYS = ("speed", "path", "keyframes", "loop", "interpolation", "yield_distance")
+
+
+def _keyframes(keys: _Keys, mover: dict, where: str, loop: bool) -> Keyframes:
+    """A keyframe mover's track: at least 2 keyframes [t, x, y], times increasing from 0."""
+    for key in ("speed", "path"):
+        if key in mover:
+            keys.fail(f"{where}.{key}", "a mover has speed and path, or keyframes, not both")
+    if "yield_distance" in mover:
+        keys.fail(f"{where}.yield_distance", "a mover on keyframes never yields: where it is depends on the time alone")
+    interpolation = mover.get("interpolation", "linear")
+    if interpolation not in INTERPOLATIONS:
+        keys.fail(f"{where}.interpolation", f"expected {' or '.join(INTERPOLATIONS)}, got {interpolation!r}")
+    rows = keys.items(mover["keyframes"], f"{where}.keyframes")
+    if len(rows) < 2:
+        keys.fail(f"{where}.keyframes", f"expected at least 2 keyframes [t, x, y], got {len(rows)}")
+    frames = np.array([keys.numbers(row, f"{where}.keyframes[{j}]", 3, "a keyframe [t, x, y] (three numbers)")
+                       for j, row in enumerate(rows)])
+    if frames[0, 0] != 0.0:
+        keys.fail(f"{where}.keyframes[0]", f"the first keyframe's time must be 0, got {frames[0, 0]:g}")
+    late = np.flatnonzero(np.diff(frames[:, 0]) <= 0)
+    if len(late):
+        j = int(late[0]) + 1
+        keys.fail(f"{where}.keyframes[{j}]", f"time {frames[j, 0]:g} does not come after {frames[j - 1, 0]:g} "
+                                             "(times must increase)")
+    return Keyframes(frames[:, 0].copy(), frames[:, 1:].copy(), loop, interpolation)
+
+
 # `generated` says how a generated world was made (kind, seed: docs/scenarios.md); the loader reads
 # nothing from it
 WORLD_KEYS = ("name", "bounds", "origin", "map", "walls", "boxes", "circles", "movers", "robot", "goals", "generated")
@@ -526,25 +577,38 @@ def world_from_mapping(doc: dict, path: str | Path) -> World:
         center = keys.numbers(circle["center"], f"circles[{i}].center", 2, "a point [x, y]")
         circles.append([*center, keys.number(circle["radius"], f"circles[{i}].radius", positive=True)])
 
-    radii, speeds, loops, yields = [], [], [], []
+    radii, speeds, loops, yields, tracks = [], [], [], [], []
     for i, mover in enumerate(keys.items(doc.get("movers"), "movers")):
         where = f"movers[{i}]"
-        mover = keys.mapping(mover, where, required=("radius", "speed", "path"), optional=("loop", "yield_distance"))
+        mover = keys.mapping(mover, where, required=("radius",), optional=MOVER_KEYS)
         radii.append(keys.number(mover["radius"], f"{where}.radius", positive=True))
+        loop = mover.get("loop", True)
+        if not isinstance(loop, bool):
+            keys.fail(f"{where}.loop", f"expected true or false, got {loop!r}")
+        if "keyframes" in mover:
+            track = _keyframes(keys, mover, where, loop)
+            speeds.append(0.0)
+            yields.append(0.0)
+            loops.append(track.trace())
+            tracks.append(track)
+            continue
+        for key in ("speed", "path"):
+            if key not in mover:
+                keys.fail(f"{where}.{key}", "missing (a mover needs speed and path, or keyframes)")
+        if "interpolation" in mover:
+            keys.fail(f"{where}.interpolation", "only for a mover on keyframes")
         speeds.append(keys.number(mover["speed"], f"{where}.speed", nonnegative=True))
         yield_distance = mover.get("yield_distance")
         yields.append(0.0 if yield_distance is None else
                       keys.number(yield_distance, f"{where}.yield_distance", positive=True))
         path_points = keys.points(mover["path"], f"{where}.path", 2)
-        loop = mover.get("loop", True)
-        if not isinstance(loop, bool):
-            keys.fail(f"{where}.loop", f"expected true or false, got {loop!r}")
         closed = np.vstack([path_points, path_points[:1]]) if loop else np.vstack([path_points, path_points[-2::-1]])
         steps = np.diff(closed, axis=0)
         closed = closed[np.r_[True, np.hypot(steps[:, 0], steps[:, 1]) > 0]]  # repeated points
         if len(closed) < 2:
             keys.fail(f"{where}.path", "all points are the same: a mover needs a path of some length")
         loops.append(closed)
+        tracks.append(None)
 
     if "robot" not in doc:
         keys.fail("robot", "missing (give at least start: [x, y, yaw])")
@@ -566,7 +630,7 @@ def world_from_mapping(doc: dict, path: str | Path) -> World:
 
     world = World(name=name, origin=(float(x0), float(y0)), bounds=(float(w), float(h)),
                   solids=np.array(solids).reshape(-1, 4, 2), circles=np.array(circles).reshape(-1, 3),
-                  movers=Movers(np.array(radii), np.array(speeds), tuple(loops), np.array(yields)),
+                  movers=Movers(np.array(radii), np.array(speeds), tuple(loops), np.array(yields), tuple(tracks)),
                   robot=Robot(start=start, drive=drive, footprint=footprint), grid=grid,
                   goals=np.array(goals).reshape(-1, 3), source=str(path))
     for where, point in [("robot.start", start), *((f"goals[{i}]", g) for i, g in enumerate(goals))]:

@@ -8,6 +8,7 @@ import pytest
 
 from omninav.services.chassis.kinematics import ChassisParams
 from omninav.sim.body import GRAVITY, BodyParams
+from omninav.sim.contacts import REJOIN_S, ContactLedger
 from omninav.sim.physics import SimParams, Simulation
 from omninav.sim.world import load_world
 
@@ -160,3 +161,17 @@ def test_the_body_outline_is_what_the_world_touches(tmp_path):
         sim = Simulation(world, NO_NOISE, chassis, body=body)
         drive(sim, [(600, (0.5, 0.0, 0.0))])
         assert (sim.collisions >= 1) == touches
+
+
+def test_touching_the_same_thing_again_at_once_continues_the_contact():
+    ledger = ContactLedger()
+    ledger.begin(3, 1.00)
+    ledger.substep({3: False}, 0.002)
+    ledger.end(3, 1.002)
+    ledger.begin(3, 1.05)                    # pushed off and met again: the same push
+    ledger.substep({3: True}, 0.002)
+    ledger.end(3, 1.052)
+    assert (ledger.contacts, ledger.robot_contacts) == (1, 1)
+    assert ledger.longest_s == pytest.approx(0.004)
+    ledger.begin(3, 1.052 + REJOIN_S + 0.01)  # later: a new contact
+    assert ledger.contacts == 2

@@ -147,24 +147,30 @@ def furniture(rng: np.random.Generator, count: int, area: tuple[float, float, fl
     return boxes
 
 
-def world_mapping(bounds, start, goal, *, walls=(), boxes=(), circles=(), movers=()) -> dict:
+def world_mapping(bounds, start, goal, *, origin=None, walls=(), boxes=(), circles=(), movers=(),
+                  robot=None) -> dict:
     """The world file's mapping (docs/worlds.md), every number rounded to the millimetre so the
-    file reads well and the same draw always writes the same bytes."""
+    file reads well and the same draw always writes the same bytes; `robot` adds keys beside the
+    start (drive, footprint)."""
     def mm(value):
         if isinstance(value, dict):
             return {k: mm(v) for k, v in value.items()}
         if isinstance(value, (list, tuple, np.ndarray)):
             return [mm(v) for v in value]
+        if isinstance(value, str):
+            return value
         if isinstance(value, (bool, np.bool_)):
             return bool(value)
         return round(float(value), 3) + 0.0       # + 0.0: no -0.0 in the file
 
     doc = {"bounds": mm(bounds)}
+    if origin is not None:
+        doc["origin"] = mm(origin)
     for key, items in (("walls", walls), ("boxes", boxes), ("circles", circles), ("movers", movers)):
         if len(items):
             doc[key] = mm(list(items))
     doc["goals"] = [mm(goal)]
-    doc["robot"] = {"start": mm(start)}
+    doc["robot"] = {"start": mm(start), **mm(robot or {})}
     return doc
 
 

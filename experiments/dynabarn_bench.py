@@ -1,0 +1,98 @@
+"""`omninav bench dynabarn`: DynaBARN worlds (experiments/scenarios/dynabarn.py) run by BARN's rules.
+
+Each world is drawn from its seed at a difficulty, written to a folder (the services read it from
+the file) and driven as `bench barn` drives a BARN world (experiments/barn.py `drive_to_goal`): one
+lockstep mission in-process with the Jackal's stack, localization `odom`, no map. The rules, as
+the BARN Challenge applies them to its dynamic worlds: start (11, 0, 180°), goal 20 m ahead at
+(−9, 0); success = the robot's centre within 1 m of the goal within 100 s of when it starts moving
+with no contact of any kind — every collision the simulator counts (sim/physics.py), the robot's
+fault or a mover's alike (both are reported); score = success × OT / clip(t, 2·OT, 8·OT) with
+OT = 10 s (20 m at the Jackal's 2 m/s). Seeds 0–99 of each difficulty are for tuning, 100100–100199
+for reporting (docs/dynabarn.md).
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+from ..services.runtime.errors import exits_2_on_user_error
+from ..sim.world import load_world
+from .barn import Verdict, drive_to_goal, judge, tally
+from .scenarios import ScenarioError, generate_world, world_text
+from .scenarios.dynabarn import DIFFICULTIES
+from .workers import run_in_workers
+
+KIND = "dynabarn"
+OT_S = 10.0        # s: DynaBARN's optimal time, the 20 m from start to goal at the Jackal's 2 m/s
+
+
+@dataclass
+class DynaBarnResult(Verdict):
+    difficulty: str
+    seed: int
+    robot_fault_collisions: int
+    mover_fault_collisions: int
+
+
+def run_seed(job: tuple[str, int, str]) -> DynaBarnResult:
+    """One world: draw it, write it into the folder, drive it, judge it."""
+    difficulty, seed, folder = job
+    world_file = Path(folder) / f"{KIND}-{difficulty}-{seed}.yaml"
+    world_file.write_text(world_text(generate_world(KIND, seed, difficulty)))
+    world = load_world(world_file)
+    watch, run = drive_to_goal(world, seed, world.robot.start, world.goals[0])
+    sim = run.nodes["sim"].sim
+    return DynaBarnResult(**asdict(judge(watch, sim.collisions > 0, OT_S)), difficulty=difficulty, seed=seed,
+                          robot_fault_collisions=sim.robot_fault_collisions,
+                          mover_fault_collisions=sim.mover_fault_collisions)
+
+
+def figures(results: list[DynaBarnResult]) -> dict:
+    """BARN's tally of the runs (experiments/barn.py) and the contacts split by fault."""
+    return {**tally(results), "robot_fault_collisions": sum(r.robot_fault_collisions for r in results),
+            "mover_fault_collisions": sum(r.mover_fault_collisions for r in results)}
+
+
+def run_line(r: DynaBarnResult) -> str:
+    time = "-" if r.time_s is None else f"{r.time_s:6.1f} s"
+    return (f"{KIND}-{r.difficulty}-{r.seed}: {'success' if r.success else 'FAIL   '} contacts "
+            f"{r.robot_fault_collisions} robot's, {r.mover_fault_collisions} movers' timeout {r.timeout!s:5} "
+            f"time {time} score {r.score:.3f}")
+
+
+def add_arguments(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--difficulty", nargs="+", choices=DIFFICULTIES, default=list(DIFFICULTIES),
+                        help="one or more of easy, medium, hard (default all three)")
+    parser.add_argument("--count", type=int, default=20, help="worlds per difficulty (default 20)")
+    parser.add_argument("--seed", type=int, default=0,
+                        help="the first world's seed (default 0; 0-99 are for tuning, 100100-100199 for reporting)")
+    parser.add_argument("--workers", type=int, default=2, help="missions driven at once, one process each (default 2)")
+    parser.add_argument("-o", "--out", type=Path, help="keep the worlds in this folder (default: a temporary one)")
+
+
+@exits_2_on_user_error("bench dynabarn")
+def main(args: argparse.Namespace) -> int:
+    if args.count < 1 or args.workers < 1 or args.seed < 0:
+        raise ScenarioError(f"--count and --workers must be >= 1 and --seed >= 0, got {args.count}, "
+                            f"{args.workers} and {args.seed}")
+    if args.out is not None and not args.out.is_dir():
+        raise ScenarioError(f"-o {args.out}: no such folder")
+    difficulties = list(dict.fromkeys(args.difficulty))
+    with tempfile.TemporaryDirectory(prefix="dynabarn-") as scratch:
+        folder = str(args.out or scratch)
+        jobs = [(d, seed, folder) for d in difficulties for seed in range(args.seed, args.seed + args.count)]
+        results = run_in_workers(run_seed, jobs, args.workers, None if args.json else lambda r: print(run_line(r), flush=True))
+    by_difficulty = {d: figures([r for r in results if r.difficulty == d]) for d in difficulties}
+    if args.json:
+        print(json.dumps({"seeds": [args.seed, args.seed + args.count - 1], "ot_s": OT_S, "difficulties": by_difficulty,
+                          "runs": [asdict(r) for r in results]}))
+        return 0
+    for d, f in by_difficulty.items():
+        median = "-" if f["median_time_s"] is None else f"{f['median_time_s']:.1f} s"
+        print(f"{d:6}: {f['runs']} runs, success {f['success_rate']:.3f}, runs with a contact {f['collisions']} "
+              f"({f['robot_fault_collisions']} contacts the robot's fault, {f['mover_fault_collisions']} a mover's), "
+              f"timeouts {f['timeouts']}, mean score {f['mean_score']:.3f}, median time {median}")
+    return 0
