@@ -4,9 +4,11 @@ goal with the stack `omninav navigate` composes (cli/navigate.py compose_for) �
 world, as fast as the CPU computes, on --workers processes.
 
 Per world and overall: success (the goal reached — the navigator said so and the truth agrees —
-and no collision that was the robot's fault), false arrivals (succeeded, but far from the goal),
-robot-fault and mover-fault collisions, the closest the footprint came to a mover, the sim time,
-the driven path against the first global plan, and when the robot first came within 1 m of the goal.
+and no contact of any kind), false arrivals (succeeded, but far from the goal), robot-fault and
+mover-fault collisions and the seconds in contact, the closest the footprint came to a mover, the
+sim time, the driven path against the first global plan, and when the robot first came within
+1 m of the goal. `--real-time` drives each world again on the wall clock (experiments/realtime.py),
+one at a time, and reports it beside the lockstep figure.
 """
 from __future__ import annotations
 
@@ -21,6 +23,7 @@ from ..services.chassis.kinematics import DRIVES
 from ..services.runtime.errors import exits_2_on_user_error
 from ..sim.world import load_world
 from ..experiments.lockstep_mission import run_mission
+from ..experiments.realtime import run_live
 from ..experiments.workers import run_in_workers
 from ..experiments.scenarios import EXPLORE_KINDS, ScenarioError, check_kind, generate_world, world_text
 
@@ -39,6 +42,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--out", help="folder for the worlds and maps (default out/scenarios-<kind>-<date>-<time>)")
     parser.add_argument("--record", action="store_true",
                         help="record each mission to run.mcap in its world's folder (to replay or read a failure)")
+    parser.add_argument("--real-time", action="store_true",
+                        help="also drive every world on the wall clock, every service its own process, one at a "
+                             "time, and report it beside the lockstep figure")
 
 
 def drive_world(job: tuple[str, int, str | None, str, float, str, bool]) -> dict:
@@ -55,11 +61,27 @@ def drive_world(job: tuple[str, int, str | None, str, float, str, bool]) -> dict
     began = time.monotonic()
     run = run_mission(compose["services"], world, world.goals, timeout_s=timeout_s,
                       recording=folder / "run.mcap" if record else None)
-    summary = run.summary.to_json()
-    goal = summary["goals"][0] if summary["goals"] else {}
-    return {"world": world.name, "seed": seed, "drive": drive, **{k: summary[k] for k in (
-        "success", "collisions", "robot_fault_collisions", "mover_fault_collisions", "shoved_collisions",
-        "min_mover_clearance_m", "min_clearance_m", "time_s", "path_length_m", "plan_length_m", "final_xy_error_m")},
+    return scenario_row(world.name, seed, drive, run.summary.to_json(), began)
+
+
+def drive_world_live(job: tuple[str, int, str | None, str, float, str, bool]) -> dict:
+    """The world drive_world wrote, on the wall clock (experiments/realtime.py)."""
+    kind, seed, drive, localization, timeout_s, out, _ = job
+    folder = Path(out) / f"{kind}-{seed}"
+    world_file = folder / "world.yaml"
+    world = load_world(world_file)
+    began = time.monotonic()
+    run = run_live(world_file, world.goals, folder / "real-time", localization=localization, timeout_s=timeout_s,
+                   seed=seed, drive=drive or world.robot.drive)
+    return scenario_row(world.name, seed, drive or world.robot.drive, run.summary or {}, began)
+
+
+def scenario_row(name: str, seed: int, drive: str, summary: dict, began: float) -> dict:
+    goal = summary["goals"][0] if summary.get("goals") else {}
+    return {"world": name, "seed": seed, "drive": drive, **{k: summary.get(k) for k in (
+        "collisions", "robot_fault_collisions", "mover_fault_collisions", "shoved_collisions",
+        "min_mover_clearance_m", "min_clearance_m", "time_s", "path_length_m", "plan_length_m", "final_xy_error_m",
+        "contact_s", "robot_contact_s")}, "success": bool(summary.get("success")),
         "status": goal.get("status", "none"), "reached": goal.get("reached", False), "within_1m_s": goal.get("within_1m_s"),
         "wall_s": round(time.monotonic() - began, 1)}
 
@@ -91,6 +113,7 @@ def overall(rows: list[dict]) -> dict:
             "robot_fault_collisions": sum(r["robot_fault_collisions"] or 0 for r in rows),
             "mover_fault_collisions": sum(r["mover_fault_collisions"] or 0 for r in rows),
             "shoved_collisions": sum(r["shoved_collisions"] or 0 for r in rows),
+            "contact_s": sum(r.get("contact_s") or 0.0 for r in rows),
             "worlds_with_robot_fault": sum(bool(r["robot_fault_collisions"]) for r in rows),
             "false_arrivals": sum(r["status"] == "succeeded" and not r["reached"] for r in rows),
             "closest_mover_approach_m": min(approaches) if approaches else None,
@@ -117,13 +140,26 @@ def main(args: argparse.Namespace) -> int:
     rows = run_in_workers(drive_world, jobs, args.workers, None if args.json else lambda r: print(row_line(r), flush=True))
     figures = {"kind": args.kind, "seeds": [args.seed, args.seed + args.count - 1], "drive": args.drive or "world's",
                "localization": args.localization, **overall(rows), "rows": rows}
+    if args.real_time:
+        live = []
+        for job in jobs:
+            live.append(drive_world_live(job))
+            if not args.json:
+                print("real time " + row_line(live[-1]), flush=True)
+        figures["real_time"] = {**overall(live), "rows": live}
     if args.json:
         print(json.dumps(figures))
     else:
-        print(f"success {figures['success_rate']:.0%} ({sum(r['success'] for r in rows)}/{len(rows)}), collisions: "
-              f"{figures['robot_fault_collisions']} the robot's fault (in {figures['worlds_with_robot_fault']} worlds), "
-              f"{figures['mover_fault_collisions']} a mover's ({figures['shoved_collisions']} of them the robot "
-              f"shoved into a wall); closest to a mover "
-              f"{_fmt(figures['closest_mover_approach_m'], '.3f')} m; median {figures['median_time_s']:.1f} sim s, "
-              f"path/plan {_fmt(figures['median_path_over_plan'], '.2f')}")
-    return 0 if figures["success_rate"] == 1.0 and figures["robot_fault_collisions"] == 0 else 1
+        for how, f in (("lockstep: " if args.real_time else "", figures), ("real time: ", figures.get("real_time"))):
+            if f is not None:
+                print(how + summary_line(f))
+    return 0 if figures["success_rate"] == 1.0 else 1
+
+
+def summary_line(f: dict) -> str:
+    return (f"success {f['success_rate']:.0%} ({round(f['success_rate'] * f['worlds'])}/{f['worlds']}, no contact of "
+            f"any kind), contacts: {f['robot_fault_collisions']} the robot's fault (in {f['worlds_with_robot_fault']} "
+            f"worlds), {f['mover_fault_collisions']} a mover's ({f['shoved_collisions']} of them the robot shoved "
+            f"into a wall), {f['contact_s']:.2f} s in contact; closest to a mover "
+            f"{_fmt(f['closest_mover_approach_m'], '.3f')} m; median {f['median_time_s']:.1f} sim s, "
+            f"path/plan {_fmt(f['median_path_over_plan'], '.2f')}")

@@ -165,14 +165,21 @@ def run_world(world_file: Path, path_file: Path, seed: int) -> WorldResult:
 
 def run_world_live(world_file: Path, path_file: Path, seed: int, out: Path) -> WorldResult:
     """One BARN run on the wall clock, every service its own process (experiments/realtime.py)."""
-    run = run_live(world_file, np.array([GOAL]), out, profile=PROFILE, localization="odom",
+    verdict, _ = drive_to_goal_live(world_file, seed, START, GOAL, optimal_time(np.load(path_file)), out)
+    return WorldResult(world=world_number(world_file), **asdict(verdict))
+
+
+def drive_to_goal_live(world_file: Path, seed: int, start, goal, ot_s: float, out: Path) -> tuple[Verdict, dict]:
+    """drive_to_goal on the wall clock (experiments/realtime.py), judged by the same rules from the
+    recorded truth; the verdict and navigate's summary."""
+    run = run_live(world_file, np.array([goal]), out, profile=PROFILE, localization="odom",
                    timeout_s=TIME_LIMIT_S + START_WAIT_S, seed=seed, sim_dt=SIM_DT)
-    watch = ArrivalWatch(START, GOAL, ROBOT)
+    watch = ArrivalWatch(start, goal, ROBOT)
     for record in read_records(run.recording, [watch.truth_key]):
         watch.see(record.key, record.payload, record.stamp_ns)
     summary = run.summary or {}
     collision = summary.get("collisions") != 0 or summary.get("min_clearance_m", 0.0) <= 0.0
-    return WorldResult(world=world_number(world_file), **asdict(judge(watch, collision, optimal_time(np.load(path_file)))))
+    return judge(watch, collision, ot_s), summary
 
 
 def world_number(path: Path) -> int:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from ..services.runtime.errors import exits_2_on_user_error
 from ..sim.world import load_world
-from .barn import Verdict, drive_to_goal, judge, tally
+from .barn import Verdict, drive_to_goal, drive_to_goal_live, judge, tally
 from .scenarios import ScenarioError, generate_world, world_text
 from .scenarios.dynabarn import DIFFICULTIES
 from .workers import run_in_workers
@@ -50,6 +50,18 @@ def run_seed(job: tuple[str, int, str]) -> DynaBarnResult:
                           mover_fault_collisions=sim.mover_fault_collisions)
 
 
+def run_seed_live(difficulty: str, seed: int, folder: Path) -> DynaBarnResult:
+    """The same world on the wall clock, every service its own process (experiments/realtime.py)."""
+    world_file = folder / f"{KIND}-{difficulty}-{seed}.yaml"
+    world_file.write_text(world_text(generate_world(KIND, seed, difficulty)))
+    world = load_world(world_file)
+    verdict, summary = drive_to_goal_live(world_file, seed, world.robot.start, world.goals[0], OT_S,
+                                          folder / f"{KIND}-{difficulty}-{seed}-real-time")
+    return DynaBarnResult(**asdict(verdict), difficulty=difficulty, seed=seed,
+                          robot_fault_collisions=summary.get("robot_fault_collisions") or 0,
+                          mover_fault_collisions=summary.get("mover_fault_collisions") or 0)
+
+
 def figures(results: list[DynaBarnResult]) -> dict:
     """BARN's tally of the runs (experiments/barn.py) and the contacts split by fault."""
     return {**tally(results), "robot_fault_collisions": sum(r.robot_fault_collisions for r in results),
@@ -71,6 +83,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help="the first world's seed (default 0; 0-99 are for tuning, 100100-100199 for reporting)")
     parser.add_argument("--workers", type=int, default=2, help="missions driven at once, one process each (default 2)")
     parser.add_argument("-o", "--out", type=Path, help="keep the worlds in this folder (default: a temporary one)")
+    parser.add_argument("--real-time", action="store_true",
+                        help="also run every world on the wall clock, every service its own process, one world "
+                             "at a time, and report it beside the lockstep figure")
 
 
 @exits_2_on_user_error("bench dynabarn")
@@ -85,14 +100,24 @@ def main(args: argparse.Namespace) -> int:
         folder = str(args.out or scratch)
         jobs = [(d, seed, folder) for d in difficulties for seed in range(args.seed, args.seed + args.count)]
         results = run_in_workers(run_seed, jobs, args.workers, None if args.json else lambda r: print(run_line(r), flush=True))
+        live = []
+        for difficulty, seed, _ in jobs if args.real_time else ():
+            live.append(run_seed_live(difficulty, seed, Path(folder)))
+            if not args.json:
+                print("real time " + run_line(live[-1]), flush=True)
     by_difficulty = {d: figures([r for r in results if r.difficulty == d]) for d in difficulties}
+    live_by_difficulty = {d: figures([r for r in live if r.difficulty == d]) for d in difficulties} if live else None
     if args.json:
         print(json.dumps({"seeds": [args.seed, args.seed + args.count - 1], "ot_s": OT_S, "difficulties": by_difficulty,
-                          "runs": [asdict(r) for r in results]}))
+                          "runs": [asdict(r) for r in results],
+                          **({"real_time": {"difficulties": live_by_difficulty, "runs": [asdict(r) for r in live]}}
+                             if live else {})}))
         return 0
-    for d, f in by_difficulty.items():
-        median = "-" if f["median_time_s"] is None else f"{f['median_time_s']:.1f} s"
-        print(f"{d:6}: {f['runs']} runs, success {f['success_rate']:.3f}, runs with a contact {f['collisions']} "
-              f"({f['robot_fault_collisions']} contacts the robot's fault, {f['mover_fault_collisions']} a mover's), "
-              f"timeouts {f['timeouts']}, mean score {f['mean_score']:.3f}, median time {median}")
+    for how, tallies in (("lockstep  " if live else "", by_difficulty), ("real time ", live_by_difficulty)):
+        for d, f in (tallies or {}).items():
+            median = "-" if f["median_time_s"] is None else f"{f['median_time_s']:.1f} s"
+            print(f"{how}{d:6}: {f['runs']} runs, success {f['success_rate']:.3f}, runs with a contact "
+                  f"{f['collisions']} ({f['robot_fault_collisions']} contacts the robot's fault, "
+                  f"{f['mover_fault_collisions']} a mover's), timeouts {f['timeouts']}, mean score "
+                  f"{f['mean_score']:.3f}, median time {median}")
     return 0

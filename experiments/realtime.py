@@ -34,8 +34,8 @@ class LiveRun:
     exit_code: int
 
 
-def run_live(world_file: Path, goals: np.ndarray, out: Path, *, profile: str | None, localization: str,
-             timeout_s: float, seed: int, sim_dt: float | None = None) -> LiveRun:
+def run_live(world_file: Path, goals: np.ndarray, out: Path, *, profile: str | None = None, localization: str,
+             timeout_s: float, seed: int, sim_dt: float | None = None, drive: str | None = None) -> LiveRun:
     """`omninav navigate` on the wall clock (rate 1) in `out`; goals (K, 3) in metres and radians."""
     out.mkdir(parents=True, exist_ok=True)
     recording = out / "run.mcap"
@@ -49,6 +49,8 @@ def run_live(world_file: Path, goals: np.ndarray, out: Path, *, profile: str | N
         command += ["--profile", profile]
     if sim_dt:
         command += ["--sim-dt", repr(sim_dt)]
+    if drive:
+        command += ["--drive", drive]
     with open(out / "navigate.log", "wb") as log:
         child = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=log, start_new_session=True)
         try:

@@ -123,12 +123,12 @@ def test_bench_figures_over_the_worlds():
     def row(success, robot, mover, approach, time_s, path, plan, status="succeeded", shoved=0):
         return {"success": success, "robot_fault_collisions": robot, "mover_fault_collisions": mover, "shoved_collisions": shoved,
                 "min_mover_clearance_m": approach, "time_s": time_s, "path_length_m": path, "plan_length_m": plan,
-                "status": status, "reached": success}
+                "status": status, "reached": success, "contact_s": 0.25 * (robot + mover)}
     figures = overall([row(True, 0, 0, 0.4, 20.0, 10.0, 10.0), row(False, 2, 1, 0.0, 60.0, 15.0, 10.0),
                        row(True, 0, 3, 0.0, 30.0, 11.0, 10.0, shoved=1), row(False, 0, 0, None, 40.0, 1.0, None, "aborted")])
     assert figures["success_rate"] == 0.5 and figures["worlds"] == 4
     assert (figures["robot_fault_collisions"], figures["mover_fault_collisions"], figures["worlds_with_robot_fault"]) == (2, 4, 1)
-    assert figures["shoved_collisions"] == 1
+    assert figures["shoved_collisions"] == 1 and figures["contact_s"] == pytest.approx(1.5)
     assert figures["false_arrivals"] == 1                               # the second: succeeded, not reached
     assert figures["closest_mover_approach_m"] == 0.0 and figures["median_time_s"] == 35.0
     assert figures["median_path_over_plan"] == pytest.approx(1.1)           # of the worlds with a plan
