@@ -68,6 +68,7 @@ class PeopleParams(Parameters):
     anticipation_time: float = param(3.0, gt=0)         # s, τ0 (same)
     anticipation_max: float = param(5.0, gt=0)          # m/s², the most one encounter makes a person swerve or brake
     right_preference: float = param(0.3, ge=0)          # sideways to the right per unit of braking for someone ahead
+    sensing_range: float = param(10.0, gt=0)            # m: people farther apart ignore each other (the cost is N²)
     stop_deceleration: float = param(0.6, gt=0)         # m/s², how a person slows towards where it will stand
     waypoint_reach: float = param(0.5, gt=0)            # m from a waypoint (plus a group's spread) that counts as there
 
@@ -110,21 +111,14 @@ class RobotShape:
     outline: np.ndarray
     velocity: np.ndarray = field(default_factory=lambda: np.zeros(2))
 
-    @property
-    def disc(self) -> np.ndarray:
-        """(x, y, r): the circle round the outline from its vertices' mean."""
-        if len(self.outline) == 0:
-            return np.zeros(3)
-        centre = self.outline.mean(axis=0)
-        return np.array([*centre, np.hypot(*(self.outline - centre).T).max()])
-
 
 _NO_ROBOT = RobotShape(np.zeros((0, 2)))
 
 
 # where each constant sits in the array the kernel takes (numba reads module-level ints as constants)
 (INV_TAU, SOCIAL_A, SOCIAL_B, LAMBDA, NEAR_A, NEAR_B, WALL_A, WALL_B, STIFFNESS, FRICTION, GAZE, VISION, ATTRACT,
- GROUP_PUSH, GROUP_GAP, ANTICIPATE_K, ANTICIPATE_T, ANTICIPATE_MAX, RIGHT) = range(19)
+ GROUP_PUSH, GROUP_GAP, ANTICIPATE_K, ANTICIPATE_T, ANTICIPATE_MAX, RIGHT, SENSING) = range(20)
+REACH = 10.0         # ranges (B) beyond which an exponential force is left out: exp(−10) of its strength
 
 
 @lru_cache(maxsize=8)
@@ -135,7 +129,7 @@ def _coefficients(params: PeopleParams) -> np.ndarray:
                      p.near_range, p.wall_strength, p.wall_range, p.body_stiffness / p.mass,
                      p.sliding_friction / p.mass, p.gaze_strength, p.vision_angle, p.attraction,
                      p.group_repulsion, p.group_gap, p.anticipation_strength, p.anticipation_time,
-                     p.anticipation_max, p.right_preference])
+                     p.anticipation_max, p.right_preference, p.sensing_range])
 
 
 def accelerations(state: State, obstacles: Obstacles, robot: RobotShape | None, params: PeopleParams) -> np.ndarray:
@@ -146,7 +140,7 @@ def accelerations(state: State, obstacles: Obstacles, robot: RobotShape | None, 
                    state.reactive, state.active, np.ascontiguousarray(obstacles.segments, np.float64),
                    np.ascontiguousarray(obstacles.circles, np.float64),
                    np.ascontiguousarray(robot.outline, np.float64), np.asarray(robot.velocity, np.float64),
-                   robot.disc, _coefficients(params), out)
+                   _coefficients(params), out)
     return out
 
 
@@ -176,23 +170,28 @@ def _contact(g, nx, ny, dvx, dvy, k, kappa):
 
 
 @njit(cache=True)
+def _weight(nx, ny, ex, ey, c):
+    """How much a body in direction −n counts for someone walking along e: 1 straight ahead, λ behind
+    (zero e, standing: all around alike)."""
+    if ex == 0.0 and ey == 0.0:
+        return 1.0
+    return c[LAMBDA] + (1.0 - c[LAMBDA]) * 0.5 * (1.0 - (nx * ex + ny * ey))
+
+
+@njit(cache=True)
 def _social(gap, nx, ny, ex, ey, c):
     """Repulsion (per unit mass) from a body `gap` m away (negative: overlapping) in direction −n,
-    weighted by where it lies relative to the walking direction e (zero e: all around alike)."""
-    w = 1.0
-    if ex != 0.0 or ey != 0.0:
-        w = c[LAMBDA] + (1.0 - c[LAMBDA]) * 0.5 * (1.0 - (nx * ex + ny * ey))
-    f = c[SOCIAL_A] * math.exp(-gap / c[SOCIAL_B]) * w + c[NEAR_A] * math.exp(-gap / c[NEAR_B])
+    for someone walking along e."""
+    f = c[SOCIAL_A] * math.exp(-gap / c[SOCIAL_B]) * _weight(nx, ny, ex, ey, c) + c[NEAR_A] * math.exp(-gap / c[NEAR_B])
     return f * nx, f * ny
 
 
 @njit(cache=True)
-def _anticipation(xx, xy, vx, vy, r, ex, ey, c):
+def _anticipation(xx, xy, vx, vy, r, c):
     """Evasion (per unit mass) of a body at relative position x (from it to oneself) and relative
     velocity v (one's own less its) that one would touch, combined radius r, in τ seconds: the
     gradient of k τ⁻² exp(−τ/τ0) (Karamouzas, Skinner & Guy 2014), along where the contact would be
-    — sideways for a near miss — capped at anticipation_max, plus a sidestep to the right in
-    proportion to its braking, so two people exactly head-on do not stop nose to nose."""
+    — sideways for a near miss — capped at anticipation_max. The same for both of a pair, opposite."""
     a = vx * vx + vy * vy
     b = -(xx * vx + xy * vy)
     gap2 = xx * xx + xy * xy - r * r
@@ -209,6 +208,13 @@ def _anticipation(xx, xy, vx, vy, r, ex, ey, c):
     size = math.sqrt(fx * fx + fy * fy)
     if size > c[ANTICIPATE_MAX]:
         fx, fy = fx * c[ANTICIPATE_MAX] / size, fy * c[ANTICIPATE_MAX] / size
+    return fx, fy
+
+
+@njit(cache=True)
+def _sidestep(fx, fy, ex, ey, c):
+    """An evasion plus a step to the right in proportion to how much it brakes someone walking along
+    e, so two people exactly head-on do not stop nose to nose."""
     braking = -(fx * ex + fy * ey)
     if braking > 0.0:
         fx += c[RIGHT] * braking * ey
@@ -234,77 +240,119 @@ def _unit(dx, dy, fallback_x, fallback_y):
 
 @njit(cache=True)
 def _accelerations(pos, vel, radius, speed, target, group, reactive, active, segments, circles, outline,
-                   robot_vel, disc, c, out):
+                   robot_vel, c, out):
     n = pos.shape[0]
-    inv_tau, k, kappa = c[INV_TAU], c[STIFFNESS], c[FRICTION]
+    disc = disc_around(outline)
+    walk = np.zeros((n, 2))                   # walking directions
+    members = np.ones(n)                      # group members, and the sum of their positions
+    centre = pos.copy()
+    for i in range(n):
+        if active[i]:
+            walk[i, 0], walk[i, 1], _ = _unit(target[i, 0] - pos[i, 0], target[i, 1] - pos[i, 1], 0.0, 0.0)
+            out[i, 0] = (speed[i] * walk[i, 0] - vel[i, 0]) * c[INV_TAU]
+            out[i, 1] = (speed[i] * walk[i, 1] - vel[i, 1]) * c[INV_TAU]
+    # each pair once: the distance terms, the contact and the time to collision are the same for both
+    # of a pair (opposite), only the weights and the sidesteps differ
     for i in range(n):
         if not active[i]:
             continue
-        px, py, vx, vy, ri = pos[i, 0], pos[i, 1], vel[i, 0], vel[i, 1], radius[i]
-        ex, ey, _ = _unit(target[i, 0] - px, target[i, 1] - py, 0.0, 0.0)
-        ax = (speed[i] * ex - vx) * inv_tau
-        ay = (speed[i] * ey - vy) * inv_tau
-
-        members, cx, cy = 1, px, py
-        for j in range(n):
-            if j == i or not active[j]:
+        for j in range(i + 1, n):
+            if not active[j]:
                 continue
-            # coincident centres: a fixed direction by index, so the pair still separates
-            nx, ny, d = _unit(px - pos[j, 0], py - pos[j, 1], 1.0 if i < j else -1.0, 0.0)
-            gap = d - ri - radius[j]
+            friends = group[i] >= 0 and group[j] == group[i]
+            dx, dy = pos[i, 0] - pos[j, 0], pos[i, 1] - pos[j, 1]
+            if not friends and dx * dx + dy * dy > c[SENSING] * c[SENSING]:
+                continue
+            # coincident centres: a fixed direction, so the pair still separates
+            nx, ny, d = _unit(dx, dy, 1.0, 0.0)
+            gap = d - radius[i] - radius[j]
             if gap < 0.0:
-                fx, fy = _contact(-gap, nx, ny, vel[j, 0] - vx, vel[j, 1] - vy, k, kappa)
-                ax += fx
-                ay += fy
-            if group[i] >= 0 and group[j] == group[i]:
+                fx, fy = _contact(-gap, nx, ny, vel[j, 0] - vel[i, 0], vel[j, 1] - vel[i, 1], c[STIFFNESS],
+                                  c[FRICTION])
+                out[i, 0] += fx
+                out[i, 1] += fy
+                out[j, 0] -= fx
+                out[j, 1] -= fy
+            if friends:
                 # friends keep no personal distance from each other: the group's own terms space them
-                members += 1
-                cx += pos[j, 0]
-                cy += pos[j, 1]
+                members[i] += 1.0
+                members[j] += 1.0
+                centre[i, 0] += pos[j, 0]
+                centre[i, 1] += pos[j, 1]
+                centre[j, 0] += pos[i, 0]
+                centre[j, 1] += pos[i, 1]
                 if gap < c[GROUP_GAP]:
-                    ax += c[GROUP_PUSH] * nx
-                    ay += c[GROUP_PUSH] * ny
+                    out[i, 0] += c[GROUP_PUSH] * nx
+                    out[i, 1] += c[GROUP_PUSH] * ny
+                    out[j, 0] -= c[GROUP_PUSH] * nx
+                    out[j, 1] -= c[GROUP_PUSH] * ny
                 continue
-            fx, fy = _social(gap, nx, ny, ex, ey, c)
-            gx, gy = _anticipation(px - pos[j, 0], py - pos[j, 1], vx - vel[j, 0], vy - vel[j, 1], ri + radius[j],
-                                   ex, ey, c)
-            ax += fx + gx
-            ay += fy + gy
+            fi = fj = 0.0
+            if gap < REACH * max(c[SOCIAL_B], c[NEAR_B]):
+                social = c[SOCIAL_A] * math.exp(-gap / c[SOCIAL_B])
+                near = c[NEAR_A] * math.exp(-gap / c[NEAR_B])
+                fi = social * _weight(nx, ny, walk[i, 0], walk[i, 1], c) + near
+                fj = social * _weight(-nx, -ny, walk[j, 0], walk[j, 1], c) + near
+            gx, gy = _anticipation(dx, dy, vel[i, 0] - vel[j, 0], vel[i, 1] - vel[j, 1], radius[i] + radius[j],
+                                   c)
+            hx, hy = _sidestep(gx, gy, walk[i, 0], walk[i, 1], c)
+            out[i, 0] += fi * nx + hx
+            out[i, 1] += fi * ny + hy
+            hx, hy = _sidestep(-gx, -gy, walk[j, 0], walk[j, 1], c)
+            out[j, 0] += -fj * nx + hx
+            out[j, 1] += -fj * ny + hy
+    for i in range(n):
+        if active[i]:
+            _surroundings(i, pos, vel, radius, walk, members, centre, reactive[i], segments, circles, outline,
+                          robot_vel, disc, c, out)
 
-        if members > 1:
-            ux, uy, dist = _unit(cx / members - px, cy / members - py, 0.0, 0.0)
-            if dist > 0.5 * (members - 1):
-                ax += c[ATTRACT] * ux
-                ay += c[ATTRACT] * uy
-            v = math.sqrt(vx * vx + vy * vy)
-            if v > 1e-9 and dist > 0.0:
-                turn = math.acos(min(1.0, max(-1.0, (vx * ux + vy * uy) / v))) - c[VISION]
-                if turn > 0.0:
-                    ax -= c[GAZE] * turn * vx
-                    ay -= c[GAZE] * turn * vy
 
-        for s in range(segments.shape[0]):
-            x1, y1, x2, y2 = segments[s, 0], segments[s, 1], segments[s, 2], segments[s, 3]
-            if (px - x1) * (y2 - y1) - (py - y1) * (x2 - x1) < 0.0:
-                continue                      # inside the solid's half-plane: its near face acts
-            qx, qy = _nearest_on_segment(px, py, x1, y1, x2, y2)
-            outward_x, outward_y, _ = _unit(y2 - y1, x1 - x2, 0.0, 0.0)
-            nx, ny, d = _unit(px - qx, py - qy, outward_x, outward_y)
-            ax, ay = _wall(ax, ay, d - ri, nx, ny, vx, vy, c)
-        for m in range(circles.shape[0]):
-            nx, ny, d = _unit(px - circles[m, 0], py - circles[m, 1], 1.0, 0.0)
-            ax, ay = _wall(ax, ay, d - circles[m, 2] - ri, nx, ny, vx, vy, c)
-            # a pillar in one's way is walked round, not into
-            fx, fy = _anticipation(px - circles[m, 0], py - circles[m, 1], vx, vy, ri + circles[m, 2], ex, ey, c)
-            ax += fx
-            ay += fy
+@njit(cache=True)
+def _surroundings(i, pos, vel, radius, walk, members, centre, reactive, segments, circles, outline, robot_vel, disc,
+                  c, out):
+    """What person i's group, the walls, the static circles and the robot do to it."""
+    px, py, vx, vy, ri = pos[i, 0], pos[i, 1], vel[i, 0], vel[i, 1], radius[i]
+    ex, ey = walk[i, 0], walk[i, 1]
+    ax, ay = out[i, 0], out[i, 1]
+    if members[i] > 1.0:
+        ux, uy, dist = _unit(centre[i, 0] / members[i] - px, centre[i, 1] / members[i] - py, 0.0, 0.0)
+        if dist > 0.5 * (members[i] - 1.0):
+            ax += c[ATTRACT] * ux
+            ay += c[ATTRACT] * uy
+        v = math.sqrt(vx * vx + vy * vy)
+        if v > 1e-9 and dist > 0.0:
+            turn = math.acos(min(1.0, max(-1.0, (vx * ux + vy * uy) / v))) - c[VISION]
+            if turn > 0.0:
+                ax -= c[GAZE] * turn * vx
+                ay -= c[GAZE] * turn * vy
 
-        if reactive[i] and outline.shape[0] >= 3:
-            fx, fy = _robot(px, py, vx, vy, ri, ex, ey, outline, robot_vel, disc, c)
-            ax += fx
-            ay += fy
-        out[i, 0] = ax
-        out[i, 1] = ay
+    reach = ri + REACH * c[WALL_B]
+    for s in range(segments.shape[0]):
+        x1, y1, x2, y2 = segments[s, 0], segments[s, 1], segments[s, 2], segments[s, 3]
+        if (px + reach < min(x1, x2) or px - reach > max(x1, x2) or py + reach < min(y1, y2)
+                or py - reach > max(y1, y2)):
+            continue                          # too far to be felt
+        if (px - x1) * (y2 - y1) - (py - y1) * (x2 - x1) < 0.0:
+            continue                          # inside the solid's half-plane: its near face acts
+        qx, qy = _nearest_on_segment(px, py, x1, y1, x2, y2)
+        outward_x, outward_y, _ = _unit(y2 - y1, x1 - x2, 0.0, 0.0)
+        nx, ny, d = _unit(px - qx, py - qy, outward_x, outward_y)
+        ax, ay = _wall(ax, ay, d - ri, nx, ny, vx, vy, c)
+    for m in range(circles.shape[0]):
+        nx, ny, d = _unit(px - circles[m, 0], py - circles[m, 1], 1.0, 0.0)
+        ax, ay = _wall(ax, ay, d - circles[m, 2] - ri, nx, ny, vx, vy, c)
+        # a pillar in one's way is walked round, not into
+        fx, fy = _anticipation(px - circles[m, 0], py - circles[m, 1], vx, vy, ri + circles[m, 2], c)
+        fx, fy = _sidestep(fx, fy, ex, ey, c)
+        ax += fx
+        ay += fy
+
+    if reactive and outline.shape[0] >= 3:
+        fx, fy = _robot(px, py, vx, vy, ri, ex, ey, outline, robot_vel, disc, c)
+        ax += fx
+        ay += fy
+    out[i, 0] = ax
+    out[i, 1] = ay
 
 
 @njit(cache=True)
@@ -320,9 +368,8 @@ def _wall(ax, ay, gap, nx, ny, vx, vy, c):
 
 
 @njit(cache=True)
-def _robot(px, py, vx, vy, ri, ex, ey, outline, robot_vel, disc, c):
-    """The robot's push on one reactive person, as another pedestrian's: its outline is the body's
-    surface, and the disc round it (x, y, r) with its velocity what the person sees coming."""
+def _nearest_on_outline(px, py, outline):
+    """The point of a polygon's boundary nearest to (px, py), and whether (px, py) is inside it."""
     best, qx, qy, inside = np.inf, px, py, False
     p = outline.shape[0]
     for e in range(p):
@@ -334,12 +381,47 @@ def _robot(px, py, vx, vy, ri, ex, ey, outline, robot_vel, disc, c):
             best, qx, qy = d2, sx, sy
         if (y1 > py) != (y2 > py) and px < x1 + (py - y1) * (x2 - x1) / (y2 - y1):
             inside = not inside
+    return qx, qy, inside
+
+
+@njit(cache=True)
+def outline_distance(points, outline):
+    """Distance from points (K, 2) to a polygon (P, 2), 0 inside it."""
+    out = np.zeros(points.shape[0])
+    for k in range(points.shape[0]):
+        qx, qy, inside = _nearest_on_outline(points[k, 0], points[k, 1], outline)
+        if not inside:
+            out[k] = math.hypot(points[k, 0] - qx, points[k, 1] - qy)
+    return out
+
+
+@njit(cache=True)
+def disc_around(outline):
+    """(x, y, r): the circle round a polygon (P, 2) from its vertices' mean; zeros for none."""
+    disc = np.zeros(3)
+    p = outline.shape[0]
+    if p == 0:
+        return disc
+    for e in range(p):
+        disc[0] += outline[e, 0] / p
+        disc[1] += outline[e, 1] / p
+    for e in range(p):
+        disc[2] = max(disc[2], math.hypot(outline[e, 0] - disc[0], outline[e, 1] - disc[1]))
+    return disc
+
+
+@njit(cache=True)
+def _robot(px, py, vx, vy, ri, ex, ey, outline, robot_vel, disc, c):
+    """The robot's push on one reactive person, as another pedestrian's: its outline is the body's
+    surface, and the disc round it (x, y, r) with its velocity what the person sees coming."""
+    qx, qy, inside = _nearest_on_outline(px, py, outline)
     nx, ny, d = _unit(px - qx, py - qy, 1.0, 0.0)
     if inside:
         nx, ny, d = -nx, -ny, -d
     gap = d - ri
     fx, fy = _social(gap, nx, ny, ex, ey, c)
-    gx, gy = _anticipation(px - disc[0], py - disc[1], vx - robot_vel[0], vy - robot_vel[1], ri + disc[2], ex, ey, c)
+    gx, gy = _anticipation(px - disc[0], py - disc[1], vx - robot_vel[0], vy - robot_vel[1], ri + disc[2], c)
+    gx, gy = _sidestep(gx, gy, ex, ey, c)
     fx += gx
     fy += gy
     if gap < 0.0:
