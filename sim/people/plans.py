@@ -23,7 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .social_force import Obstacles, PeopleParams, RobotShape, State, accelerations, integrate
+from .social_force import (Obstacles, PeopleParams, RobotShape, State, accelerations, disc_around, integrate,
+                           outline_distance)
 
 # Weidmann 1993: free walking speed 1.34 ± 0.26 m/s; drawn from that normal truncated to the range asked
 WALKING_SPEED = statistics.NormalDist(1.34, 0.26)
@@ -129,18 +130,6 @@ class Arrival:
     loop: bool
 
 
-@dataclass(eq=False)
-class Party:
-    members: np.ndarray          # slots
-    group: int                   # the group number the model sees (−1 alone)
-    route: np.ndarray
-    waits: np.ndarray
-    loop: bool
-    leg: int = 0                 # the waypoint it walks to, or stands at
-    stopping: bool = False       # arrived where it will wait, not yet standing
-    wait_until: float | None = None
-
-
 def line_up(center: np.ndarray, towards: np.ndarray, radius: np.ndarray) -> np.ndarray:
     """Where a party's members stand at its start: abreast, side by side across the way to its
     first waypoint, centred on `center`."""
@@ -209,18 +198,29 @@ class Crowd:
     Call `update(t, robot)` before computing forces (once per simulator step is enough: it only
     changes targets, desired speeds and who is there); the caller keeps `state.position` and
     `state.velocity` current (the simulator copies its bodies in, or `integrate` moves them).
+
+    A party is known by the slot of its first member, and what it is doing is kept in arrays indexed
+    by that number, so an update is a few vectorised steps plus a Python step only for the parties
+    that arrive somewhere, stand, or go on.
     """
 
     def __init__(self, spec: PeopleSpec, params: PeopleParams = PeopleParams()):
         self.spec, self.params = spec, params
-        self.state = State.empty(spec.capacity)
+        n = spec.capacity
+        self.state = State.empty(n)
         # one generator per walker and per flow, so adding a flow never changes the others' people
         self._waiting: list[deque[Arrival]] = [
             deque([walker_arrival(w, np.random.default_rng([spec.seed, 0, k]))]) for k, w in enumerate(spec.walkers)]
         self._flows = [FlowArrivals(f, np.random.default_rng([spec.seed, 1, k])) for k, f in enumerate(spec.flows)]
         self._waiting += [deque() for _ in self._flows]
-        self.parties: list[Party] = []
-        self._groups = 0
+        self.party = np.full(n, -1, np.int64)          # per slot: its party
+        self._routes: list[Arrival | None] = [None] * n
+        self._leg = np.zeros(n, np.int64)               # per party: the waypoint it walks to or stands at
+        self._goal = np.zeros((n, 2))                   # ... that waypoint
+        self._wait = np.zeros(n)                        # ... the wait there (s)
+        self._reach = np.zeros(n)                       # ... how near its centre must come to be there
+        self._stopping = np.zeros(n, bool)              # ... arrived where it waits, not yet standing
+        self._wait_until = np.full(n, np.nan)           # ... standing until then
         self.spawned = 0
         self.left = 0
 
@@ -235,27 +235,85 @@ class Crowd:
         for queue in self._waiting:
             while queue and queue[0].time <= t and self._spawn(queue[0], robot):
                 queue.popleft()
-        self.parties = [party for party in self.parties if self._follow(party, t)]
+        self._move_on(t)
+        s = self.state
+        slots = np.flatnonzero(s.active)
+        party = self.party[slots]
+        s.target[slots] = self._goal[party]
+        standing = self._stopping[party] | ~np.isnan(self._wait_until[party])
+        distance = np.hypot(*(self._goal[party] - s.position[slots]).T) - self._reach[party]
+        braking = np.sqrt(2 * self.params.stop_deceleration * np.maximum(distance, 0.0))
+        # slowing where it will wait, so it arrives as a person does; not at all while standing
+        s.speed[slots] = np.where(standing, 0.0, np.where(self._wait[party] > 0, np.minimum(s.v0[slots], braking),
+                                                          s.v0[slots]))
 
     def step(self, t: float, dt: float, obstacles: Obstacles, robot: RobotShape | None = None) -> None:
         """Without the simulator: update at t, then move everyone by dt (`integrate`)."""
         self.update(t, robot)
         integrate(self.state, accelerations(self.state, obstacles, robot, self.params), dt, self.params)
 
+    def _move_on(self, t: float) -> None:
+        """One step along its route for each party that is due one: arrive, stand, go on."""
+        s = self.state
+        slots = np.flatnonzero(s.active)
+        if not len(slots):
+            return
+        party, n = self.party[slots], len(s)
+        members = np.bincount(party, minlength=n)
+        live = np.flatnonzero(members)
+        centre = np.column_stack([np.bincount(party, s.position[slots, k], n)[live] for k in (0, 1)]) \
+            / members[live, None]
+        speed = np.bincount(party, np.hypot(*s.velocity[slots].T), n)[live] / members[live]
+        waiting = ~np.isnan(self._wait_until[live])
+        stopping = self._stopping[live]
+        near = np.hypot(*(self._goal[live] - centre).T) <= self._reach[live]
+        for p in live[stopping & (speed < STANDING_SPEED)]:
+            self._stopping[p], self._wait_until[p] = False, t + self._wait[p]
+        for p in live[waiting & (self._wait_until[live] <= t)]:
+            self._wait_until[p] = np.nan
+            self._next_leg(p)
+        for p in live[near & ~stopping & ~waiting]:
+            if self._wait[p] > 0:
+                self._stopping[p] = True
+            else:
+                self._next_leg(p)
+
+    def _next_leg(self, p: int) -> None:
+        route = self._routes[p]
+        leg = self._leg[p] + 1
+        if leg == len(route.route):
+            if not route.loop:
+                self._leave(p)
+                return
+            leg = 0
+        self._leg[p], self._goal[p], self._wait[p] = leg, route.route[leg], route.waits[leg]
+
+    def _leave(self, p: int) -> None:
+        s = self.state
+        slots = np.flatnonzero(self.party == p)
+        s.active[slots], s.velocity[slots] = False, 0.0
+        self.party[slots] = -1
+        self._routes[p] = None
+        self.left += len(slots)
+
     def _spawn(self, arrival: Arrival, robot: RobotShape | None) -> bool:
         """Put the party in the world if its members have free slots and room; False: it waits."""
-        s = self.state
-        free = np.flatnonzero(~s.active)[:len(arrival.radius)]
-        if len(free) < len(arrival.radius) or self._blocked(arrival, robot):
+        s, size = self.state, len(arrival.radius)
+        free = np.flatnonzero(~s.active)[:size]
+        if len(free) < size or self._blocked(arrival, robot):
             return False
+        p = int(free[0])
         s.position[free], s.velocity[free] = arrival.start, 0.0
         s.radius[free], s.reactive[free] = arrival.radius, arrival.reactive
         s.v0[free] = s.speed[free] = arrival.speed
-        s.group[free] = self._groups if len(free) > 1 else -1
+        s.group[free] = p if size > 1 else -1
         s.active[free] = True
-        self._groups += len(free) > 1
-        self.spawned += len(free)
-        self.parties.append(Party(free, int(s.group[free[0]]), arrival.route, arrival.waits, arrival.loop))
+        self.party[free] = p
+        self._routes[p] = arrival
+        self._leg[p], self._goal[p], self._wait[p] = 0, arrival.route[0], arrival.waits[0]
+        self._reach[p] = self.params.waypoint_reach + 0.5 * (size - 1)
+        self._stopping[p], self._wait_until[p] = False, np.nan
+        self.spawned += size
         return True
 
     def _blocked(self, arrival: Arrival, robot: RobotShape | None) -> bool:
@@ -267,56 +325,8 @@ class Crowd:
             return True
         if robot is None or len(robot.outline) < 3:
             return False
-        return bool((_outline_distance(arrival.start, robot.outline) < arrival.radius + SPAWN_CLEARANCE).any())
-
-    def _follow(self, party: Party, t: float) -> bool:
-        """Move the party on along its route (one step per update: arrive, stand, go on) and set its
-        members' targets and speeds; False once it has left the world."""
-        s, m = self.state, party.members
-        reach = self.params.waypoint_reach + 0.5 * (len(m) - 1)
-        if party.wait_until is not None:
-            if t >= party.wait_until:
-                party.wait_until = None
-                party.leg += 1
-        elif party.stopping:
-            if np.hypot(*s.velocity[m].T).mean() < STANDING_SPEED:
-                party.stopping, party.wait_until = False, t + float(party.waits[party.leg])
-        elif np.hypot(*(party.route[party.leg] - s.position[m].mean(axis=0))) <= reach:
-            if party.waits[party.leg] > 0:
-                party.stopping = True
-            else:
-                party.leg += 1
-        if party.leg == len(party.route):
-            if not party.loop:
-                s.active[m] = False
-                s.velocity[m] = 0.0
-                self.left += len(m)
-                return False
-            party.leg = 0
-        s.target[m] = party.route[party.leg]
-        s.speed[m] = self._speed(party, reach)
-        return True
-
-    def _speed(self, party: Party, reach: float) -> np.ndarray:
-        """Desired speeds: the party's own, less where it will stand (so it arrives slowing as a
-        person does, at stop_deceleration), none while it stands."""
-        s, m = self.state, party.members
-        if party.stopping or party.wait_until is not None:
-            return np.zeros(len(m))
-        if party.waits[party.leg] <= 0:
-            return s.v0[m]
-        distance = np.hypot(*(party.route[party.leg] - s.position[m]).T) - reach
-        return np.minimum(s.v0[m], np.sqrt(2 * self.params.stop_deceleration * np.maximum(distance, 0.0)))
-
-
-def _outline_distance(points: np.ndarray, outline: np.ndarray) -> np.ndarray:
-    """Distance from points (K, 2) to a polygon's boundary, 0 inside it."""
-    a, b = outline, np.roll(outline, -1, axis=0)
-    ab = b - a
-    t = np.clip(((points[:, None] - a[None]) * ab[None]).sum(-1) / (ab * ab).sum(-1)[None], 0.0, 1.0)
-    nearest = a[None] + t[..., None] * ab[None]
-    d = np.hypot(*(points[:, None] - nearest).transpose(2, 0, 1)).min(axis=1)
-    crossings = ((a[None, :, 1] > points[:, None, 1]) != (b[None, :, 1] > points[:, None, 1])) & (
-        points[:, None, 0] < a[None, :, 0] + (points[:, None, 1] - a[None, :, 1]) * ab[None, :, 0]
-        / np.where(ab[None, :, 1] == 0, 1.0, ab[None, :, 1]))
-    return np.where(crossings.sum(axis=1) % 2 == 1, 0.0, d)
+        outline = np.ascontiguousarray(robot.outline, np.float64)
+        x, y, reach = disc_around(outline)
+        if (np.hypot(arrival.start[:, 0] - x, arrival.start[:, 1] - y) > reach + arrival.radius + SPAWN_CLEARANCE).all():
+            return False                          # clear of the circle round the robot: no need to look closer
+        return bool((outline_distance(arrival.start, outline) < arrival.radius + SPAWN_CLEARANCE).any())
