@@ -213,7 +213,7 @@ class Crowd:
             deque([walker_arrival(w, np.random.default_rng([spec.seed, 0, k]))]) for k, w in enumerate(spec.walkers)]
         self._flows = [FlowArrivals(f, np.random.default_rng([spec.seed, 1, k])) for k, f in enumerate(spec.flows)]
         self._waiting += [deque() for _ in self._flows]
-        self.party = np.full(n, -1, np.int64)          # per slot: its party
+        self._party = np.full(n, -1, np.int64)         # per slot: its party
         self._routes: list[Arrival | None] = [None] * n
         self._leg = np.zeros(n, np.int64)               # per party: the waypoint it walks to or stands at
         self._goal = np.zeros((n, 2))                   # ... that waypoint
@@ -238,7 +238,7 @@ class Crowd:
         self._move_on(t)
         s = self.state
         slots = np.flatnonzero(s.active)
-        party = self.party[slots]
+        party = self._party[slots]
         s.target[slots] = self._goal[party]
         standing = self._stopping[party] | ~np.isnan(self._wait_until[party])
         distance = np.hypot(*(self._goal[party] - s.position[slots]).T) - self._reach[party]
@@ -258,7 +258,7 @@ class Crowd:
         slots = np.flatnonzero(s.active)
         if not len(slots):
             return
-        party, n = self.party[slots], len(s)
+        party, n = self._party[slots], len(s)
         members = np.bincount(party, minlength=n)
         live = np.flatnonzero(members)
         centre = np.column_stack([np.bincount(party, s.position[slots, k], n)[live] for k in (0, 1)]) \
@@ -290,9 +290,9 @@ class Crowd:
 
     def _leave(self, p: int) -> None:
         s = self.state
-        slots = np.flatnonzero(self.party == p)
+        slots = np.flatnonzero(self._party == p)
         s.active[slots], s.velocity[slots] = False, 0.0
-        self.party[slots] = -1
+        self._party[slots] = -1
         self._routes[p] = None
         self.left += len(slots)
 
@@ -308,7 +308,7 @@ class Crowd:
         s.v0[free] = s.speed[free] = arrival.speed
         s.group[free] = p if size > 1 else -1
         s.active[free] = True
-        self.party[free] = p
+        self._party[free] = p
         self._routes[p] = arrival
         self._leg[p], self._goal[p], self._wait[p] = 0, arrival.route[0], arrival.waits[0]
         self._reach[p] = self.params.waypoint_reach + 0.5 * (size - 1)

@@ -49,7 +49,7 @@ class PeopleParams(Parameters):
     relaxation_time: float = param(0.5, gt=0)           # s, τ (Helbing, Farkas & Vicsek 2000)
     max_speed_factor: float = param(1.3, ge=1)          # a person never walks faster than this × its v0 (H&M 1995)
     # A¹, B¹ and λ tuned on Weidmann's diagram (docs/people.md) from Johansson, Helbing & Shukla 2007's
-    # circular fit (0.42 m/s², 1.65 m, 0.12), whose long range slowed a crowd 0.2 m/s too much everywhere
+    # circular fit (0.42 m/s², 1.65 m, 0.12), whose long range stopped a crowd at 2.5 people/m²
     social_strength: float = param(1.5, ge=0)           # m/s², A¹
     social_range: float = param(0.46, gt=0)             # m, B¹
     anisotropy: float = param(0.2, ge=0, le=1)          # λ: weight of what is behind
@@ -432,10 +432,13 @@ def _robot(px, py, vx, vy, ri, ex, ey, outline, robot_vel, disc, c):
 
 
 def warm_up() -> None:
-    """Compile the kernel (or load it from numba's cache) before the first step."""
+    """Compile the kernels (or load them from numba's cache) before the first step."""
     state = State.empty(2)
     state.active[:] = True
     state.position[1] = (1.0, 0.0)
     state.group[:] = 0
+    outline = np.array([[3.0, 0.0], [4.0, 0.0], [4.0, 1.0]])
     accelerations(state, Obstacles(np.array([[0.0, -1.0, 1.0, -1.0]]), np.array([[0.0, 2.0, 0.3]])),
-                  RobotShape(np.array([[3.0, 0.0], [4.0, 0.0], [4.0, 1.0]])), PeopleParams())
+                  RobotShape(outline), PeopleParams())
+    outline_distance(state.position, outline)
+    disc_around(outline)
