@@ -107,6 +107,15 @@ def test_a_group_walks_abreast(size):
             assert gaps.min() > 0.45 and np.sort(gaps)[size - 2] < 1.0    # side by side, not far apart
 
 
+def test_a_waypoint_walked_past_is_not_walked_back_to():
+    # the route's middle point is inside a pillar: nobody gets within reach of it, but walking past
+    # it along the leg counts, so the person goes on instead of pressing against the pillar
+    pillar = Obstacles(circles=np.array([[5.0, 0.0, 0.6]]))
+    pos, _, active, crowd = run(PeopleSpec(walkers=(walker([[0, 0.1], [5, 0], [10, 0]], speed=1.3),)), 15.0, pillar)
+    assert crowd.left == 1
+    assert np.hypot(*(pos[active[:, 0], 0] - (5.0, 0.0)).T).min() > 0.6
+
+
 def test_people_keep_off_walls():
     # a corridor 1.2 m wide whose route runs 0.2 m from the lower wall: the person walks off its line
     walls = solids_obstacles([0, 0, 20, 0], [0, 1.2, 20, 1.2])

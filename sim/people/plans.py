@@ -217,6 +217,7 @@ class Crowd:
         self._routes: list[Arrival | None] = [None] * n
         self._leg = np.zeros(n, np.int64)               # per party: the waypoint it walks to or stands at
         self._goal = np.zeros((n, 2))                   # ... that waypoint
+        self._from = np.zeros((n, 2))                   # ... where the leg began (the waypoint before)
         self._wait = np.zeros(n)                        # ... the wait there (s)
         self._reach = np.zeros(n)                       # ... how near its centre must come to be there
         self._stopping = np.zeros(n, bool)              # ... arrived where it waits, not yet standing
@@ -266,7 +267,11 @@ class Crowd:
         speed = np.bincount(party, np.hypot(*s.velocity[slots].T), n)[live] / members[live]
         waiting = ~np.isnan(self._wait_until[live])
         stopping = self._stopping[live]
-        near = np.hypot(*(self._goal[live] - centre).T) <= self._reach[live]
+        goal = self._goal[live]
+        near = np.hypot(*(goal - centre).T) <= self._reach[live]
+        # past a waypoint without a wait (beyond the line through it across the leg) is as good as
+        # there: one pushed through a door wide of its middle must not turn back to it
+        near |= (self._wait[live] <= 0) & (((centre - goal) * (goal - self._from[live])).sum(axis=1) >= 0)
         for p in live[stopping & (speed < STANDING_SPEED)]:
             self._stopping[p], self._wait_until[p] = False, t + self._wait[p]
         for p in live[waiting & (self._wait_until[live] <= t)]:
@@ -286,6 +291,7 @@ class Crowd:
                 self._leave(p)
                 return
             leg = 0
+        self._from[p] = self._goal[p]
         self._leg[p], self._goal[p], self._wait[p] = leg, route.route[leg], route.waits[leg]
 
     def _leave(self, p: int) -> None:
@@ -311,6 +317,7 @@ class Crowd:
         self._party[free] = p
         self._routes[p] = arrival
         self._leg[p], self._goal[p], self._wait[p] = 0, arrival.route[0], arrival.waits[0]
+        self._from[p] = arrival.start.mean(axis=0)
         self._reach[p] = self.params.waypoint_reach + 0.5 * (size - 1)
         self._stopping[p], self._wait_until[p] = False, np.nan
         self.spawned += size
