@@ -4,8 +4,8 @@ Weidmann (1993) fitted walking speed against density in unidirectional flow:
     v(ρ) = v0 · (1 − exp(−γ · (1/ρ − 1/ρmax))),  v0 = 1.34 m/s, γ = 1.913 m⁻², ρmax = 5.4 m⁻².
 `corridor_speed` measures the model's: people at a given density walk along a straight corridor
 without ends (what leaves at one end comes in at the other, and people near one end feel those near
-the other), with speeds and radii drawn as a flow draws them; after a warm-up the mean speed along
-the corridor over everyone and every step is the figure.
+the other), with Weidmann's free speeds (or a flow's) and a flow's radii; after a warm-up the mean
+speed along the corridor over everyone and every step is the figure.
 """
 from __future__ import annotations
 
@@ -86,12 +86,3 @@ def corridor_speed(density: float, params: PeopleParams = PeopleParams(), seed: 
         if step >= warm:
             along.append(float(state.velocity[:, 0].mean()))
     return float(np.mean(along))
-
-
-def fundamental_diagram(densities, params: PeopleParams = PeopleParams(), seed: int = 0, **corridor) -> list[dict]:
-    """Per density: the model's mean speed, Weidmann's, and the difference (m/s)."""
-    rows = []
-    for density in densities:
-        measured, published = corridor_speed(density, params, seed, **corridor), weidmann_speed(density)
-        rows.append({"density": density, "model": measured, "weidmann": published, "difference": measured - published})
-    return rows
