@@ -24,6 +24,7 @@ BENCHES: dict[str, str] = {
     "footprint": "omninav.bench.process_footprint",
     "cpu": "omninav.bench.service_cpu",
     "lockstep": "omninav.bench.determinism",
+    "people": "omninav.bench.people",
 }
 
 
