@@ -54,6 +54,7 @@ WITHIN_M = 1.0              # the radius of a goal's within_1m_s
 # a succeeded goal farther than this from the truth was a false arrival: ten times navigate's
 # arrival tolerance (3 cm) plus AMCL's usual error of a few cm, well below the robot's width
 ARRIVED_M = 0.25
+FAR = 1.0e6             # m: where a moment with fewer movers puts the ones it lacks
 
 
 class MissionError(UserError):
@@ -179,11 +180,15 @@ class MissionCollector:
                                sim_values=dict(found["sim"][-1].values) if found["sim"] else {},
                                restarts={name: len(runs) - 1 for name, runs in self.runs.items() if len(runs) > 1})
         movers = found["movers"]
-        if movers and len(movers[0].circles):
-            count = len(movers[0].circles)
-            movers = [m for m in movers if len(m.circles) == count]
+        count = max((len(m.circles) for m in movers), default=0)
+        if count:
+            # people come and go: every moment padded to the most there were, with circles of
+            # radius 0 far away (nothing comes near them)
+            circles = np.tile(np.array([FAR, FAR, 0.0]), (len(movers), count, 1))
+            for row, m in zip(circles, movers):
+                row[:len(m.circles)] = m.circles
             record.mover_stamps = np.array([m.header.stamp_ns for m in movers], np.int64)
-            record.mover_circles = np.array([m.circles for m in movers], np.float64).reshape(len(movers), count, 3)
+            record.mover_circles = circles
         return record
 
 

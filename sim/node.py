@@ -19,6 +19,7 @@ from ..services.chassis.kinematics import ChassisParams
 from ..services.runtime.node import NS_PER_S, Node
 from ..parameters.from_mapping import load_params
 from .body import BodyParams
+from .people.social_force import warm_up as warm_people
 from .physics import Readings, SimParams, Simulation
 from .world import World, WorldError, load_world, shipped_worlds, world_path
 from ..geometry.polygons import polygon_area
@@ -73,6 +74,8 @@ class SimNode(Node):
         p = self.params
         self.world = p.robot_world(open_world(p.world))
         self.sim = Simulation(self.world, p, p.chassis_params(), body=p.body_params())
+        if len(self.sim.walkers):
+            warm_people()       # compile the social force kernels now, never inside a step
         self.step_ns = round(p.dt * NS_PER_S)
         self.wheel_state = self.publisher("wheel_state")
         self.truth = self.publisher("sim/truth")

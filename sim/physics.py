@@ -62,6 +62,8 @@ from ..parameters.declare import Parameters, Rule, param
 from ..parameters.from_mapping import load_params
 from .body import BodyParams, Ground
 from .contacts import STATIC, ContactLedger, MoverHistory
+from .people.social_force import Obstacles, RobotShape
+from .walkers import Walkers, hold
 from .world import World
 
 CONTACT_SLOP = 1e-3          # m of overlap pymunk tolerates before pushing bodies apart
@@ -164,10 +166,6 @@ def _convex_parts(polygon: np.ndarray) -> list[np.ndarray]:
     return [np.array([tuple(v) for v in part[:-1]]) for part in convex_decomposition(closed, 0.0)]
 
 
-def _hold(body: pymunk.Body, dt: float) -> None:
-    """Position function that keeps a body where it is during space.step (see the module notes)."""
-
-
 class Simulation:
     """The robot in its world; `set_wheel_command`, then `step()` once per dt."""
 
@@ -207,8 +205,12 @@ class Simulation:
         self._movers = self._add_movers()
         self._mover_steps = np.zeros(len(world.movers), np.int64)   # steps each mover has moved
         self._mover_xy = world.movers.pose_after(0.0)
-        self._mover_history = MoverHistory(max(1, round(params.foresight_s / params.dt)), len(world.movers))
         self.robot = self._add_robot()
+        self.walkers = Walkers(world.people, self.space, Obstacles(world.segments, world.circles), _MOVERS)
+        for slot, shape in enumerate(self.walkers.shapes):          # people are movers after the world's movers
+            self._mover_of_shape[shape] = len(world.movers) + slot
+        self._mover_history = MoverHistory(max(1, round(params.foresight_s / params.dt)),
+                                           len(world.movers) + len(self.walkers))
         self.ground = Ground.of(body, self.drive, self._wheel_reach(), self.robot.moment)
         self.space.on_collision(_ROBOT, None, begin=self._on_begin, pre_solve=self._on_touch,
                                 separate=self._on_separate)
@@ -246,7 +248,7 @@ class Simulation:
         for k, (radius, (x, y)) in enumerate(zip(self.world.movers.radius, self.world.movers.pose_after(0.0))):
             body = pymunk.Body(body_type=pymunk.Body.KINEMATIC)
             body.position = (float(x), float(y))
-            body.position_func = _hold
+            body.position_func = hold
             shape = pymunk.Circle(body, float(radius))
             shape.friction = 1.0
             shape.filter = pymunk.ShapeFilter(categories=_MOVERS)
@@ -262,7 +264,7 @@ class Simulation:
         body = pymunk.Body(mass, self.body.inertia or pymunk.moment_for_poly(mass, [tuple(p) for p in footprint]))
         x, y, yaw = (float(v) for v in self.world.robot.start)
         body.position, body.angle = (x, y), yaw
-        body.position_func = _hold
+        body.position_func = hold
         self.space.add(body)
         for part in self._parts:
             shape = pymunk.Poly(body, [tuple(p) for p in part])
@@ -330,7 +332,8 @@ class Simulation:
             return False
         xy, velocity = then
         centre = xy[mover] + velocity[mover] * self.params.foresight_s
-        radius = float(self.world.movers.radius[mover])
+        movers = len(self.world.movers)
+        radius = float(self.world.movers.radius[mover] if mover < movers else self.walkers.state.radius[mover - movers])
         for part in self._parts:
             outline = transform_points(part, self.pose)[0]
             inside = points_in_polygons(centre[None], outline[None])[0, 0]
@@ -377,7 +380,14 @@ class Simulation:
 
     @property
     def mover_circles(self) -> np.ndarray:
-        return np.column_stack([self._mover_xy, self.world.movers.radius]).reshape(-1, 3)
+        """The world's movers, then the people in the world (M, 3): x, y, r."""
+        movers = np.column_stack([self._mover_xy, self.world.movers.radius]).reshape(-1, 3)
+        return np.vstack([movers, self.walkers.circles()]) if len(self.walkers) else movers
+
+    def _robot_shape(self) -> RobotShape:
+        """The robot as people see it: its outline where it is, its velocity."""
+        velocity = self.robot.velocity
+        return RobotShape(self.footprint_outline, np.array([velocity.x, velocity.y]))
 
     def set_wheel_command(self, wheel_speeds) -> None:
         """Hold these wheel speeds (rad/s, in Kinematics.wheel_names order) until the next command."""
@@ -412,6 +422,8 @@ class Simulation:
         self._demand = self.ground.twist_scale * self.kinematics.fk(ground)
 
         before = (*self.robot.position, self.robot.angle)
+        if len(self.walkers):
+            self.walkers.plan(self.time, self._robot_shape())
         start_xy, moving = self._mover_xy, np.ones(len(self._movers), bool)
         if self._movers:
             moving = ~self.world.movers.yielding(self._mover_steps * dt, self.footprint_outline)
@@ -424,7 +436,10 @@ class Simulation:
         self.steps += 1
         self._now_s = self.time             # no drift from adding up substeps
         mover_velocities = (self._mover_xy - start_xy) / dt
-        self._mover_history.push(self._mover_xy, mover_velocities)
+        people_xy, people_velocities = self.walkers.slots()
+        self._mover_history.push(np.vstack([self._mover_xy, people_xy]),
+                                 np.vstack([mover_velocities, people_velocities]))
+        mover_velocities = np.vstack([mover_velocities, self.walkers.velocities()])
         self.contact_steps += touched
 
         after = (*self.robot.position, self.robot.angle)
@@ -449,6 +464,8 @@ class Simulation:
         # movers stay where they are during space.step; the solver sees their velocity
         for body, xy, xy_next in zip(self._movers, self._mover_xy, next_xy):
             body.velocity = (float(xy_next[0] - xy[0]) / h, float(xy_next[1] - xy[1]) / h)
+        if len(self.walkers):
+            self.walkers.push(h, self._robot_shape())
         self._shares = {}
         self.space.step(h)
         if self._shares:                  # a contact changed the body's velocity: the floor starts from there
@@ -457,6 +474,7 @@ class Simulation:
             self._twist = np.array([c * velocity.x + s * velocity.y, -s * velocity.x + c * velocity.y,
                                     self.robot.angular_velocity])
         pymunk.Body.update_position(self.robot, h)
+        self.walkers.advance(h)
         for body, xy in zip(self._movers, next_xy):
             body.position = (float(xy[0]), float(xy[1]))
             self.space.reindex_shapes_for_body(body)

@@ -27,6 +27,8 @@ from ..geometry.polygons import (point_segment_distance, points_in_polygons, pol
                                  transform_points)
 from ..geometry.grid import GRID_OBSTACLE, cell_to_world, grid_coords, world_to_cell
 from .barn_world import BarnWorldError, barn_world_doc
+from .people.plans import PeopleSpec
+from .people.spec import people_from_mapping
 from .keyframes import INTERPOLATIONS, Keyframes, Tracks
 
 WALL_THICKNESS = 0.1          # m, walls and the outer walls along the bounds
@@ -212,6 +214,7 @@ class World:
     grid: OccupancyGrid | None = None  # static map (`map:` key)
     goals: np.ndarray = field(default_factory=lambda: np.zeros((0, 3)))
     source: str = ""                   # the file it came from
+    people: PeopleSpec = PeopleSpec()  # who walks the world (sim/people, docs/people.md)
 
     @cached_property
     def segments(self) -> np.ndarray:
@@ -512,7 +515,8 @@ def _keyframes(keys: _Keys, mover: dict, where: str, loop: bool) -> Keyframes:
 
 # `generated` says how a generated world was made (kind, seed: docs/scenarios.md); the loader reads
 # nothing from it
-WORLD_KEYS = ("name", "bounds", "origin", "map", "walls", "boxes", "circles", "movers", "robot", "goals", "generated")
+WORLD_KEYS = ("name", "bounds", "origin", "map", "walls", "boxes", "circles", "movers", "people", "robot", "goals",
+              "generated")
 
 
 def load_world(path: str | Path) -> World:
@@ -628,11 +632,13 @@ def world_from_mapping(doc: dict, path: str | Path) -> World:
     goals = [keys.numbers(g, f"goals[{i}]", 3, "[x, y, yaw] (three numbers)")
              for i, g in enumerate(keys.items(doc.get("goals"), "goals"))]
 
+    people = people_from_mapping(doc["people"], keys) if doc.get("people") is not None else PeopleSpec()
+
     world = World(name=name, origin=(float(x0), float(y0)), bounds=(float(w), float(h)),
                   solids=np.array(solids).reshape(-1, 4, 2), circles=np.array(circles).reshape(-1, 3),
                   movers=Movers(np.array(radii), np.array(speeds), tuple(loops), np.array(yields), tuple(tracks)),
                   robot=Robot(start=start, drive=drive, footprint=footprint), grid=grid,
-                  goals=np.array(goals).reshape(-1, 3), source=str(path))
+                  goals=np.array(goals).reshape(-1, 3), source=str(path), people=people)
     for where, point in [("robot.start", start), *((f"goals[{i}]", g) for i, g in enumerate(goals))]:
         if world.outside(point[:2]):
             keys.fail(where, f"({point[0]}, {point[1]}) lies outside the bounds {world.extent}")

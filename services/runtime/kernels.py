@@ -7,7 +7,7 @@ import importlib
 import time
 from typing import Callable
 
-KERNEL_MODULES = ("omninav.sim.lidar", "omninav.services.costmap.layers", "omninav.services.global_planner.astar",
+KERNEL_MODULES = ("omninav.sim.lidar", "omninav.sim.people.social_force", "omninav.services.costmap.layers", "omninav.services.global_planner.astar",
                   "omninav.services.local_planner.dwa", "omninav.services.local_planner.eband",
                   "omninav.services.localizer.filter", "omninav.services.tracker.tracker")
 
