@@ -17,7 +17,7 @@ import yaml
 
 from ...services.runtime.errors import UserError
 from ...sim.world import WorldError, world_from_mapping
-from . import clutter, crossing, crowd, doorway, dynabarn, headon, maze, overtake
+from . import clutter, crossing, crowd, doorway, dynabarn, hall, headon, maze, overtake, shelves
 from .check import world_problems
 
 KINDS: dict[str, Callable[[np.random.Generator], dict]] = {
@@ -26,6 +26,8 @@ KINDS: dict[str, Callable[[np.random.Generator], dict]] = {
     "overtake": overtake.generate,
     "crowd": crowd.generate,
     "doorway": doorway.generate,
+    "hall": hall.generate,
+    "shelves": shelves.generate,
     "clutter": clutter.generate,
     "maze": maze.generate,
 }
@@ -33,7 +35,7 @@ KINDS: dict[str, Callable[[np.random.Generator], dict]] = {
 GRADED_KINDS: dict[str, tuple[Callable[[np.random.Generator, str], dict], tuple[str, ...]]] = {
     "dynabarn": (dynabarn.generate, dynabarn.DIFFICULTIES),
 }
-DYNAMIC_KINDS = ("crossing", "headon", "overtake", "crowd", "doorway")
+DYNAMIC_KINDS = ("crossing", "headon", "overtake", "crowd", "doorway", "hall", "shelves")
 EXPLORE_KINDS = ("maze",)      # worlds without a goal: `omninav bench explore` maps them
 ATTEMPTS = 100          # sub-seeds tried before a seed is given up
 

@@ -4,20 +4,26 @@ drawn again from the next sub-seed.
 - the start and the goal are free for the footprint grown by CLEARANCE_M, and the goal can be
   reached from the start on the world rasterised at RESOLUTION (experiments/reachability.py: the global
   planner core, a disk of the footprint's inscribed radius);
-- every path mover's loop keeps its radius plus CLEARANCE_M from the static obstacles (people do
-  not walk through furniture), and keeps off the robot standing at its start or its goal (the robot
-  must be able to wait there without being run over);
+- every path mover's loop, and every walker's route (people: docs/people.md; a group as wide as it
+  walks abreast), keeps its radius plus CLEARANCE_M from the static obstacles (people do not walk
+  through furniture), and keeps off the robot standing at its start or its goal (the robot must be
+  able to wait there without being run over);
+- a flow's people (who walk from anywhere in its source area to anywhere in its goal area) keep
+  off the robot standing at its start or its goal: the region between the two areas keeps the
+  robot's reach plus a person plus CLEARANCE_M from both (the generator keeps furniture out of it);
 - a mover on keyframes (DynaBARN's obstacles) may cross walls, the start and the goal, as
   DynaBARN's do; it only must not overlap the robot's footprint at its start when the run begins.
 """
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import ConvexHull, QhullError
 
 from ..mission_score import movers_clearance
 from ..reachability import ReachabilityParams, mission_problems
+from ...geometry.polygons import point_segment_distance, points_in_polygons
+from ...sim.people.plans import ROW_GAP
 from ...sim.world import World
-from ...geometry.polygons import point_segment_distance
 from .route import polyline_length
 
 RESOLUTION = 0.05       # m, as `navigate` rasterises a world into its map
@@ -31,6 +37,19 @@ def _loop_points(loop: np.ndarray) -> np.ndarray:
     return np.column_stack([np.interp(samples, arcs, loop[:, 0]), np.interp(samples, arcs, loop[:, 1])])
 
 
+def _swept_region(flow) -> np.ndarray:
+    """The convex region (V, 2), counter-clockwise, between a flow's source and goal areas and
+    through its via points."""
+    corners = [np.asarray(area.center) + np.array([sx, sy]) * np.asarray(area.size) / 2
+               for area in (flow.source, flow.goal) for sx in (-1, 1) for sy in (-1, 1)]
+    points = np.unique(np.vstack([corners, flow.via.reshape(-1, 2)]), axis=0)
+    try:
+        return points[ConvexHull(points).vertices]
+    except QhullError:                    # all on a line: the line's ends
+        order = np.argsort(points @ (points[-1] - points[0]))
+        return points[order[[0, -1]]]
+
+
 def world_problems(world: World) -> list[str]:
     """One line per reason the world is unfair; empty when it is fine."""
     problems = mission_problems(world.rasterize(RESOLUTION), world.robot.footprint, world.robot.start, world.goals,
@@ -42,12 +61,20 @@ def world_problems(world: World) -> list[str]:
     at_start = movers_clearance(footprint, world.robot.start[None], world.movers.circles_at(0.0)[None, on_keyframes])
     if at_start[0] <= 0.0:
         problems.append("a mover on keyframes stands on the robot's start at t = 0")
-    for k, (loop, radius) in enumerate(zip(world.movers.loops, world.movers.radius)):
-        if on_keyframes[k]:
-            continue
-        points = _loop_points(loop)
-        if world.distance(points).min() < radius + CLEARANCE_M:
-            problems.append(f"mover {k} walks into a static obstacle")
+    routes = [(f"mover {k}", loop, radius) for k, (loop, radius) in enumerate(zip(world.movers.loops, world.movers.radius))
+              if not on_keyframes[k]]
+    for k, w in enumerate(world.people.walkers):
+        half_width = w.radius[1] + (w.group - 1) * (w.radius[1] + ROW_GAP / 2)
+        routes.append((f"walker {k}", np.vstack([w.path, w.path[:1]]) if w.loop else w.path, half_width))
+    for k, flow in enumerate(world.people.flows):
+        region = _swept_region(flow)
+        inside = points_in_polygons(ends, region[None])[:, 0].any()
+        gap = point_segment_distance(ends[:, None], region[None], np.roll(region, -1, axis=0)[None]).min()
+        if inside or gap < reach + flow.radius[1] + CLEARANCE_M:
+            problems.append(f"flow {k} walks over the robot's start or goal")
+    for name, loop, radius in routes:
+        if world.distance(_loop_points(loop)).min() < radius + CLEARANCE_M:
+            problems.append(f"{name} walks into a static obstacle")
         if point_segment_distance(ends[:, None], loop[None, :-1], loop[None, 1:]).min() < reach + radius + CLEARANCE_M:
-            problems.append(f"mover {k} walks over the robot's start or goal")
+            problems.append(f"{name} walks over the robot's start or goal")
     return problems

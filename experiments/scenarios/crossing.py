@@ -1,12 +1,13 @@
 """crossing: in a hall, one or two people walk back and forth across the robot's way,
-perpendicular to it, each reaching the way about when the robot does (within a second and a half)."""
+perpendicular to it at human speed, each reaching the way about when the robot does (within a
+second and a half)."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
-from .route import crossing_mover, furniture, lane, person, uniform, world_mapping
+from .route import crossing_walker, furniture, lane, person, uniform, world_mapping
 
 
 def generate(rng: np.random.Generator) -> dict:
@@ -15,12 +16,13 @@ def generate(rng: np.random.Generator) -> dict:
     heading = math.atan2(goal_y - start_y, width - 2.4)
     start, goal = (1.2, start_y, heading), (width - 1.2, goal_y, heading)
     route = np.array([start[:2], goal[:2]])
-    lanes, movers = [lane(route, 0.6)], []
+    lanes, walkers = [lane(route, 0.6)], []
     first = uniform(rng, (3.5, width / 2))
     for x in ([first] if rng.random() < 0.5 else [first, uniform(rng, (first + 1.5, width - 3.5))]):
-        radius, speed = person(rng)
+        who = person(rng)
         ends = [(x, 0.6), (x, height - 0.6)] if rng.random() < 0.5 else [(x, height - 0.6), (x, 0.6)]
-        movers.append(crossing_mover(ends, route, rng, radius=radius, speed=speed, late_s=uniform(rng, (-1.5, 1.5))))
-        lanes.append(lane(ends, radius))
+        walkers.append(crossing_walker(ends, route, rng, who, late_s=uniform(rng, (-1.5, 1.5))))
+        lanes.append(lane(ends, who.radius))
     boxes = furniture(rng, int(rng.integers(2, 5)), (0.1, 0.1, width - 0.1, height - 0.1), lanes)
-    return world_mapping((width, height), start, goal, boxes=boxes, movers=movers)
+    return world_mapping((width, height), start, goal, boxes=boxes, walkers=walkers,
+                         people_seed=int(rng.integers(2**31)))

@@ -1,12 +1,13 @@
-"""crowd: in a hall, four to six people walk at once — across the robot's way, diagonally,
-along the hall and in circles — each reaching the way within a few seconds of the robot."""
+"""crowd: in a hall, four to six parties walk at once at human speed — across the robot's way,
+diagonally, along the hall and in circles, a third of them groups of two or three abreast — each
+reaching the way within a few seconds of the robot."""
 from __future__ import annotations
 
 import math
 
 import numpy as np
 
-from .route import crossing_mover, furniture, lane, person, uniform, world_mapping
+from .route import crossing_walker, furniture, lane, person, uniform, world_mapping
 
 CIRCLE_POINTS = 12      # a circling person's loop
 
@@ -37,11 +38,13 @@ def generate(rng: np.random.Generator) -> dict:
     heading = math.atan2(goal_y - start_y, width - 2.4)
     start, goal = (1.2, start_y, heading), (width - 1.2, goal_y, heading)
     route = np.array([start[:2], goal[:2]])
-    lanes, movers = [lane(route, 0.6)], []
+    lanes, walkers = [lane(route, 0.6)], []
     for _ in range(int(rng.integers(4, 7))):
         loop = _walk(rng, width, height, route)
-        radius, speed = person(rng)
-        movers.append(crossing_mover(loop, route, rng, radius=radius, speed=speed, late_s=uniform(rng, (-3.0, 3.0))))
-        lanes.append(lane(np.vstack([loop, loop[:1]]), radius))
+        who = person(rng)
+        group = int(rng.choice([1, 2, 3], p=[2 / 3, 2 / 9, 1 / 9]))
+        walkers.append(crossing_walker(loop, route, rng, who, late_s=uniform(rng, (-3.0, 3.0)), group=group))
+        lanes.append(lane(np.vstack([loop, loop[:1]]), who.radius + 0.35 * (group - 1)))
     boxes = furniture(rng, int(rng.integers(0, 4)), (0.1, 0.1, width - 0.1, height - 0.1), lanes)
-    return world_mapping((width, height), start, goal, boxes=boxes, movers=movers)
+    return world_mapping((width, height), start, goal, boxes=boxes, walkers=walkers,
+                         people_seed=int(rng.integers(2**31)))

@@ -1,10 +1,14 @@
 """What every scenario kind builds its world from: the robot's route and when it gets where,
-movers timed to meet it, furniture kept out of the ways, and the world-file mapping.
+people timed to meet it, furniture kept out of the ways, and the world-file mapping.
 
-Movers never give way (no yield_distance): they walk their loops whatever the robot does. Each is
-timed from the robot's expected progress along its route — it starts `start_delay_s` after sim 0
-(the first goal goes out at 1 s, the first plan follows) and drives at `expected_speed` — so that
-the mover reaches the point where its loop crosses the route when the robot is expected there.
+People walk at human speed (1.0–1.5 m/s, Weidmann's distribution: sim/people) round their loops,
+driven by the social force model: a reactive person avoids the robot as another pedestrian, a
+distracted one (DISTRACTED_SHARE of them) does not see it. Each is timed from the robot's expected
+progress along its route — it starts `start_delay_s` after sim 0 (the first goal goes out at 1 s,
+the first plan follows) and drives at `expected_speed` — so that the person reaches the point
+where its loop crosses the route when the robot is expected there (give or take what avoiding
+others costs them). Until 2026-12-05 the kinds used kinematic movers at 0.3–0.6 m/s that never
+gave way; docs/scenarios.md keeps their figures.
 """
 from __future__ import annotations
 
@@ -14,6 +18,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...geometry.polygons import point_segment_distance, segment_distance
+from ...sim.people.plans import RADIUS_RANGE, SPEED_RANGE, draw_speeds
 
 
 @dataclass(frozen=True)
@@ -23,9 +28,15 @@ class Timing:
 
 
 TIMING = Timing()
-PERSON_RADIUS = (0.25, 0.32)        # m, drawn per person
-PERSON_SPEED = (0.3, 0.6)           # m/s, a stroll to a slow walk: the robot (0.5 m/s) can still get away
+DISTRACTED_SHARE = 0.2              # people who do not see the robot (on the phone, in a hurry)
 KEEP_OUT_M = 0.3                    # furniture keeps this far from routes, lanes and the robot's ends
+
+
+@dataclass(frozen=True)
+class Person:
+    radius: float                   # m
+    speed: float                    # m/s
+    distracted: bool
 
 
 def uniform(rng: np.random.Generator, bounds: tuple[float, float]) -> float:
@@ -89,26 +100,39 @@ def route_crossing(loop: np.ndarray, route: np.ndarray, rng: np.random.Generator
     return float(arcs[nearest]), points[nearest]
 
 
-def timed_mover(loop, arc: float, at_s: float, *, radius: float, speed: float) -> dict:
-    """A mover walking the closed loop (N, 2) for ever, placed so that it is `arc` around it at
+def walker(who: Person, path, *, loop: bool = True, start_s: float = 0.0, group: int = 1) -> dict:
+    """A walker of the world file's people: key (docs/people.md)."""
+    doc = {"path": [list(p) for p in np.asarray(path, np.float64)], "loop": loop, "speed": who.speed,
+           "radius": who.radius, "distracted": who.distracted}
+    if start_s > 0:
+        doc["start_s"] = start_s
+    if group > 1:
+        doc["group"] = group
+    return doc
+
+
+def timed_walker(loop, arc: float, at_s: float, who: Person, group: int = 1) -> dict:
+    """A person walking the closed loop (N, 2) for ever, placed so that it is `arc` around it at
     sim time at_s. Back and forth between A and B is the loop [A, B]."""
     loop = np.asarray(loop, np.float64)
-    start, segment = point_on_loop(loop, arc - speed * at_s)
-    return {"radius": radius, "speed": speed, "path": [start, *np.roll(loop, -(segment + 1), axis=0)], "loop": True}
+    start, segment = point_on_loop(loop, arc - who.speed * at_s)
+    return walker(who, [start, *np.roll(loop, -(segment + 1), axis=0)], group=group)
 
 
-def crossing_mover(loop, route: np.ndarray, rng: np.random.Generator, *, radius: float, speed: float,
-                   late_s: float = 0.0, timing: Timing = TIMING) -> dict:
-    """A mover on the loop that reaches a place where it crosses the route when the robot is
+def crossing_walker(loop, route: np.ndarray, rng: np.random.Generator, who: Person, *, late_s: float = 0.0,
+                    group: int = 1, timing: Timing = TIMING) -> dict:
+    """A person on the loop who reaches a place where it crosses the route when the robot is
     expected there, plus late_s."""
     loop = np.asarray(loop, np.float64)
     arc, point = route_crossing(loop, route, rng)
-    return timed_mover(loop, arc, arrival_s(route, point, timing) + late_s, radius=radius, speed=speed)
+    return timed_walker(loop, arc, arrival_s(route, point, timing) + late_s, who, group)
 
 
-def person(rng: np.random.Generator) -> tuple[float, float]:
-    """A person's radius and walking speed."""
-    return uniform(rng, PERSON_RADIUS), uniform(rng, PERSON_SPEED)
+def person(rng: np.random.Generator) -> Person:
+    """A person: radius, walking speed (Weidmann's, within sim/people's range), distracted or not."""
+    radius = uniform(rng, RADIUS_RANGE)
+    speed = float(draw_speeds(rng, *SPEED_RANGE, 1)[0])
+    return Person(radius, round(speed, 3), bool(rng.random() < DISTRACTED_SHARE))
 
 
 def box_corners(center, size, yaw: float) -> np.ndarray:
@@ -148,10 +172,10 @@ def furniture(rng: np.random.Generator, count: int, area: tuple[float, float, fl
 
 
 def world_mapping(bounds, start, goal, *, origin=None, walls=(), boxes=(), circles=(), movers=(),
-                  robot=None) -> dict:
+                  walkers=(), flows=(), people_seed: int = 0, robot=None) -> dict:
     """The world file's mapping (docs/worlds.md), every number rounded to the millimetre so the
-    file reads well and the same draw always writes the same bytes; `robot` adds keys beside the
-    start (drive, footprint)."""
+    file reads well and the same draw always writes the same bytes; `walkers` and `flows` are the
+    people (docs/people.md); `robot` adds keys beside the start (drive, footprint)."""
     def mm(value):
         if isinstance(value, dict):
             return {k: mm(v) for k, v in value.items()}
@@ -161,6 +185,8 @@ def world_mapping(bounds, start, goal, *, origin=None, walls=(), boxes=(), circl
             return value
         if isinstance(value, (bool, np.bool_)):
             return bool(value)
+        if isinstance(value, (int, np.integer)):   # counts (a group's size) stay whole numbers
+            return int(value)
         return round(float(value), 3) + 0.0       # + 0.0: no -0.0 in the file
 
     doc = {"bounds": mm(bounds)}
@@ -169,6 +195,11 @@ def world_mapping(bounds, start, goal, *, origin=None, walls=(), boxes=(), circl
     for key, items in (("walls", walls), ("boxes", boxes), ("circles", circles), ("movers", movers)):
         if len(items):
             doc[key] = mm(list(items))
+    if len(walkers) or len(flows):
+        doc["people"] = {"seed": int(people_seed)}
+        for key, items in (("walkers", walkers), ("flows", flows)):
+            if len(items):
+                doc["people"][key] = mm(list(items))
     doc["goals"] = [mm(goal)]
     doc["robot"] = {"start": mm(start), **mm(robot or {})}
     return doc
