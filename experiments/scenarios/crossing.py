@@ -3,19 +3,15 @@ perpendicular to it at human speed, each reaching the way about when the robot d
 second and a half)."""
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
-from .route import crossing_walker, furniture, lane, person, uniform, world_mapping
+from .route import across_hall, crossing_walker, furniture, lane, person, uniform, world_mapping
 
 
 def generate(rng: np.random.Generator) -> dict:
     width, height = uniform(rng, (10.0, 14.0)), uniform(rng, (6.0, 8.0))
-    start_y, goal_y = (uniform(rng, (0.4, 0.6)) * height for _ in range(2))
-    heading = math.atan2(goal_y - start_y, width - 2.4)
-    start, goal = (1.2, start_y, heading), (width - 1.2, goal_y, heading)
-    route = np.array([start[:2], goal[:2]])
+    start, goal, route = across_hall(rng, width, height)
     lanes, walkers = [lane(route, 0.6)], []
     first = uniform(rng, (3.5, width / 2))
     for x in ([first] if rng.random() < 0.5 else [first, uniform(rng, (first + 1.5, width - 3.5))]):

@@ -4,11 +4,10 @@ a fifth of the people distracted — while a group or two stands talking near th
 off after a while. About six people are in the hall at once."""
 from __future__ import annotations
 
-import math
 
 import numpy as np
 
-from .route import Person, furniture, lane, person, uniform, walker, world_mapping
+from .route import Person, across_hall, furniture, lane, person, uniform, walker, world_mapping
 
 PEOPLE_AT_ONCE = (4.0, 8.0)     # the flows' people in the hall at a time, by Little's law
 WINDOW_S = 90.0                 # s: the flows run this long, well past the robot's crossing
@@ -35,10 +34,7 @@ def _standing(rng: np.random.Generator, width: float, height: float, route: np.n
 
 def generate(rng: np.random.Generator) -> dict:
     width, height = uniform(rng, (12.0, 16.0)), uniform(rng, (8.0, 10.0))
-    start_y, goal_y = (uniform(rng, (0.4, 0.6)) * height for _ in range(2))
-    heading = math.atan2(goal_y - start_y, width - 2.4)
-    start, goal = (1.2, start_y, heading), (width - 1.2, goal_y, heading)
-    route = np.array([start[:2], goal[:2]])
+    start, goal, route = across_hall(rng, width, height)
     x0, x1 = 3.5, width - 3.5
     crossing_s = (height - 1.2) / 1.27                       # at Weidmann's mean speed in the range
     rate = uniform(rng, PEOPLE_AT_ONCE) / crossing_s * 60.0  # people per minute, both flows together

@@ -43,6 +43,15 @@ def uniform(rng: np.random.Generator, bounds: tuple[float, float]) -> float:
     return float(rng.uniform(*bounds))
 
 
+def across_hall(rng: np.random.Generator, width: float, height: float):
+    """The robot's start and goal 1.2 m from a hall's two ends, each at 40–60 % of its height,
+    facing each other; and the straight route between them (2, 2)."""
+    start_y, goal_y = (uniform(rng, (0.4, 0.6)) * height for _ in range(2))
+    heading = math.atan2(goal_y - start_y, width - 2.4)
+    start, goal = (1.2, start_y, heading), (width - 1.2, goal_y, heading)
+    return start, goal, np.array([start[:2], goal[:2]])
+
+
 def polyline_length(points: np.ndarray) -> np.ndarray:
     """Arc length (N,) at each vertex of a polyline (N, 2)."""
     return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
