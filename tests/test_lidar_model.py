@@ -15,6 +15,8 @@ from omninav.sim.lidar import (LidarParams, cast, cast_with_incidence, dropout_c
                                sensor_model)
 from omninav.sim.world import load_world, world_path
 
+from conftest import SHARED_DATA
+
 # every parameter of the new effects at its default: the sensor as it was
 OFF = dict(noise_std_per_m=0.0, range_dropout_start=0.0, range_dropout_prob=0.0, incidence_dropout_start=0.0,
            incidence_dropout_prob=0.0, beam_divergence=0.0, mixed_pixel_threshold=0.1, mixed_pixel_prob=0.0)
@@ -42,7 +44,11 @@ def old_sensor_model(true_ranges, params, rng):
 
 # ---------------------------------------------------------------- the old sensor, exactly
 
-@pytest.mark.parametrize("name, movers", [("room", False), ("warehouse", True), ("willow", False)])
+WILLOW = pytest.param("willow", False, marks=pytest.mark.skipif(
+    not (SHARED_DATA / "maps" / "willow-full-0.05.yaml").is_file(), reason="no shared map data"))
+
+
+@pytest.mark.parametrize("name, movers", [("room", False), ("warehouse", True), WILLOW])
 @pytest.mark.parametrize("old", [{}, dict(noise_std=0.05, dropout_prob=0.2), dict(noise_std=0.0, dropout_prob=0.1),
                                  dict(noise_std=0.3, range_min=0.5, range_max=4.0)])
 def test_with_the_new_effects_off_scans_are_the_old_sensors_byte_for_byte(name, movers, old):
