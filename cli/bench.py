@@ -17,6 +17,8 @@ BENCHES: dict[str, str] = {
     "missions": "omninav.bench.missions",
     "paper": "omninav.bench.paper",
     "scenarios": "omninav.bench.scenarios",
+    "buildings": "omninav.bench.buildings",
+    "regress": "omninav.bench.regress",
     "barn": "omninav.experiments.barn",
     "dynabarn": "omninav.experiments.dynabarn_bench",
     "explore": "omninav.bench.explore",

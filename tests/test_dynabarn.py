@@ -110,7 +110,7 @@ def test_keyframe_movers_may_cross_walls_and_the_goal_but_not_stand_on_the_start
 
 
 def test_a_difficulty_is_only_for_dynabarn_and_dynabarn_needs_one(tmp_path, capsys):
-    with pytest.raises(ScenarioError, match="a difficulty is only for dynabarn worlds, not crowd"):
+    with pytest.raises(ScenarioError, match=re.escape("crowd worlds come in one variant, got 'easy' (a difficulty is for dynabarn worlds")):
         generate_world("crowd", 1, "easy")
     with pytest.raises(ScenarioError, match=re.escape("dynabarn worlds need a difficulty, one of easy | medium | hard: got 'brutal'")):
         generate_world("dynabarn", 1, "brutal")

@@ -132,7 +132,7 @@ def test_a_person_meets_the_robot_on_its_way(worlds, kind):
 
 
 def test_unknown_kinds_and_bad_seeds_are_one_line_errors(tmp_path, capsys):
-    with pytest.raises(ScenarioError, match="unknown scenario kind 'maize': choose one of clutter, crossing"):
+    with pytest.raises(ScenarioError, match="unknown scenario kind .maize.: choose one of building, clutter, crossing"):
         generate_world("maize", 1)
     with pytest.raises(ScenarioError, match="seed must be >= 0"):
         generate_world("crowd", -1)

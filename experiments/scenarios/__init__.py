@@ -2,14 +2,15 @@
 
 Each kind is a module with `generate(rng: numpy.random.Generator) -> dict` returning a world
 file's mapping (docs/worlds.md) with the robot's start and one goal, but for the kinds to explore
-(EXPLORE_KINDS), which have no goal; KINDS maps the kind's name to it. A kind drawn at a difficulty
-(GRADED_KINDS: dynabarn) has `generate(rng, difficulty)` instead. `generate_world` draws from the
-seed, checks the world is fair (check.py) and otherwise draws again from the next sub-seed, so one
-seed always gives the same world, byte for byte.
+(EXPLORE_KINDS), which have no goal; KINDS maps the kind's name to it. A kind drawn in variants
+(VARIANT_KINDS: dynabarn at a difficulty, building for a robot) has `generate(rng, variant)`
+instead. `generate_world` draws from the seed, checks the world is fair (check.py, and the kind's
+own check) and otherwise draws again from the next sub-seed, so one seed always gives the same
+world, byte for byte.
 """
 from __future__ import annotations
 
-from functools import partial
+from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
@@ -17,8 +18,8 @@ import yaml
 
 from ...services.runtime.errors import UserError
 from ...sim.world import WorldError, world_from_mapping
-from . import clutter, crossing, crowd, doorway, dynabarn, hall, headon, maze, overtake, shelves
-from .check import world_problems
+from . import building, clutter, crossing, crowd, doorway, dynabarn, hall, headon, maze, overtake, shelves
+from .check import building_problems, world_problems
 
 KINDS: dict[str, Callable[[np.random.Generator], dict]] = {
     "crossing": crossing.generate,
@@ -31,9 +32,19 @@ KINDS: dict[str, Callable[[np.random.Generator], dict]] = {
     "clutter": clutter.generate,
     "maze": maze.generate,
 }
-# kind -> (generate(rng, difficulty), the difficulties it knows)
-GRADED_KINDS: dict[str, tuple[Callable[[np.random.Generator, str], dict], tuple[str, ...]]] = {
-    "dynabarn": (dynabarn.generate, dynabarn.DIFFICULTIES),
+
+
+@dataclass(frozen=True)
+class Variants:
+    generate: Callable[[np.random.Generator, str], dict]
+    values: tuple[str, ...]
+    option: str                     # what a variant is: the command line's --<option>
+    check: Callable = lambda world: []      # the kind's own fairness check, beside check.py's
+
+
+VARIANT_KINDS: dict[str, Variants] = {
+    "dynabarn": Variants(dynabarn.generate, dynabarn.DIFFICULTIES, "difficulty"),
+    "building": Variants(building.generate, tuple(building.ROBOTS), "robot", building_problems),
 }
 DYNAMIC_KINDS = ("crossing", "headon", "overtake", "crowd", "doorway", "hall", "shelves")
 EXPLORE_KINDS = ("maze",)      # worlds without a goal: `omninav bench explore` maps them
@@ -44,36 +55,39 @@ class ScenarioError(UserError):
     """An unknown kind or seed, or a seed whose every draw was unfair: one line."""
 
 
-def check_kind(kind: str, difficulty: str | None = None) -> None:
-    """ScenarioError unless the kind exists and the difficulty is one it knows (none for the other kinds)."""
-    if kind not in KINDS and kind not in GRADED_KINDS:
-        raise ScenarioError(f"unknown scenario kind {kind!r}: choose one of {', '.join(sorted({*KINDS, *GRADED_KINDS}))}")
-    if kind in KINDS and difficulty is not None:
-        raise ScenarioError(f"a difficulty is only for {', '.join(sorted(GRADED_KINDS))} worlds, not {kind}")
-    if kind in GRADED_KINDS and difficulty not in GRADED_KINDS[kind][1]:
-        given = "none given" if difficulty is None else f"got {difficulty!r}"
-        raise ScenarioError(f"{kind} worlds need a difficulty, one of {' | '.join(GRADED_KINDS[kind][1])}: {given}")
+def check_kind(kind: str, variant: str | None = None) -> None:
+    """ScenarioError unless the kind exists and the variant is one it knows (none for the other kinds)."""
+    if kind not in KINDS and kind not in VARIANT_KINDS:
+        raise ScenarioError(f"unknown scenario kind {kind!r}: choose one of {', '.join(sorted({*KINDS, *VARIANT_KINDS}))}")
+    if kind in KINDS and variant is not None:
+        owners = ", ".join(f"a {v.option} is for {k} worlds" for k, v in VARIANT_KINDS.items())
+        raise ScenarioError(f"{kind} worlds come in one variant, got {variant!r} ({owners})")
+    if kind in VARIANT_KINDS and variant not in VARIANT_KINDS[kind].values:
+        variants = VARIANT_KINDS[kind]
+        given = "none given" if variant is None else f"got {variant!r}"
+        raise ScenarioError(f"{kind} worlds need a {variants.option}, one of {' | '.join(variants.values)}: {given}")
 
 
-def generate_world(kind: str, seed: int, difficulty: str | None = None) -> dict:
-    """The world file mapping of `kind` (at `difficulty`, for GRADED_KINDS) drawn from `seed`
+def generate_world(kind: str, seed: int, variant: str | None = None) -> dict:
+    """The world file mapping of `kind` (its `variant`, for VARIANT_KINDS) drawn from `seed`
     (ScenarioError if none of ATTEMPTS draws is fair)."""
-    check_kind(kind, difficulty)
+    check_kind(kind, variant)
     if seed < 0:
         raise ScenarioError(f"the seed must be >= 0, got {seed}")
     name, generated, streams = f"{kind}-{seed}", {"kind": kind, "seed": seed}, [seed]
-    draw = KINDS.get(kind)
-    if kind in GRADED_KINDS:
-        generate, difficulties = GRADED_KINDS[kind]
-        draw = partial(generate, difficulty=difficulty)
-        name, generated["difficulty"] = f"{kind}-{difficulty}-{seed}", difficulty
-        streams.append(difficulties.index(difficulty))     # a seed's easy and hard worlds share no draws
+    draw, own_check = KINDS.get(kind), (lambda world: [])
+    if kind in VARIANT_KINDS:
+        variants = VARIANT_KINDS[kind]
+        draw, own_check = (lambda rng: variants.generate(rng, variant)), variants.check
+        name, generated[variants.option] = f"{kind}-{variant}-{seed}", variant
+        streams.append(variants.values.index(variant))     # a seed's variants share no draws
     problems: list[str] = []
     for attempt in range(ATTEMPTS):
         doc = {"name": name, "generated": {**generated, "sub_seed": attempt},
                **draw(np.random.default_rng([*streams, attempt]))}
         try:
-            problems = world_problems(world_from_mapping(doc, f"<{name}>"))
+            world = world_from_mapping(doc, f"<{name}>")
+            problems = world_problems(world) or own_check(world)
         except WorldError as exc:
             problems = [str(exc)]
         if not problems:
@@ -84,6 +98,7 @@ def generate_world(kind: str, seed: int, difficulty: str | None = None) -> dict:
 def world_text(doc: dict) -> str:
     """The world file's text: the same mapping always gives the same bytes."""
     made = doc["generated"]
-    difficulty = f" --difficulty {made['difficulty']}" if "difficulty" in made else ""
-    header = f"# generated by `omninav scenario generate --kind {made['kind']}{difficulty} --seed {made['seed']}`\n"
+    option = VARIANT_KINDS[made["kind"]].option if made["kind"] in VARIANT_KINDS else None
+    variant = f" --{option} {made[option]}" if option else ""
+    header = f"# generated by `omninav scenario generate --kind {made['kind']}{variant} --seed {made['seed']}`\n"
     return header + yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120)

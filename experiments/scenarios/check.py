@@ -11,6 +11,8 @@ drawn again from the next sub-seed.
 - a flow's people (who walk from anywhere in its source area to anywhere in its goal area) keep
   off the robot standing at its start or its goal: the region between the two areas keeps the
   robot's reach plus a person plus CLEARANCE_M from both (the generator keeps furniture out of it);
+- a building's robot (building_problems) gets from its start to its goal as its whole shape, not
+  a disk, keeping CSPACE_MARGIN_M a side (experiments/configuration_space.py);
 - a mover on keyframes (DynaBARN's obstacles) may cross walls, the start and the goal, as
   DynaBARN's do; it only must not overlap the robot's footprint at its start when the run begins.
 """
@@ -19,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from ..configuration_space import reach
 from ..mission_score import movers_clearance
 from ..reachability import ReachabilityParams, mission_problems
 from ...geometry.polygons import point_segment_distance, points_in_polygons
@@ -78,3 +81,16 @@ def world_problems(world: World) -> list[str]:
         if point_segment_distance(ends[:, None], loop[None, :-1], loop[None, 1:]).min() < reach + radius + CLEARANCE_M:
             problems.append(f"{name} walks over the robot's start or goal")
     return problems
+
+
+CSPACE_MARGIN_M = 0.05      # a building's robot keeps this from everything on some way to its goal
+
+
+def building_problems(world: World) -> list[str]:
+    """Why the robot's own shape (its footprint, not a disk) cannot drive from its start to its
+    goal keeping CSPACE_MARGIN_M from everything, turning where it must; empty when it can."""
+    grid = world.rasterize(RESOLUTION)
+    way = reach(grid.data > 0, grid.info, world.robot.footprint, world.robot.start, world.goals[0], CSPACE_MARGIN_M)
+    if way.reachable:
+        return []
+    return [f"the robot's shape cannot reach the goal with {CSPACE_MARGIN_M} m to spare a side"]

@@ -71,8 +71,12 @@ def room_edges(rows: int, cols: int) -> list[tuple[tuple[int, int], tuple[int, i
 
 
 def spanning_tree(rows: int, cols: int, rng: np.random.Generator) -> set:
-    """Links between neighbouring rooms that join all of them without a loop (randomised Kruskal)."""
-    edges = room_edges(rows, cols)
+    """Links between neighbouring rooms that join all of them without a loop."""
+    return random_spanning_tree(room_edges(rows, cols), rng)
+
+
+def random_spanning_tree(edges: list[tuple], rng: np.random.Generator) -> set:
+    """The edges (pairs of hashable nodes) of a random spanning tree (randomised Kruskal)."""
     parent = {room: room for edge in edges for room in edge}
 
     def root(room):
