@@ -89,8 +89,9 @@ def stored() -> dict:
 
 
 def _commit() -> str:
+    """HEAD, marked -dirty when the tree has changes not committed (as a run before its commit has)."""
     try:
-        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO, capture_output=True, text=True,
+        return subprocess.run(["git", "describe", "--always", "--dirty"], cwd=REPO, capture_output=True, text=True,
                               check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"

@@ -88,16 +88,31 @@ def test_the_collision_monitor_stops_slows_or_lets_pass(bearing):
     assert far.action == "none" and np.array_equal(far.twist, cmd)
 
 
-@pytest.mark.parametrize("cmd, action", [((-0.2, 0.0, 0.0), "slowdown"), ((0.0, 0.2, 0.0), "slowdown"),
+@pytest.mark.parametrize("cmd, action", [((-0.2, 0.0, 0.0), "none"), ((0.0, 0.2, 0.0), "none"),
                                           ((0.05, 0.0, 0.0), "stop"), ((0.0, 0.2, 0.8), "stop")],
                          ids=["back-away", "slide-along", "creep-closer", "swing-a-corner-into-it"])
 def test_within_the_stop_zone_only_a_command_that_approaches_the_obstacle_is_stopped(cmd, action):
-    """A robot 3 cm from a wall ahead may still back away or slide along it (slowed), not come closer."""
+    """A robot 3 cm from a wall ahead may still back away or slide along it (at full speed: it
+    brings nothing nearer than the wall is), not come closer."""
     monitor = CollisionMonitor(CollisionMonitorParams())
     wall = [(0.446, y) for y in np.linspace(-0.6, 0.6, 25)]
     result = monitor.check(cmd, wall)
     assert result.action == action
-    assert np.allclose(result.twist, 0.0 if action == "stop" else 0.5 * np.asarray(cmd))
+    assert np.allclose(result.twist, 0.0 if action == "stop" else np.asarray(cmd))
+
+
+@pytest.mark.parametrize("side", [1.0, -1.0])
+def test_the_slowdown_zone_slows_a_robot_closing_in_not_one_keeping_its_clearance(side):
+    """Through a door or along a wall 0.15 m beside the robot the clearance stays as it is: full
+    speed. Turning towards the wall, or a wall ahead within the zone, is slowed."""
+    monitor = CollisionMonitor(CollisionMonitorParams())
+    wall = [(x, side * (0.318 + 0.15)) for x in np.linspace(-1.5, 1.5, 61)]
+    along = monitor.check((0.5, 0.0, 0.0), wall)
+    assert along.action == "none" and np.allclose(along.twist, (0.5, 0.0, 0.0))
+    towards = monitor.check((0.5, side * 0.2, 0.0), wall)
+    assert towards.action == "slowdown" and np.allclose(towards.twist, (0.25, side * 0.1, 0.0))
+    ahead = [(0.416 + 0.2, y) for y in np.linspace(-0.5, 0.5, 21)]
+    assert monitor.check((0.5, 0.0, 0.0), ahead).action == "slowdown"
 
 
 def test_the_collision_monitor_ignores_fewer_than_min_points_and_uses_the_sensor_pose():
@@ -139,11 +154,12 @@ def test_time_to_collision_is_when_the_track_reaches_the_stop_zone():
     assert ttc == pytest.approx(1.3, abs=1e-9)     # the first 0.1 s step at or after
 
 
-def test_a_person_close_behind_does_not_slow_a_robot_driving_away_but_a_wall_does():
+def test_nothing_close_behind_slows_a_robot_driving_away_but_backing_into_it_is_slowed():
     monitor = CollisionMonitor(CollisionMonitorParams())
     behind = [(-0.416 - 0.2, y) for y in np.linspace(-0.25, 0.25, 11)]        # 0.2 m behind: the slowdown zone
     cmd = (0.4, 0.0, 0.0)
-    assert monitor.check(cmd, behind).action == "slowdown"                   # a wall (no track there)
+    assert monitor.check(cmd, behind).action == "none"                       # a wall (no track there)
+    assert monitor.check((-0.2, 0.0, 0.0), behind).action == "slowdown"
     person = movers((-0.416 - 0.5, 0.0, 0.8, 0.0, 0.3))                      # a person right there, coming on
     result = monitor.check(cmd, behind, person)
     assert result.action == "none" and np.array_equal(result.twist, cmd)

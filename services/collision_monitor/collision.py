@@ -31,7 +31,10 @@ turned was 17 cm off them, its points split between on and off the track, too fe
 Unlike Nav2's stop polygon, a point in the stop zone stops only a command that approaches it (its
 distance to the footprint would shrink more than stopping would shrink it): a robot that has come
 within stop_padding of a door post may still turn or move away from it, instead of standing there
-until the navigator gives up.
+until the navigator gives up. Likewise the slowdown zone slows only a command that brings
+min_points of its points nearer to the footprint than the nearest of them is now (by
+SLOWDOWN_TOLERANCE): driving along a wall or through a door keeps the same clearance and keeps
+its speed; closing in on a wall ahead, or swinging a corner towards one, is slowed.
 """
 from __future__ import annotations
 
@@ -61,6 +64,10 @@ APPROACH_TOLERANCE = 0.01     # m deeper into the stop zone than standing that a
 # ... and no sooner than this rate allows: just before a contact, a command closing in on a person
 # faster than the simulator's fault_speed (0.02 m/s) makes the contact the robot's
 APPROACH_TOLERANCE_SPEED = 0.01   # m/s
+# m nearer than the nearest point in the slowdown zone is now that a command must bring points
+# before it is slowed: along a wall or through a door the nearest stays as near, and a robot slowed
+# wherever a wall stood within the zone crossed a building at a quarter of its speed (bench buildings)
+SLOWDOWN_TOLERANCE = 0.01
 
 
 @dataclass(frozen=True)
@@ -202,8 +209,13 @@ class CollisionMonitor:
                                  f"{approached} scan points the command brings within {p.stop_padding} m "
                                  f"of the footprint before the robot can stop")
         if inside[1] >= p.min_points:
-            return MonitorResult(twist * p.slowdown_ratio, "slowdown", int(inside[1]),
-                                 f"{inside[1]} scan points within {p.slowdown_padding} m of the footprint")
+            slow = points[zones[:, 1]]
+            nearest = float(self._closest(paths.of(np.zeros(3)), slow).min())
+            nearer = self._approached(paths, twist, slow, 1e-9, min(p.slowdown_padding, nearest - SLOWDOWN_TOLERANCE))
+            if nearer >= p.min_points:
+                return MonitorResult(twist * p.slowdown_ratio, "slowdown", nearer,
+                                     f"{nearer} scan points within {p.slowdown_padding} m of the footprint the command "
+                                     f"brings nearer than the nearest is ({nearest:.2f} m)")
         return MonitorResult(twist.copy(), "none", 0, "")
 
     def _approached(self, paths: Paths, twist: np.ndarray, points: np.ndarray, tolerance: float, within: float) -> int:
