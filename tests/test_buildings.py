@@ -17,7 +17,6 @@ from omninav.experiments.reachability import mission_problems
 from omninav.experiments.scenarios import ScenarioError, generate_world, world_text
 from omninav.experiments.scenarios.building import DOOR_M, ROBOTS
 from omninav.experiments.scenarios.check import building_problems
-from omninav.geometry.footprint import DEFAULT_FOOTPRINT
 from omninav.sim.world import world_from_mapping
 
 RESOLUTION = 0.05
