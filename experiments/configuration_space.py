@@ -19,7 +19,8 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage, signal
+from scipy import ndimage, signal, sparse
+from scipy.sparse import csgraph
 
 from ..geometry.footprint import pad
 from ..geometry.grid import in_grid, world_to_cell
@@ -63,23 +64,14 @@ def free_poses(blocked: np.ndarray, footprint: np.ndarray, margin_m: float, reso
 
 
 def _regions(free: np.ndarray) -> np.ndarray:
-    """Labels (HEADINGS, H, W) of the joined free poses; heading 0 joins the last heading too."""
+    """Labels (HEADINGS, H, W) of the joined free poses, 0 where blocked; heading 0 joins the last
+    heading too (the labelling alone does not wrap round)."""
     labels, count = ndimage.label(free, structure=ndimage.generate_binary_structure(3, 1))
-    parent = np.arange(count + 1)
-
-    def root(a: int) -> int:
-        while parent[a] != a:
-            parent[a] = parent[parent[a]]
-            a = parent[a]
-        return a
-
     wrap = free[0] & free[-1]
-    for a, b in set(zip(labels[0][wrap].tolist(), labels[-1][wrap].tolist())):
-        ra, rb = root(a), root(b)
-        if ra != rb:
-            parent[max(ra, rb)] = min(ra, rb)
-    roots = np.array([root(a) for a in range(count + 1)])
-    return roots[labels]
+    joined = sparse.coo_matrix((np.ones(int(wrap.sum())), (labels[0][wrap], labels[-1][wrap])),
+                               shape=(count + 1, count + 1))
+    _, region = csgraph.connected_components(joined, directed=False)
+    return np.where(labels > 0, region[labels] + 1, 0)
 
 
 def _heading(yaw: float) -> int:

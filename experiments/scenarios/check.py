@@ -32,6 +32,7 @@ from .route import polyline_length
 RESOLUTION = 0.05       # m, as `navigate` rasterises a world into its map
 CLEARANCE_M = 0.1       # m, as the shipped worlds keep the footprint from everything at the start
 SAMPLE_M = 0.05         # m between the points checked along a mover's loop
+CSPACE_MARGIN_M = 0.05  # m a building's robot keeps from everything on some way to its goal
 
 
 def _loop_points(loop: np.ndarray) -> np.ndarray:
@@ -82,8 +83,6 @@ def world_problems(world: World) -> list[str]:
             problems.append(f"{name} walks over the robot's start or goal")
     return problems
 
-
-CSPACE_MARGIN_M = 0.05      # a building's robot keeps this from everything on some way to its goal
 
 
 def building_problems(world: World) -> list[str]:

@@ -210,27 +210,33 @@ class CollisionMonitor:
                                  f"of the footprint before the robot can stop")
         if inside[1] >= p.min_points:
             slow = points[zones[:, 1]]
-            nearest = float(self._closest(paths.of(np.zeros(3)), slow).min())
-            nearer = self._approached(paths, twist, slow, 1e-9, min(p.slowdown_padding, nearest - SLOWDOWN_TOLERANCE))
+            standing = self._closest(paths.of(np.zeros(3)), slow)
+            nearest = float(standing.min())
+            nearer = self._approached(paths, twist, slow, 1e-9, min(p.slowdown_padding, nearest - SLOWDOWN_TOLERANCE),
+                                      standing)
             if nearer >= p.min_points:
                 return MonitorResult(twist * p.slowdown_ratio, "slowdown", nearer,
                                      f"{nearer} scan points within {p.slowdown_padding} m of the footprint the command "
                                      f"brings nearer than the nearest is ({nearest:.2f} m)")
         return MonitorResult(twist.copy(), "none", 0, "")
 
-    def _approached(self, paths: Paths, twist: np.ndarray, points: np.ndarray, tolerance: float, within: float) -> int:
+    def _approached(self, paths: Paths, twist: np.ndarray, points: np.ndarray, tolerance: float, within: float,
+                    standing: np.ndarray | None = None) -> int:
         """How many of the points the command's path brings closer to the footprint's outline than
-        stopping now would (by more than tolerance metres), and within `within` of it."""
+        stopping now would (by more than tolerance metres), and within `within` of it; `standing`:
+        the points' distances when stopping now, if the caller has them already."""
         path = paths.of(twist)
         if np.isfinite(within) and len(points):
             # no point of the footprint moves farther along the path than this: points farther out
             # (most of them) cannot be brought within, and the path test is the monitor's cost
             sweep = float(np.max(np.hypot(path[:, 0], path[:, 1]) + self._radius * np.abs(path[:, 2])))
-            points = points[self._signed_distance(points) < within + sweep]
+            near = self._signed_distance(points) < within + sweep
+            points, standing = points[near], None if standing is None else standing[near]
         if len(points) == 0:
             return 0
         moving = self._closest(path, points)
-        standing = self._closest(paths.of(np.zeros(3)), points)
+        if standing is None:
+            standing = self._closest(paths.of(np.zeros(3)), points)
         return int(np.count_nonzero((moving < standing - tolerance) & (moving < within)))
 
     def _signed_distance(self, points: np.ndarray) -> np.ndarray:
