@@ -17,6 +17,7 @@ from pathlib import Path
 from ..experiments.barn import run_world
 from ..experiments.dynabarn_bench import run_seed
 from ..experiments.workers import run_in_workers
+from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..sim.world import shared_data_dir
 from .buildings import drive_building
 from .missions import drive_mission
@@ -104,7 +105,11 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("-o", "--out", help="folder for the runs (default out/regress-<date>-<time>)")
 
 
+@exits_2_on_user_error("bench regress")
 def main(args: argparse.Namespace) -> int:
+    unknown = sorted(set(args.only or ()) - {name for _, name, _ in CASES})
+    if unknown:
+        raise UserError(f"--only: no such case {', '.join(unknown)} (the cases: {', '.join(name for _, name, _ in CASES)})")
     out = Path(args.out or REPO / "out" / time.strftime("regress-%Y%m%d-%H%M%S")).resolve()
     out.mkdir(parents=True, exist_ok=True)
     data = shared_data_dir(Path(__file__))

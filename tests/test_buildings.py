@@ -134,3 +134,9 @@ def test_regress_covers_every_family_and_says_what_changed():
     failed = {**ok, "success": False, "status": "aborted", "contacts": 2}
     assert compare(failed, ok).startswith("BROKEN (was ok succeeded, 0 contacts, 20.0 s, 9.50 m)")
     assert compare(ok, failed).startswith("FIXED") and compare({**ok, "time_s": 21.0}, ok).startswith("changed")
+
+
+def test_regress_refuses_a_case_it_does_not_have(tmp_path, capsys):
+    assert cli_main(["bench", "regress", "--only", "crossing-0", "no-such-case", "-o", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "no such case no-such-case" in err and "crossing-0" in err
