@@ -94,6 +94,31 @@ def test_the_final_approach_lands_on_the_goal_pose_in_a_kinematic_loop(drive, st
     assert np.allclose(poses[-1], goal) and np.allclose(poses[0][:2], start[:2])
 
 
+@pytest.mark.parametrize("latch", [True, False])
+def test_a_differential_drive_whose_turn_drifts_its_centre_keeps_the_position_it_reached(latch):
+    """A skid steer's centre slides while it turns on the spot. Latched, the approach keeps the
+    position it reached and finishes the turn; unlatched, the slide the turn to the goal's yaw brings
+    (2.4 cm against a 2 cm tolerance) is corrected by turning towards it, and that turn slides it
+    again: it turns back and forth for good (the Jackal's 10 s of dithering)."""
+    goal = np.array([0.5, 0.0, math.pi / 2])
+    approach = FinalApproach(FollowerParams(drive="diff"), goal, (0.0, 0.0, 0.0), 0.0, 0.02, 0.02, latch)
+    pose, phases, turned = np.array([0.0, 0.0, 0.0]), [], 0.0
+    for _ in range(600):
+        command = approach.step(pose, 0.05)
+        phases.append(command.phase)
+        if command.phase == "arrived":
+            break
+        slide = 0.015 * abs(command.twist[2]) if command.twist[0] == 0.0 else 0.0   # m/s sideways per rad/s
+        pose = integrate(pose, command.twist + np.array([0.0, slide, 0.0]), 0.05)
+        turned += abs(command.twist[2]) * 0.05
+    aligns = sum(1 for a, b in zip(phases, phases[1:]) if b == "align" and a != "align")
+    if latch:   # one turn to the yaw, and the slide it brought kept within twice the tolerance
+        assert phases[-1] == "arrived" and approach.reached(pose) and aligns == 0
+        assert 0.02 < math.hypot(*(pose[:2] - goal[:2])) <= 0.04 and turned < math.pi / 2 + 0.1
+    else:
+        assert phases[-1] != "arrived" and aligns >= 5
+
+
 def test_local_cmd_is_published_every_tick_and_idle_without_a_path():
     node = LocalPlannerNode(LocalPlannerNodeParams())
     out = []

@@ -13,8 +13,10 @@ to max_vel_theta, and to what closes the error within one period):
 
 Done when the position is within xy_tolerance and the yaw within yaw_tolerance; a line that ends
 farther than xy_tolerance from the goal (cross-track error left over, the robot pushed aside) is
-followed by a new line from where the robot stands. Poses are (x, y, yaw) in one frame (the node
-uses the map frame), twists body twists.
+followed by a new line from where the robot stands. With latch_xy, a position once reached stays
+reached while the robot turns to the goal's yaw, unless it drifts beyond the latch's slack
+(geometry/goal_latch.py). Poses are (x, y, yaw) in one frame (the node uses the map frame), twists
+body twists.
 
 The turn has no floor at min_in_place_vel_theta (base_local_planner's rotate-to-goal has one): the
 command reaches the wheels a few control periods later (smoother, chassis), and a floor then
@@ -27,6 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ...geometry.goal_latch import GoalLatch
 from ...geometry.se2 import wrap_angle
 from .path_follower import Line, PathFollower
 from .params import FollowerParams
@@ -43,10 +46,11 @@ class ApproachCommand:
 
 class FinalApproach:
     def __init__(self, params: FollowerParams, goal, pose, speed: float, xy_tolerance: float,
-                 yaw_tolerance: float):
+                 yaw_tolerance: float, latch_xy: bool = False):
         self.params = params
         self.goal = np.asarray(goal, float).copy()
         self.xy_tolerance, self.yaw_tolerance = xy_tolerance, yaw_tolerance
+        self._latch = GoalLatch(xy_tolerance, latch_xy)
         self.holonomic = params.drive == "holonomic"
         self._start_line(np.asarray(pose, float), speed)
 
@@ -88,15 +92,16 @@ class FinalApproach:
             if not cmd.done:
                 return ApproachCommand(twist, "drive")
             self._follower = None
-        if math.hypot(*(self.goal[:2] - pose[:2])) > self.xy_tolerance:
+        if not self._latch.within(math.hypot(*(self.goal[:2] - pose[:2]))):
             self._start_line(pose, 0.0)
             return self.step(pose, dt) if self._follower is not None else self._turn_to_goal(yaw_error)
         return self._turn_to_goal(yaw_error)
 
     def reached(self, pose) -> bool:
-        """Whether pose is within the tolerances of the goal, as an arrival needs."""
+        """Whether pose is within the tolerances of the goal (the position's latched), as an arrival
+        needs."""
         pose = np.asarray(pose, float)
-        return (math.hypot(*(self.goal[:2] - pose[:2])) <= self.xy_tolerance
+        return (self._latch.holds(math.hypot(*(self.goal[:2] - pose[:2])))
                 and abs(float(wrap_angle(self.goal[2] - pose[2]))) <= self.yaw_tolerance)
 
     def _turn_to_goal(self, yaw_error: float) -> ApproachCommand:

@@ -21,7 +21,9 @@ One tick, in order:
   takes over as long as the poses it will pass through are free on the costmap; when they are not,
   the controller carries on along the path (counted approach_blocked). It reports ok with a zero
   twist ("goal_reached") once within xy_goal_tolerance and yaw_goal_tolerance; the navigator
-  decides success by its own. It is given up beyond final_approach_distance + APPROACH_HYSTERESIS.
+  decides success by its own. It is given up beyond final_approach_distance + APPROACH_HYSTERESIS
+  and on a path that ends elsewhere; a replan to the same end pose (the navigator replans every
+  planner period) keeps it, with the position it has latched (geometry/goal_latch.py).
 - The rotation shim (shim.py; on by default with dwa) turns the robot on the spot towards a new path
   (a new goal_id, or a start more than START_MOVED from the last path's) that lies more than
   angular_dist_threshold off its heading: reason "rotate_to_heading". Its state is set by `follow`
@@ -81,6 +83,7 @@ class LocalControlParams(DwaParams, RotationShimParams):
     core's own; the tolerances are the final approach's, tighter than ROS's."""
     xy_goal_tolerance: float = param(0.02, ge=0)         # m: the controller stops here (the navigator judges success)
     yaw_goal_tolerance: float = param(0.02, ge=0)        # rad
+    latch_xy_goal_tolerance: bool = True                 # the position once reached stays so while turning (geometry/goal_latch.py; ROS: false, Nav2: stateful)
     controller: str = param("dwa", choices=CONTROLLERS)  # dwa | eband | follower
     final_approach_distance: float = param(0.6, ge=0)    # m from the path's end where the final approach takes over
     rotation_shim: bool | None = None                    # turn towards a new path first (shim.py); None: with the dwa controller
@@ -182,11 +185,14 @@ class LocalControl:
 
     def follow(self, path: Path, frames: RobotFrames) -> None:
         """Follow `path` (map or odom frame) from now on; an empty path stops."""
-        if self.path is None or not len(path.poses) or path.goal_id != self.path.goal_id:
+        same_goal = self.path is not None and len(path.poses) and path.goal_id == self.path.goal_id
+        if not same_goal:
             self.maneuver = None
             self._stall.clear()
+        if not (same_goal and _same_end(path, self.path)):
+            self.approach, self.arrived = None, False
         self.path = path if len(path.poses) else None
-        self.approach, self.arrived, self.path_follower = None, False, None
+        self.path_follower = None
         if self.shim is not None and self.path is not None:
             start = np.asarray(path.poses, np.float64).reshape(-1, 3)[0, :2]
             if (self.shim_key is None or self.shim_key[0] != path.goal_id
@@ -326,7 +332,7 @@ class LocalControl:
             moving = compose((0.0, 0.0, robot[2]), (*velocity[:2], 0.0))[:2]    # the robot's velocity, map axes
             along = float(np.dot(moving, goal[:2] - robot[:2]) / max(distance, 1e-9))
             self.approach = FinalApproach(self.follower_params, goal, robot, along, p.xy_goal_tolerance,
-                                          p.yaw_goal_tolerance)
+                                          p.yaw_goal_tolerance, p.latch_xy_goal_tolerance)
         poses = frames.carry(self.approach.planned_poses(robot, costmap.info.resolution / 2), frames.map_frame,
                              costmap.header.frame_id)
         if not self._legal(poses, costmap).all():
@@ -379,3 +385,10 @@ class LocalControl:
             return Control(self._brake(velocity), False, "path_blocked: the path ahead collides on the local costmap",
                            ahead)
         return Control(command.twist, True, "", ahead)
+
+
+def _same_end(path: Path, other: Path) -> bool:
+    """Whether two paths end on the same pose: a replan towards the same goal keeps the final
+    approach (and its latched position) going instead of starting it afresh every planner period."""
+    return (path.header.frame_id == other.header.frame_id
+            and np.allclose(np.asarray(path.poses)[-1], np.asarray(other.poses)[-1], atol=1e-6))

@@ -60,7 +60,7 @@ ROS_SECTIONS = {
 ROS_WITHOUT_EFFECT = {
     "meter_scoring", "heading_lookahead", "heading_scoring", "heading_scoring_timestep", "simple_attractor",
     "angular_sim_granularity", "prune_plan", "publish_cost_grid_pc", "publish_cost_grid", "publish_traj_pc",
-    "global_frame_id", "latch_xy_goal_tolerance", "oscillation_reset_dist", "oscillation_reset_angle",
+    "global_frame_id", "oscillation_reset_dist", "oscillation_reset_angle",
     "restore_defaults", "trans_stopped_vel", "theta_stopped_vel",
     "rot_stopped_vel", "stop_time_buffer", "scaling_speed", "max_scaling_factor", "twirling_scale",
     "acc_lim_trans", "max_vel_trans", "min_vel_trans", "max_trans_vel", "min_trans_vel", "use_sim_time",
