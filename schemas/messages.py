@@ -269,6 +269,9 @@ class LocalCommand:
 # LocalCommand.reason while the robot stands at the followed path's end within the local planner's
 # tolerances; the navigator, which decides success, checks it against its own view of the robot
 GOAL_REACHED = "goal_reached"
+# the status that begins a failed Path's error when the goal cannot be reached on the map itself
+# (global_planner/map_reach.py): no recovery can help, and the navigator aborts at once
+PLAN_UNREACHABLE = "unreachable"
 
 
 @message("Transform", 1)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from omninav.schemas.messages import GOAL_REACHED, CancelGoal, Goal, Header, Pose2D
+from omninav.schemas.messages import GOAL_REACHED, PLAN_UNREACHABLE, CancelGoal, Goal, Header, Pose2D
 from omninav.services.navigator.core import (WAITING_FOR_CONFIDENT_POSE, ControlResult, Navigator, NavInputs,
                                              PlanResult, State)
 from omninav.services.navigator.params import NavigatorParams
@@ -191,7 +191,8 @@ def test_planner_failure_runs_recoveries_in_order_then_aborts_with_reason():
     nav = Navigator()
     log, poses = run(nav, 900, planner=failing_planner, events={0: (goal(2.0, 0.0, 0.0), None)})
     rec = recoveries(log)
-    assert [name for _, name in rec] == ["clear_costmaps", "rotate", "back_up", "wait"]
+    # no plan: clear the marks, wait for whoever stands in the way, look round, then back off
+    assert [name for _, name in rec] == ["clear_costmaps", "wait", "rotate", "back_up"]
     first = rec[0][0]
     assert 5.0 < first * DT <= 5.0 + 2 * DT          # planner_patience
     assert log[first].recovery.reset_distance == 3.0  # conservative_reset_dist
@@ -201,16 +202,23 @@ def test_planner_failure_runs_recoveries_in_order_then_aborts_with_reason():
     end = statuses.index("aborted")
     reason = log[end].statuses[-1].reason
     assert "no valid plan" in reason and "goal in a lethal cell" in reason
-    assert "clear_costmaps, rotate, back_up, wait" in reason
+    assert "clear_costmaps, wait, rotate, back_up" in reason
     assert log[end].cmd == (0.0, 0.0, 0.0) and all(a.cmd is None for a in log[end + 1:])
     # The failing planner was asked again and again while PLANNING (planner_frequency 0: every step).
     assert sum(a.plan_request is not None for a in log[:first]) > 50
 
 
 def test_configured_order_disabled_recovery_and_retry_limit():
-    nav = Navigator(NavigatorParams(recovery_behaviors=("wait", "clear_costmaps"), wait_duration=0.5))
+    # move_base's way: the configured list in its order, whatever the cause
+    nav = Navigator(NavigatorParams(recovery_behaviors=("wait", "clear_costmaps"), wait_duration=0.5,
+                                    recovery_by_cause=False))
     log, _ = run(nav, 400, planner=failing_planner, events={0: (goal(2.0, 0.0, 0.0), None)})
     assert [name for _, name in recoveries(log)] == ["wait", "clear_costmaps"]
+    assert current_status(log)[-1] == "aborted"
+    # by cause, only the configured behaviours run (and each once), reordered for a planning failure
+    nav = Navigator(NavigatorParams(recovery_behaviors=("back_up", "wait", "clear_costmaps"), wait_duration=0.5))
+    log, _ = run(nav, 600, planner=failing_planner, events={0: (goal(2.0, 0.0, 0.0), None)})
+    assert [name for _, name in recoveries(log)] == ["clear_costmaps", "wait", "back_up"]
     assert current_status(log)[-1] == "aborted"
 
     nav = Navigator(NavigatorParams(recovery_behavior_enabled=False))
@@ -226,6 +234,45 @@ def test_configured_order_disabled_recovery_and_retry_limit():
     assert name == "clear_costmaps" and requests_before == 3   # the third failure exceeds 2 retries
 
 
+def test_a_goal_unreachable_on_the_map_is_aborted_at_once_with_the_reason():
+    def walled_off(request):
+        return PlanResult(request.request_id, False,
+                          reason=f"{PLAN_UNREACHABLE}: the goal (2.00, 0.00) lies in a part of the map no way "
+                                 "through free cells joins to the robot's (0.00, 0.00) (no_path: ...)")
+
+    log, poses = run(Navigator(), 100, planner=walled_off, events={0: (goal(2.0, 0.0, 0.0), None)})
+    statuses = current_status(log)
+    end = statuses.index("aborted")
+    assert end <= 2 and not recoveries(log)              # the first answer ends it: no recovery changes a map
+    reason = log[end].statuses[-1].reason
+    assert reason.startswith("goal unreachable: the goal (2.00, 0.00) lies in a part of the map")
+    assert np.allclose(poses[-1], 0.0)
+
+
+def test_the_final_position_is_latched_while_the_robot_turns_to_the_goal_yaw_within_a_slack():
+    """A turn on the spot moves the centre a little (a skid steer slips, the pose jitters): the
+    position once reached stays reached while it turns, up to twice the tolerance, not beyond."""
+    def drifting_turn(pose, path, drift):
+        if path is None:
+            return ControlResult(True)
+        error = wrap_angle(path[-1, 2] - pose[2])
+        if math.hypot(*(path[-1, :2] - pose[:2])) > 0.01 and abs(error) > 0.5:
+            return holonomic_controller(pose, path, turn=False)
+        if abs(error) <= 0.01:
+            return ControlResult(True, reason=GOAL_REACHED)
+        return ControlResult(True, (drift, 0.0, math.copysign(0.5, error)))   # sideways creep while turning
+
+    for drift, latch, ends in ((0.04, True, "succeeded"), (0.04, False, "active"), (0.06, True, "active")):
+        nav = Navigator(NavigatorParams(xy_goal_tolerance=0.03, latch_xy_goal_tolerance=latch,
+                                        controller_patience=60.0))
+        log, poses = run(nav, 300, controller=lambda pose, path: drifting_turn(pose, path, drift),
+                         events={0: (goal(1.0, 0.0, math.pi / 2), None)})
+        assert current_status(log)[-1] == ends, (drift, latch)
+        if ends == "succeeded":   # it left the tolerance while turning, and stayed within the slack
+            misses = [math.hypot(x - 1.0, y) for x, y, _ in poses[:current_status(log).index("succeeded")]]
+            assert max(misses[-40:]) > 0.03 and misses[-1] <= 0.06
+
+
 def test_controller_failure_replans_then_recovers_then_aborts():
     params = NavigatorParams(controller_patience=2.0)
     nav = Navigator(params)
@@ -235,7 +282,8 @@ def test_controller_failure_replans_then_recovers_then_aborts():
 
     log, _ = run(nav, 1200, controller=stuck, events={0: (goal(2.0, 0.0, 0.0), None)})
     rec = recoveries(log)
-    assert [name for _, name in rec] == ["clear_costmaps", "rotate", "back_up", "wait"]
+    # no valid command: clear the marks, then back off to get room to turn
+    assert [name for _, name in rec] == ["clear_costmaps", "back_up", "rotate", "wait"]
     assert 2.0 < rec[0][0] * DT <= 2.0 + 4 * DT
     # Within the patience, each failure stops the robot and asks for a new plan.
     assert sum(a.plan_request is not None for a in log[:rec[0][0]]) > 5
@@ -252,7 +300,9 @@ def test_oscillation_triggers_recovery_only_when_enabled():
     nav = Navigator(NavigatorParams(oscillation_timeout=3.0, oscillation_distance=0.5))
     log, _ = run(nav, 1000, controller=dither, events={0: (goal(2.0, 0.0, 0.0), None)})
     rec = recoveries(log)
-    assert rec and rec[0][1] == "clear_costmaps" and 3.0 < rec[0][0] * DT <= 3.0 + 3 * DT
+    # valid commands and no progress: move_base's order
+    assert [name for _, name in rec] == ["clear_costmaps", "rotate", "back_up", "wait"]
+    assert 3.0 < rec[0][0] * DT <= 3.0 + 3 * DT
     statuses = current_status(log)
     assert "oscillating" in log[statuses.index("aborted")].statuses[-1].reason
 
@@ -300,8 +350,9 @@ def test_recovery_that_fixes_control_returns_to_controlling():
         return holonomic_controller(pose, path)
 
     log, poses = run(nav, 800, controller=stuck_until_rotated, events={0: (goal(2.0, 0.0, 0.0), None)})
-    # clear_costmaps does not move the robot; rotate does, and the controller recovers.
-    assert [name for _, name in recoveries(log)] == ["clear_costmaps", "rotate"]
+    # clear_costmaps and back_up leave the robot facing the same way; rotate turns it, and the
+    # controller recovers
+    assert [name for _, name in recoveries(log)] == ["clear_costmaps", "back_up", "rotate"]
     assert current_status(log)[-1] == "succeeded"
 
 

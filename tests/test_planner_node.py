@@ -137,6 +137,40 @@ def test_unreachable_goals_get_an_error_naming_the_reason():
     assert node.counters["queries/no_path"] == 1
 
 
+def test_a_goal_the_map_itself_walls_off_is_unreachable_and_one_only_marked_off_is_not():
+    """After a failed plan the planner asks the map: a goal in a wall or in a pocket no free cell of
+    the map joins to the start is `unreachable` (the navigator ends it at once); a way closed only
+    by what the sensors marked on the costmap stays `no_path`, for the recoveries."""
+    grid = room_map()
+    grid.header = Header(stamp_ns=0, frame_id="map")
+    u, v = grid_coords(grid.info, 3.0, 7.0)
+    r, c = int(v), int(u)
+    grid.data[r - 10:r + 11, c - 10:c + 11] = 100       # a walled pocket on the map itself
+    grid.data[r - 8:r + 9, c - 8:c + 9] = 0
+    costmap = room_costmap()
+    costmap.data[r - 10:r + 11, c - 10:c + 11] = LETHAL_OBSTACLE
+    costmap.data[r - 8:r + 9, c - 8:c + 9] = 0
+    node = PlannerNode(PlannerNodeParams())
+    feed(node, [(KEYS.robot("costmap/global"), costmap), (KEYS.robot("map"), grid)])
+    with pytest.raises(QueryError, match=r"^unreachable: the goal \(3.00, 7.00\) lies in a part of the map no way "
+                                         r"through free cells joins to the robot's \(1.20, 1.00\) \(no_path: "):
+        ask(node, start="1.2,1.0", goal="3.0,7.0")
+    with pytest.raises(QueryError, match=r"^unreachable: the goal \(5.00, 4.00\) lies on no free cell of the map "
+                                         r"\(goal_in_obstacle: "):
+        ask(node, start="1.2,1.0", goal="5,4")            # the pillar
+    # a wall of marks across the room (people, a cart) on the costmap only: the map joins them
+    marked = room_costmap()
+    u, _ = grid_coords(marked.info, 6.0, 0.0)
+    marked.data[:, int(u) - 2:int(u) + 3] = LETHAL_OBSTACLE
+    node = PlannerNode(PlannerNodeParams())
+    feed(node, [(KEYS.robot("costmap/global"), marked), (KEYS.robot("map"), room_map())])
+    with pytest.raises(QueryError, match=r"^no_path: no path from cell"):
+        ask(node, start="1.2,1.0", goal="8,4")
+    # beyond the map lies unknown space the planner may cross: the map cannot say no
+    with pytest.raises(QueryError, match=r"^no_path: "):
+        ask(node, start="1.2,1.0", goal="50,4")
+
+
 def test_bad_parameters_and_missing_inputs_get_clear_errors():
     node = PlannerNode()
     with pytest.raises(QueryError, match=r"no global costmap yet \(on omninav/r1/costmap/global\)"):
@@ -289,4 +323,4 @@ def test_omninav_get_plans_with_running_map_server_costmap_and_planner(processes
     bad = subprocess.run([sys.executable, "-m", "omninav.cli.main", "get", "omninav/r1/plan;start=1.2,1.0;goal=5,4"],
                          capture_output=True, text=True, timeout=60, cwd=REPO, env=env)
     assert bad.returncode == 1
-    assert "error reply: goal_in_obstacle: the goal cell" in bad.stderr
+    assert "error reply: unreachable: the goal (5.00, 4.00) lies on no free cell of the map (goal_in_obstacle: " in bad.stderr

@@ -3,7 +3,7 @@
 Plan as a service: `get` on the plan key with `start=x,y[,yaw];goal=x,y[,yaw]` (metres and radians
 in the costmap's frame, the map; yaw 0 when left out) answers a Path planned on the newest global
 costmap received; without `start` the plan starts at the robot's pose. A plan that fails answers
-an error whose text begins with the status (`no_path`, `goal_in_obstacle`, `off_map`) and says why;
+an error whose text begins with the status (`no_path`, `goal_in_obstacle`, `off_map`, `unreachable`) and says why;
 malformed parameters, or no costmap yet, answer an error saying so. `get` without parameters
 answers the plan last published.
 
@@ -17,7 +17,12 @@ empty Path, as ROS global_planner does, whose error says "<status>: <reason>", c
 Diagnostic as plans/<status>. A goal that comes before a costmap or a pose is planned when they
 are there.
 
-Inputs, in merge order: odom (synced); costmap/global, tf/map_odom, pose, goal_topic, cancel (sporadic).
+Inputs, in merge order: odom (synced); costmap/global, tf/map_odom, pose, goal_topic, cancel, map (sporadic).
+
+A plan that fails (no_path, goal_in_obstacle) on a costmap in the map frame is checked against the
+latest map (map_reach.py): a goal that no way through the map's free cells joins to the robot fails
+as `unreachable: <why> (<the planner's status>: <its reason>)`, which the navigator ends the goal on
+at once; otherwise the failure stands, for the navigator's recoveries.
 A sporadic message stamped t takes effect at the first odometry or planning tick stamped after
 t + request_delay_s, as the localizer defers its requests: the costmap service runs up to a scan
 period behind the clock (it waits for the scans), so its costmaps come after the odometry of their
@@ -39,17 +44,19 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...schemas.keys import KeyLayout, type_for_key
-from ...schemas.messages import Costmap, Diagnostic, Goal, Header, Odometry, Path, PoseWithCovariance
+from ...schemas.messages import (PLAN_UNREACHABLE, Costmap, Diagnostic, Goal, Header, OccupancyGrid, Odometry, Path,
+                                 PoseWithCovariance)
 from ...geometry.frames import FrameParams
 from ..runtime.deferred import Deferred
 from ..runtime.node import Node, QueryError
-from .astar import GlobalPlanner, PlanResult, warm_up
+from .astar import GOAL_IN_OBSTACLE, NO_PATH, GlobalPlanner, PlanResult, warm_up
+from .map_reach import MapReach
 from .params import GlobalPlannerParams
 from ...parameters.declare import ParamError, Rule, param
 
 TIMES_KEPT = 10_000     # plan times kept for the diagnostic's median
 QUERY_PARAMETERS = ("start", "goal")
-COSTMAP, MAP_ODOM, POSE, GOAL, CANCEL = range(5)   # sporadic inputs, in input order (the order of equal stamps)
+COSTMAP, MAP_ODOM, POSE, GOAL, CANCEL, MAP = range(6)   # sporadic inputs, in input order (the order of equal stamps)
 
 
 @dataclass(frozen=True)
@@ -92,6 +99,8 @@ class PlannerNode(Node):
         self.pending = Deferred(p.request_delay_s)   # sporadic inputs not yet in effect
         self.costmap: Costmap | None = None          # in effect
         self.pose: PoseWithCovariance | None = None
+        self.map: OccupancyGrid | None = None         # in effect
+        self._map_reach: tuple[OccupancyGrid, MapReach] | None = None   # a map's free regions, found when a plan first fails on it
         self.goal: Goal | None = None
         self.waiting = False               # the active goal is not planned yet: no costmap or pose
         self.plan: Path | None = None      # last published
@@ -102,7 +111,7 @@ class PlannerNode(Node):
         for kind, topic, check in ((COSTMAP, "costmap/global", self._check_costmap),
                                    (MAP_ODOM, "tf/map_odom", self.frames.transform_problem),
                                    (POSE, "pose", self._check_pose), (GOAL, p.goal_topic, self._check_goal),
-                                   (CANCEL, "cancel", None)):
+                                   (CANCEL, "cancel", None), (MAP, "map", self._check_map)):
             self.subscribe_deferred(topic, self.pending, kind, check)
         self.queryable("plan", self.answer_plan)
         if p.planner_frequency > 0:
@@ -121,6 +130,13 @@ class PlannerNode(Node):
             return f"data of shape {msg.data.shape} for a grid of {msg.info.height} x {msg.info.width} cells"
         if msg.header.frame_id not in (self.frames.map_frame, self.frames.odom_frame):
             return f"frame {msg.header.frame_id!r} is neither {self.frames.map_frame!r} nor {self.frames.odom_frame!r}"
+        return ""
+
+    def _check_map(self, msg: OccupancyGrid) -> str:
+        if msg.data.shape != (msg.info.height, msg.info.width) or msg.data.size == 0:
+            return f"data of shape {msg.data.shape} for a grid of {msg.info.height} x {msg.info.width} cells"
+        if msg.header.frame_id not in ("", self.frames.map_frame):
+            return f"frame {msg.header.frame_id!r}, expected the map frame {self.frames.map_frame!r}"
         return ""
 
     def _check_pose(self, msg: PoseWithCovariance) -> str:
@@ -142,6 +158,8 @@ class PlannerNode(Node):
                 self.frames.set_map_odom(msg)
             elif kind == POSE:
                 self.pose = msg
+            elif kind == MAP:
+                self.map = msg
             elif kind == GOAL:
                 self.goal, self.waiting = msg, True
                 self.counters["goals"] += 1
@@ -161,9 +179,17 @@ class PlannerNode(Node):
 
     # ------------------------------------------------------------ planning
 
-    def _plan(self, costmap: Costmap, start, goal) -> PlanResult:
+    def _plan(self, costmap: Costmap, start, goal, grid: OccupancyGrid | None) -> PlanResult:
+        """A plan on the costmap; a failed one checked against the map `grid` (map_reach.py)."""
         began = time.perf_counter()   # instrumentation only
         result = self.planner.plan(costmap.data, costmap.info, start, goal)
+        if result.status in (NO_PATH, GOAL_IN_OBSTACLE) and grid is not None \
+                and costmap.header.frame_id == self.frames.map_frame:
+            if self._map_reach is None or self._map_reach[0] is not grid:
+                self._map_reach = grid, MapReach(grid, self.params.allow_unknown)
+            why = self._map_reach[1].why_unreachable(start, goal, self.params.default_tolerance)
+            if why:
+                result = PlanResult(PLAN_UNREACHABLE, f"{why} ({result.status}: {result.message})")
         self.plan_ms.append((time.perf_counter() - began) * 1e3)
         return result
 
@@ -177,7 +203,7 @@ class PlannerNode(Node):
         if self.waiting:
             return
         g = self.goal.pose
-        result = self._plan(self.costmap, start, (g.x, g.y, g.theta))
+        result = self._plan(self.costmap, start, (g.x, g.y, g.theta), self.map)
         self.counters[f"plans/{result.status}"] += 1
         self.plan = Path(header=self.header(self.costmap.header.frame_id), poses=result.poses,
                          goal_id=self.goal.goal_id, error="" if result.ok else f"{result.status}: {result.message}")
@@ -200,7 +226,8 @@ class PlannerNode(Node):
             start = self.frames.robot_with_pose(costmap.header.frame_id, self.pose)
             if start is None:
                 raise QueryError(f"{self.plan_key}: no start= given and the robot's pose is not known yet")
-        result = self._plan(costmap, start, goal)
+        held = self.pending.latest(MAP)
+        result = self._plan(costmap, start, goal, held if held is not None else self.map)
         self.counters[f"queries/{result.status}"] += 1
         if not result.ok:
             raise QueryError(f"{result.status}: {result.message}")

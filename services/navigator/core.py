@@ -24,15 +24,28 @@ SUCCEEDED | ABORTED(reason) | CANCELED(reason). The move_base rules kept:
   local planner decide arrival; here the navigator does, and a disagreement must not leave the robot
   standing with an active goal for good.
 - not moving oscillation_distance within oscillation_timeout while CONTROLLING → recovery.
-- recovery behaviours run in the configured order, each at most once per target (waypoint or
-  goal): after one, the timers restart and planning resumes; the index goes back to the start
-  when the failure that triggered recovery goes away (a valid plan, a valid command, or enough
-  motion). When none are left: ABORTED, naming the failure and the behaviours tried.
+- recovery behaviours run each at most once per target (waypoint or goal): after one, the timers
+  restart and planning resumes (from where the robot is); they may all run again once the failure
+  that triggered recovery goes away (a valid plan, a valid command, or enough motion). When none
+  are left: ABORTED, naming the failure and the behaviours tried. Not move_base's: with
+  recovery_by_cause (the default) the configured behaviours run in the order that suits what
+  blocked the robot (RECOVERY_BY_TRIGGER): no plan — clear the marks first, then wait for whoever
+  stands in the way, then look round; no valid command — clear, then back off to get room to turn;
+  no progress although commands are valid — move_base's own order: clear, look round, back off
+  (backing off first was tried: building-diff-3, a robot wedged diagonally in a door, took 65.6 s
+  against 53.8 s — 0.15 m back left it as wedged, and turning was what freed it). move_base runs its
+  one list whatever the cause (recovery_by_cause false).
+- a plan the global planner failed as PLAN_UNREACHABLE (the goal cannot be reached on the map
+  itself: global_planner/map_reach.py) ends the goal ABORTED at once, "goal unreachable: <why>":
+  no recovery changes the map.
 - a new goal preempts the current one: the old goal ends CANCELED with the reason
   "preempted by goal <id>" (actionlib's PREEMPTED; NavStatus has no such status).
 - arrival: within xy_goal_tolerance of an intermediate waypoint (no yaw check), and within
   xy_goal_tolerance and yaw_goal_tolerance of the final pose, moving no faster than
-  trans_stopped_vel / rot_stopped_vel (when the velocity is known).
+  trans_stopped_vel / rot_stopped_vel (when the velocity is known). With latch_xy_goal_tolerance the
+  final position, once within xy_goal_tolerance, stays reached while the robot turns to the yaw,
+  unless it drifts beyond the latch's slack (geometry/goal_latch.py), as the local planner's final
+  approach latches it.
 
 Not move_base's: the goal never succeeds on a pose the localizer doubts. While the latest beam fit
 (the share of a scan's returns on mapped obstacles at the localizer's pose) is below
@@ -50,7 +63,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ...schemas.messages import GOAL_REACHED, CancelGoal, Goal, Header, NavStatus
+from ...schemas.messages import GOAL_REACHED, PLAN_UNREACHABLE, CancelGoal, Goal, Header, NavStatus
+from ...geometry.goal_latch import GoalLatch
 from ...geometry.se2 import wrap_angle
 from .params import NavigatorParams
 from .recovery import ZERO, Behaviour, Twist3, behaviour
@@ -80,6 +94,12 @@ class Trigger(enum.Enum):
     PLANNING = "planning"
     CONTROLLING = "controlling"
     OSCILLATION = "oscillation"
+
+
+# with recovery_by_cause: the order the configured behaviours run in, by what blocked the robot
+RECOVERY_BY_TRIGGER = {Trigger.PLANNING: ("clear_costmaps", "wait", "rotate", "back_up"),
+                       Trigger.CONTROLLING: ("clear_costmaps", "back_up", "rotate", "wait"),
+                       Trigger.OSCILLATION: ("clear_costmaps", "rotate", "back_up", "wait")}
 
 
 @dataclass(frozen=True)
@@ -137,6 +157,7 @@ class Navigator:
         self.velocity: np.ndarray | None = None
         self.beam_fit: float | None = None    # None: no localizer says how well its scans fit
         self.path: np.ndarray | None = None
+        self._latch = GoalLatch(self.params.xy_goal_tolerance, self.params.latch_xy_goal_tolerance)
         self._now: float | None = None
         self._next_request_id = 1
         self._outstanding: int | None = None  # the plan request whose answer counts
@@ -150,7 +171,7 @@ class Navigator:
         self._planning_retries = 0
         self._last_failure = ""
         self._trigger: Trigger | None = None
-        self._recovery_index = 0
+        self._tried: list[str] = []           # the behaviours run for this target since the failure began
         self._recovery: Behaviour | None = None
         self._recovery_start_s = 0.0
 
@@ -209,7 +230,7 @@ class Navigator:
         self.reason = ""
         self.path = None
         self._outstanding = None
-        self._recovery_index = 0
+        self._tried.clear()
         self._trigger = None
         waypoints = np.asarray(goal.waypoints, dtype=float).reshape(-1, 3)
         self.targets = np.vstack([waypoints, [[goal.pose.x, goal.pose.y, goal.pose.theta]]])
@@ -245,6 +266,7 @@ class Navigator:
         self._oscillation_pose = self.pose.copy()
         self._planning_retries = 0
         self._last_failure = ""
+        self._latch.latched = False
 
     def _check_arrival(self, out: NavActions) -> None:
         self.reason = ""   # an active goal's only reason is the wait below, decided afresh each step
@@ -253,7 +275,7 @@ class Navigator:
                 return
             if self.target_index < len(self.targets) - 1:
                 self.target_index += 1
-                self._recovery_index = 0
+                self._tried.clear()
                 self._begin_target()
                 continue
             if self._stopped():
@@ -273,7 +295,9 @@ class Navigator:
 
     def _at_target(self) -> bool:
         distance, yaw_error = self._target_miss()
-        return distance <= self.params.xy_goal_tolerance and yaw_error <= self.params.yaw_goal_tolerance
+        if self.target_index < len(self.targets) - 1:
+            return distance <= self.params.xy_goal_tolerance
+        return self._latch.within(distance) and yaw_error <= self.params.yaw_goal_tolerance
 
     def _pose_doubted(self) -> bool:
         return self.beam_fit is not None and self.beam_fit < self.params.min_pose_beam_fit
@@ -317,7 +341,7 @@ class Navigator:
             self._last_valid_plan_s = self._now
             self._planning_retries = 0
             if self._trigger is Trigger.PLANNING:
-                self._recovery_index = 0
+                self._tried.clear()
             if self.state is State.PLANNING:
                 # The local planner's answer in this same step was made without this plan.
                 self.state = State.CONTROLLING
@@ -325,6 +349,9 @@ class Navigator:
             return
         self._planning_retries += 1
         self._last_failure = result.reason or "empty plan"
+        if self._last_failure.startswith(f"{PLAN_UNREACHABLE}:"):
+            self._finish(State.ABORTED, f"goal unreachable: {self._last_failure[len(PLAN_UNREACHABLE) + 1:].strip()}", out)
+            return
         p = self.params
         too_many = 0 <= p.max_planning_retries < self._planning_retries
         if too_many or self._now > self._last_valid_plan_s + p.planner_patience:
@@ -336,7 +363,7 @@ class Navigator:
             self._oscillation_pose = self.pose.copy()
             self._last_oscillation_reset_s = self._now
             if self._trigger is Trigger.OSCILLATION:
-                self._recovery_index = 0
+                self._tried.clear()
 
     def _control(self, result: ControlResult | None, out: NavActions) -> None:
         p = self.params
@@ -354,7 +381,7 @@ class Navigator:
             out.cmd = tuple(float(v) for v in result.cmd)
             self._last_valid_control_s = now
             if self._trigger is Trigger.CONTROLLING:
-                self._recovery_index = 0
+                self._tried.clear()
             return
         if result is not None:
             self._last_failure = result.reason or "no valid command"
@@ -367,14 +394,25 @@ class Navigator:
             self._want_plan = True
 
     # ---- recovering ----------------------------------------------------------------------
+    def _recovery_order(self, trigger: Trigger) -> list[str]:
+        """The configured behaviours (a name may come twice, as in ROS files) in the order they run for
+        this trigger."""
+        order = list(self.params.recovery_order)
+        if self.params.recovery_by_cause:
+            order.sort(key=RECOVERY_BY_TRIGGER[trigger].index)
+        return order
+
     def _recover(self, trigger: Trigger, out: NavActions) -> None:
         self._trigger = trigger
-        order = self.params.recovery_order
-        if self._recovery_index >= len(order):
-            self._finish(State.ABORTED, self._abort_reason(trigger, order), out)
+        left = self._recovery_order(trigger)
+        for name in self._tried:
+            if name in left:
+                left.remove(name)
+        if not left:
+            self._finish(State.ABORTED, self._abort_reason(trigger), out)
             return
-        self._recovery = behaviour(order[self._recovery_index], self.params)
-        self._recovery_index += 1
+        self._recovery = behaviour(left[0], self.params)
+        self._tried.append(left[0])
         self._recovery_start_s = self._now
         self._outstanding = None
         self.state = State.RECOVERING
@@ -391,7 +429,7 @@ class Navigator:
         self._begin_target()
         out.cmd = ZERO
 
-    def _abort_reason(self, trigger: Trigger, order: tuple[str, ...]) -> str:
+    def _abort_reason(self, trigger: Trigger) -> str:
         p = self.params
         if trigger is Trigger.PLANNING:
             what = f"no valid plan within planner_patience {p.planner_patience:g} s"
@@ -402,7 +440,7 @@ class Navigator:
                     f"in oscillation_timeout {p.oscillation_timeout:g} s")
         if trigger is not Trigger.OSCILLATION and self._last_failure:
             what += f" ({self._last_failure})"
-        tried = f"even after recovery behaviours {', '.join(order)}" if order else "recovery behaviours disabled"
+        tried = f"even after recovery behaviours {', '.join(self._tried)}" if self._tried else "recovery behaviours disabled"
         return f"{what}, {tried}"
 
     # ---- status --------------------------------------------------------------------------

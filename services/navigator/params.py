@@ -1,8 +1,10 @@
 """Navigator parameters with move_base's names and defaults (ROS 1 noetic move_base.cpp).
 
-min_pose_beam_fit is not move_base's: move_base trusts any pose; this one waits at the goal while the
-localizer's scans do not fit the map (docs/navigator.md). xy_goal_tolerance, yaw_goal_tolerance and
-escape_vel are base_local_planner's (in ROS the local
+min_pose_beam_fit and recovery_by_cause are not move_base's: move_base trusts any pose; this one
+waits at the goal while the localizer's scans do not fit the map (docs/navigator.md); move_base runs
+its recovery behaviours in one order, this one in the order that suits what blocked the robot
+(core.py). xy_goal_tolerance, yaw_goal_tolerance,
+latch_xy_goal_tolerance and escape_vel are base_local_planner's (in ROS the local
 planner decides arrival; here the navigator does, so both see the same numbers). The recovery
 behaviours' own settings (rotate_angle, max_rotational_vel, backup_dist, wait_duration) carry the
 names of rotate_recovery and Nav2's BackUp/Wait behaviours.
@@ -47,8 +49,10 @@ class NavigatorParams(Parameters):
     clearing_rotation_allowed: bool = True                 # false drops "rotate" from the recovery order
     shutdown_costmaps: bool = False                        # accepted for ROS files; costmaps here run independently
     recovery_behaviors: tuple[str, ...] = param(RECOVERY_NAMES, choices=RECOVERY_NAMES)
+    recovery_by_cause: bool = True                         # run them in the order that suits what blocked the robot (core.py); false: as listed, as move_base
     xy_goal_tolerance: float = param(0.10, ge=0)           # m
     yaw_goal_tolerance: float = param(0.05, ge=0)          # rad (final pose only; waypoints check xy only)
+    latch_xy_goal_tolerance: bool = True                   # the final position once reached stays so while turning, within a slack (geometry/goal_latch.py; ROS: false, Nav2: stateful)
     trans_stopped_vel: float = param(0.1, ge=0)            # m/s: at the final pose, success only below this (dwa_local_planner)
     rot_stopped_vel: float = param(0.1, ge=0)              # rad/s: likewise
     min_pose_beam_fit: float = param(0.5, ge=0)            # success only while the localizer's latest beam fit is at least this; 0 = off
