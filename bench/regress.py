@@ -69,7 +69,7 @@ def run_case(job: tuple[str, str, tuple, str]) -> dict:
 
 
 def _show(row: dict) -> str:
-    time_s = "-" if row["time_s"] is None else f"{row['time_s']:.1f} s"
+    time_s = "-" if row["time_s"] is None else f"{row['time_s']:.2f} s"
     path = "" if row["path_m"] is None else f", {row['path_m']:.2f} m"
     return f"{'ok' if row['success'] else 'FAIL'} {row['status']}, {row['contacts']} contacts, {time_s}{path}"
 

@@ -133,8 +133,10 @@ def test_regress_covers_every_family_and_says_what_changed():
     ok = {"name": "a", "success": True, "status": "succeeded", "contacts": 0, "time_s": 20.0, "path_m": 9.5}
     assert compare(ok, None) == "new" and compare(ok, dict(ok)) == "same"
     failed = {**ok, "success": False, "status": "aborted", "contacts": 2}
-    assert compare(failed, ok).startswith("BROKEN (was ok succeeded, 0 contacts, 20.0 s, 9.50 m)")
+    assert compare(failed, ok).startswith("BROKEN (was ok succeeded, 0 contacts, 20.00 s, 9.50 m)")
     assert compare(ok, failed).startswith("FIXED") and compare({**ok, "time_s": 21.0}, ok).startswith("changed")
+    # a change of 0.05 s shows in what it was
+    assert compare({**ok, "time_s": 20.05}, ok) == "changed (was ok succeeded, 0 contacts, 20.00 s, 9.50 m)"
 
 
 def test_regress_refuses_a_case_it_does_not_have(tmp_path, capsys):

@@ -15,6 +15,7 @@ from omninav.schemas.messages import (GOAL_REACHED, Costmap, Header, LocalComman
 from omninav.geometry.frames import RobotFrames
 from omninav.geometry.se2 import integrate
 from omninav.services.local_planner.control import ControlInputs, LocalControl, LocalControlParams
+from omninav.services.local_planner.dwa import path_maps
 from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
 from omninav.services.runtime.node import NS_PER_S
 
@@ -259,6 +260,29 @@ def test_a_robot_in_a_slot_too_narrow_to_turn_in_backs_out_and_turns_by_a_maneuv
     assert answers[-1].reason == GOAL_REACHED and math.hypot(pose[0] + 1.0, pose[1]) <= 0.02
     stuck, stuck_pose = results[False]
     assert stuck[-1].reason != GOAL_REACHED and stuck_pose[0] > 0.5     # still in the slot
+
+
+def test_a_robot_wedged_on_the_costmap_gets_a_maneuver_off_the_cells_it_stands_on():
+    # lethal cells under the robot's own side by its rear corner (a post rasterised a cell into it, a noisy
+    # mark): every pose near it is illegal by the robot's outline, so the search from it found
+    # nothing and the robot stood (building-diff-3, 40 s in a door); those cells forgiven, as DWA's
+    # escape forgives them, the maneuver drives it on along its path
+    grid = costmap((-0.45, 0.3, -0.2, 0.45))
+    params = LocalControlParams(holonomic_robot=False, min_vel_x=0.0)
+    core, frames = LocalControl(params, DT), RobotFrames("map", "odom")
+    core.follow(follow_path(EAST), frames)
+    robot = np.zeros(3)
+    assert core.footprint_check.setup(robot, grid.data, grid.info).wedged
+    maps = path_maps(EAST, robot, grid.info, grid.data, core.controller.distances)
+    first = core._plan_maneuver(robot, grid, maps)
+    assert first is not None and first.reason == "maneuver" and "maneuver/planned" in core._counted
+    pose = robot
+    for k in range(400):
+        answer = core._maneuver(pose, grid)
+        if answer is None:
+            break
+        pose = integrate(pose, answer.twist, DT)
+    assert pose[0] >= params.maneuver_params().progress - 0.1 and abs(pose[1]) < 0.1
 
 
 @pytest.mark.parametrize("speed, stalls", [(0.05, True), (0.0, True), (0.1, False)])

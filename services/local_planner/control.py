@@ -43,7 +43,8 @@ One tick, in order:
   people is not stuck), a maneuver is searched in (x, y, heading) for the footprint and, found,
   driven from this tick on (counted maneuver/planned, else maneuver/none): at the mouth of a BARN
   gap DWA's arcs reach none of the few poses the padded footprint fits in, and the robot crept and
-  turned there until a recovery moved it (docs/barn.md).
+  turned there until a recovery moved it (docs/barn.md). A robot wedged on the costmap is searched
+  and driven with the cells it is wedged on forgiven (`_plan_maneuver`).
 Every pose is held to one FootprintCheck (footprint_check.py), the one DWA's rollouts use.
 """
 from __future__ import annotations
@@ -166,6 +167,7 @@ class LocalControl:
         self.arrived = False
         self.maneuver_params = p.maneuver_params()
         self.maneuver: ManeuverDriver | None = None
+        self._maneuver_wedged_at: np.ndarray | None = None   # where the robot stood wedged when its maneuver was planned
         self._stall: deque[np.ndarray] = deque()   # the robot's poses over the last stall_time under DWA
         self._counted: list[str] = []
 
@@ -278,8 +280,18 @@ class LocalControl:
         return True
 
     def _plan_maneuver(self, robot: np.ndarray, costmap: Costmap, maps) -> Control | None:
-        """A maneuver (maneuver.py) out of a stall, its first command; None when none is found."""
+        """A maneuver (maneuver.py) out of a stall, its first command; None when none is found.
+
+        A robot wedged on the costmap (its own outline on lethal cells where it stands: a door post
+        rasterised a cell into it, the scan's noise) is planned and driven with those cells forgiven
+        (FootprintCheck.escape_check): from a start every neighbour of which is illegal the search
+        found nothing (building-diff-3: the mecanum robot as a diff drive, diagonal in a 1.1 m door,
+        stood 40 s). The collision monitor, on the scan's points, still stops any motion into the
+        door post."""
         check = self.footprint_check.setup(robot, costmap.data, costmap.info)
+        wedged = check.wedged
+        if wedged:
+            check = self.footprint_check.escape_check(check, robot, costmap.data, costmap.info)
         segments = plan_maneuver(robot, self.footprint_check, check, costmap.data, costmap.info, maps.goal_dist,
                                  self.maneuver_params)
         self._counted.append("maneuver/planned" if segments else "maneuver/none")
@@ -288,6 +300,7 @@ class LocalControl:
         dwa = self.dwa_params
         self.maneuver = ManeuverDriver(segments, robot, self.maneuver_params, (dwa.max_vel_x, dwa.max_vel_theta),
                                        (dwa.acc_lim_x, dwa.acc_lim_theta))
+        self._maneuver_wedged_at = robot.copy() if wedged else None
         return self._maneuver(robot, costmap)
 
     def _maneuver(self, robot: np.ndarray, costmap: Costmap) -> Control | None:
@@ -299,7 +312,11 @@ class LocalControl:
         if twist is not None:
             ahead = compose(robot, tuple(v * MANEUVER_LOOKAHEAD_S for v in twist))
             poses = np.array([robot, ahead])
-            check = self.footprint_check.monitor_check(costmap.data, costmap.info)
+            fc, anchor = self.footprint_check, self._maneuver_wedged_at
+            if anchor is None:
+                check = fc.monitor_check(costmap.data, costmap.info)
+            else:   # as planned: the robot's own outline, the cells it was wedged on forgiven
+                check = fc.escape_check(fc.setup(anchor, costmap.data, costmap.info), anchor, costmap.data, costmap.info)
             if self.footprint_check.check_poses(check, poses, costmap.data, costmap.info).all():
                 return Control(twist, True, "maneuver", poses)
             self._counted.append("maneuver/blocked")
