@@ -159,10 +159,7 @@ class LocalControl:
         self.follower_params = p.follower_params()
         self.controller = self._make_controller()
         shimmed = p.rotation_shim if p.rotation_shim is not None else p.controller == "dwa"
-        # DWA (dwa: true) samples only twists within a control period's acceleration of the current
-        # one, each held for sim_time: it can stop no turn faster than that
-        handover = p.acc_lim_theta / p.controller_frequency if p.controller == "dwa" and p.dwa else math.inf
-        self.shim = RotationShim(p.shim_params(), dt, handover) if shimmed else None
+        self.shim = RotationShim(p.shim_params(), dt) if shimmed else None
         self.shim_key: tuple[str, np.ndarray] | None = None   # goal_id and start of the last path the shim saw
         self.path: Path | None = None            # followed; None: idle
         self.path_follower: PathFollower | None = None      # controller "follower", on the path in the map frame

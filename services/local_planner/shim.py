@@ -12,11 +12,9 @@ would touch an obstacle is not commanded: the primary controller gets the path a
 The turn: ω towards the target heading at rotate_to_heading_angular_vel, at most the rate from
 which braking at max_angular_accel stops it on the target heading (sqrt(2 · max_angular_accel ·
 error), for discrete control periods), so it slows down near alignment instead of overshooting,
-and within max_angular_accel · dt of the current turn rate. Not Nav2's: at most, too, the rate from
-which it slows to `handover_rate` by angular_dist_threshold — in front of DWA, the half-width of
-DWA's window, the fastest turn DWA can stop: DWA holds each sampled twist for sim_time and samples
-only within one control period's acceleration of the current twist, and handed a faster turn it
-turned on round (the Jackal, 3 rad/s against a 0.6 rad/s window: 1.3 turns, building-jackal-1). Poses are (x, y, yaw), twists (vx, vy, wz) in the
+and within max_angular_accel · dt of the current turn rate. With the defaults the shim hands over
+before it slows down (1 rad/s brakes within 0.16 rad, far inside angular_dist_threshold); the
+primary controller brakes the turn within its own window. Poses are (x, y, yaw), twists (vx, vy, wz) in the
 robot frame; `path` (N, 3) in the pose's frame.
 """
 from __future__ import annotations
@@ -64,35 +62,23 @@ def heading_error(path: np.ndarray, pose, distance: float) -> float:
     return float(wrap_angle(math.atan2(point[1] - pose[1], point[0] - pose[0]) - pose[2]))
 
 
-def _braking(params: RotationShimParams, angle: float, step: float, final: float = 0.0) -> float:
-    """The fastest rate from which braking by `step` per period comes down to the rate `final` within
-    `angle` radians (for final 0, the discrete sqrt(2 · accel · angle)): the periods at r, r − step, …,
-    final + step cover (r − final)(r + final + step) / (2 · accel)."""
-    if math.isinf(final):
-        return math.inf
-    return math.sqrt((step / 2) ** 2 + final * (final + step) + 2.0 * params.max_angular_accel * max(angle, 0.0)) \
-        - step / 2
-
-
-def turn_rate(params: RotationShimParams, error: float, wz: float, dt: float,
-              handover_rate: float = math.inf) -> float:
-    """The turn rate towards a heading `error` radians away, from the current rate wz: at most what
-    stops on the target, what slows to handover_rate by angular_dist_threshold, and no further than
-    the target within this period."""
+def turn_rate(params: RotationShimParams, error: float, wz: float, dt: float) -> float:
+    """The turn rate towards a heading `error` radians away, from the current rate wz."""
     step = params.max_angular_accel * dt
-    slowing = _braking(params, abs(error) - params.angular_dist_threshold, step, handover_rate)
-    top = min(params.rotate_to_heading_angular_vel, _braking(params, abs(error), step), slowing, abs(error) / dt)
+    # the fastest rate from which braking by `step` per period stops on the target (the discrete
+    # sqrt(2 · accel · error)), and no further than the target within this period
+    braking = math.sqrt(2.0 * params.max_angular_accel * abs(error) + (step / 2) ** 2) - step / 2
+    top = min(params.rotate_to_heading_angular_vel, braking, abs(error) / dt)
     return float(np.clip(math.copysign(top, error), wz - step, wz + step))
 
 
-def swept_poses(params: RotationShimParams, pose, error: float, wz: float, dt: float,
-                handover_rate: float = math.inf) -> np.ndarray:
+def swept_poses(params: RotationShimParams, pose, error: float, wz: float, dt: float) -> np.ndarray:
     """(K, 3) the poses of the turn on the spot that the shim would command over simulate_ahead_time
     (or until it faces the target), at most SWEEP_STEP apart."""
     x, y, yaw = (float(v) for v in pose)
     yaws = [yaw]
     for _ in range(max(1, math.ceil(params.simulate_ahead_time / dt - 1e-9))):
-        wz = turn_rate(params, error, wz, dt, handover_rate)
+        wz = turn_rate(params, error, wz, dt)
         turn = wz * dt
         if turn * error > 0.0 and abs(turn) >= abs(error):
             turn = error               # the target is reached within this period
@@ -105,12 +91,10 @@ def swept_poses(params: RotationShimParams, pose, error: float, wz: float, dt: f
 
 
 class RotationShim:
-    """Armed by `new_path`; `step` answers each control tick until it hands over (aligned or blocked).
-    `handover_rate` (rad/s): the turn rate it slows to by the time it hands over."""
+    """Armed by `new_path`; `step` answers each control tick until it hands over (aligned or blocked)."""
 
-    def __init__(self, params: RotationShimParams, dt: float, handover_rate: float = math.inf):
+    def __init__(self, params: RotationShimParams, dt: float):
         self.params, self.dt = params, dt
-        self.handover_rate = handover_rate
         self.armed = False
 
     def new_path(self) -> None:
@@ -127,9 +111,9 @@ class RotationShim:
         if abs(error) <= self.params.angular_dist_threshold:
             self.armed = False
             return ShimCommand("aligned", np.zeros(3), none)
-        poses = swept_poses(self.params, pose, error, float(velocity[2]), self.dt, self.handover_rate)
+        poses = swept_poses(self.params, pose, error, float(velocity[2]), self.dt)
         if not np.all(legal_poses(poses)):
             self.armed = False
             return ShimCommand("blocked", np.zeros(3), poses)
-        rate = turn_rate(self.params, error, float(velocity[2]), self.dt, self.handover_rate)
-        return ShimCommand("rotate", np.array([0.0, 0.0, rate]), poses)
+        return ShimCommand("rotate", np.array([0.0, 0.0, turn_rate(self.params, error, float(velocity[2]), self.dt)]),
+                           poses)
