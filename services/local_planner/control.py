@@ -167,7 +167,7 @@ class LocalControl:
         self.arrived = False
         self.maneuver_params = p.maneuver_params()
         self.maneuver: ManeuverDriver | None = None
-        self._maneuver_wedged_at: np.ndarray | None = None   # where the robot stood wedged when its maneuver was planned
+        self._maneuver_from: tuple[np.ndarray, bool] | None = None   # where the maneuver was planned, and wedged there
         self._stall: deque[np.ndarray] = deque()   # the robot's poses over the last stall_time under DWA
         self._counted: list[str] = []
 
@@ -300,7 +300,7 @@ class LocalControl:
         dwa = self.dwa_params
         self.maneuver = ManeuverDriver(segments, robot, self.maneuver_params, (dwa.max_vel_x, dwa.max_vel_theta),
                                        (dwa.acc_lim_x, dwa.acc_lim_theta))
-        self._maneuver_wedged_at = robot.copy() if wedged else None
+        self._maneuver_from = robot.copy(), wedged
         return self._maneuver(robot, costmap)
 
     def _maneuver(self, robot: np.ndarray, costmap: Costmap) -> Control | None:
@@ -312,12 +312,17 @@ class LocalControl:
         if twist is not None:
             ahead = compose(robot, tuple(v * MANEUVER_LOOKAHEAD_S for v in twist))
             poses = np.array([robot, ahead])
-            fc, anchor = self.footprint_check, self._maneuver_wedged_at
-            if anchor is None:
-                check = fc.monitor_check(costmap.data, costmap.info)
-            else:   # as planned: the robot's own outline, the cells it was wedged on forgiven
-                check = fc.escape_check(fc.setup(anchor, costmap.data, costmap.info), anchor, costmap.data, costmap.info)
-            if self.footprint_check.check_poses(check, poses, costmap.data, costmap.info).all():
+            fc, (anchor, wedged) = self.footprint_check, self._maneuver_from
+            data, info = costmap.data, costmap.info
+            if wedged:   # as planned: the robot's own outline, the cells it was wedged on forgiven
+                check = fc.escape_check(fc.setup(anchor, data, info), anchor, data, info)
+            else:
+                check = fc.monitor_check(data, info)
+                if not fc.check_poses(check, anchor[None], data, info)[0]:
+                    # the monitor's zone reached a wall where it was planned: as planned, by the
+                    # padding that pose allows (mecanum-20: six maneuvers dropped at their first step)
+                    check = fc.setup(anchor, data, info)
+            if fc.check_poses(check, poses, data, info).all():
                 return Control(twist, True, "maneuver", poses)
             self._counted.append("maneuver/blocked")
         else:
