@@ -35,3 +35,7 @@ class GoalLatch:
     def holds(self, distance: float) -> bool:
         """As within(), without changing the latch."""
         return distance <= (LATCH_SLACK * self.xy_tolerance if self.latched else self.xy_tolerance)
+
+    def reset(self) -> None:
+        """A new goal: nothing reached yet."""
+        self.latched = False

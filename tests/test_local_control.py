@@ -263,6 +263,17 @@ def test_a_robot_in_a_slot_too_narrow_to_turn_in_backs_out_and_turns_by_a_maneuv
     assert stuck[-1].reason != GOAL_REACHED and stuck_pose[0] > 0.5     # still in the slot
 
 
+def drive_maneuver(core: LocalControl, grid: Costmap, pose) -> np.ndarray:
+    """A kinematic loop over the core's maneuver alone, until it ends or is dropped: the last pose."""
+    pose = np.asarray(pose, float)
+    for _ in range(400):
+        answer = core._maneuver(pose, grid)
+        if answer is None:
+            break
+        pose = integrate(pose, answer.twist, DT)
+    return pose
+
+
 def test_a_robot_wedged_on_the_costmap_gets_a_maneuver_off_the_cells_it_stands_on():
     # lethal cells under the robot's own side by its rear corner (a post rasterised a cell into it, a noisy
     # mark): every pose near it is illegal by the robot's outline, so the search from it found
@@ -277,12 +288,7 @@ def test_a_robot_wedged_on_the_costmap_gets_a_maneuver_off_the_cells_it_stands_o
     maps = path_maps(EAST, robot, grid.info, grid.data, core.controller.distances)
     first = core._plan_maneuver(robot, grid, maps)
     assert first is not None and first.reason == "maneuver" and "maneuver/planned" in core._counted
-    pose = robot
-    for k in range(400):
-        answer = core._maneuver(pose, grid)
-        if answer is None:
-            break
-        pose = integrate(pose, answer.twist, DT)
+    pose = drive_maneuver(core, grid, robot)
     assert pose[0] >= params.maneuver_params().progress - 0.1 and abs(pose[1]) < 0.1
 
 
@@ -300,12 +306,7 @@ def test_a_maneuver_planned_beside_a_wall_within_the_monitors_zone_is_driven_not
     core.maneuver = ManeuverDriver([Segment("drive", 1.0)], robot, core.maneuver_params,
                                    (dwa.max_vel_x, dwa.max_vel_theta), (dwa.acc_lim_x, dwa.acc_lim_theta))
     core._maneuver_from = robot.copy(), False
-    pose = robot
-    for _ in range(400):
-        answer = core._maneuver(pose, grid)
-        if answer is None:
-            break
-        pose = integrate(pose, answer.twist, DT)
+    pose = drive_maneuver(core, grid, robot)
     assert "maneuver/blocked" not in core._counted and pose[0] >= 0.95 and abs(pose[1]) < 0.01
 
 

@@ -69,6 +69,12 @@ class PlannerNodeParams(FrameParams, GlobalPlannerParams):
     rules = (Rule("goal_topic", lambda p: _carries_goals(p.goal_topic), "a topic of Goal messages"),)
 
 
+def _grid_problem(grid: Costmap | OccupancyGrid) -> str:
+    if grid.data.shape != (grid.info.height, grid.info.width) or grid.data.size == 0:
+        return f"data of shape {grid.data.shape} for a grid of {grid.info.height} x {grid.info.width} cells"
+    return ""
+
+
 def _carries_goals(topic: str) -> bool:
     try:
         return type_for_key(KeyLayout().resolve(topic)) is Goal
@@ -126,25 +132,21 @@ class PlannerNode(Node):
         return held if held is not None else self.costmap
 
     def _check_costmap(self, msg: Costmap) -> str:
-        if msg.data.shape != (msg.info.height, msg.info.width) or msg.data.size == 0:
-            return f"data of shape {msg.data.shape} for a grid of {msg.info.height} x {msg.info.width} cells"
-        if msg.header.frame_id not in (self.frames.map_frame, self.frames.odom_frame):
-            return f"frame {msg.header.frame_id!r} is neither {self.frames.map_frame!r} nor {self.frames.odom_frame!r}"
-        return ""
+        problem = _grid_problem(msg)
+        if not problem and msg.header.frame_id not in (self.frames.map_frame, self.frames.odom_frame):
+            problem = f"frame {msg.header.frame_id!r} is neither {self.frames.map_frame!r} nor {self.frames.odom_frame!r}"
+        return problem
 
     def _check_map(self, msg: OccupancyGrid) -> str:
-        if msg.data.shape != (msg.info.height, msg.info.width) or msg.data.size == 0:
-            return f"data of shape {msg.data.shape} for a grid of {msg.info.height} x {msg.info.width} cells"
-        if msg.header.frame_id not in ("", self.frames.map_frame):
-            return f"frame {msg.header.frame_id!r}, expected the map frame {self.frames.map_frame!r}"
-        return ""
+        return _grid_problem(msg) or self._check_goal(msg)
 
     def _check_pose(self, msg: PoseWithCovariance) -> str:
         if msg.header.frame_id != self.frames.map_frame:
             return f"frame {msg.header.frame_id!r}, expected the map frame {self.frames.map_frame!r}"
         return ""
 
-    def _check_goal(self, msg: Goal) -> str:
+    def _check_goal(self, msg: Goal | OccupancyGrid) -> str:
+        """A frame of the map's (or none, taken as the map's)."""
         if msg.header.frame_id not in ("", self.frames.map_frame):
             return f"frame {msg.header.frame_id!r}, expected the map frame {self.frames.map_frame!r}"
         return ""

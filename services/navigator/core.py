@@ -266,7 +266,7 @@ class Navigator:
         self._oscillation_pose = self.pose.copy()
         self._planning_retries = 0
         self._last_failure = ""
-        self._latch.latched = False
+        self._latch.reset()
 
     def _check_arrival(self, out: NavActions) -> None:
         self.reason = ""   # an active goal's only reason is the wait below, decided afresh each step
