@@ -23,7 +23,7 @@ from scipy import ndimage, signal, sparse
 from scipy.sparse import csgraph
 
 from ..geometry.footprint import pad
-from ..geometry.grid import in_grid, world_to_cell
+from ..geometry.grid import cell_to_world, in_grid, world_to_cell
 from ..geometry.polygons import points_in_polygons, transform_points
 from ..schemas.messages import MapMetaData
 from ..services.global_planner.astar import GlobalPlanner
@@ -37,6 +37,7 @@ class Reach:
     reachable: bool
     shortest_m: float | None        # the taut way through the start's region, None if unreachable
     region_cells: int               # cells some pose of the start's region covers
+    way: np.ndarray | None = None   # (N, 2) x, y of that way's corners, start to goal
 
 
 def _kernel(footprint: np.ndarray, yaw: float, grown_m: float, resolution: float) -> np.ndarray:
@@ -78,22 +79,22 @@ def _heading(yaw: float) -> int:
     return int(round(yaw / (2 * math.pi / HEADINGS))) % HEADINGS
 
 
-def _taut_length(cells: np.ndarray, room: np.ndarray, resolution: float) -> float:
-    """Length (m) of the cell path (N, 2) of (row, col) pulled taut inside `room`: from each point,
-    straight to the farthest later point it sees."""
+def _taut_corners(cells: np.ndarray, room: np.ndarray) -> np.ndarray:
+    """The corners (M, 2) of the cell path (N, 2) of (row, col) pulled taut inside `room`: from
+    each point, straight to the farthest later point it sees."""
     def sees(a, b) -> bool:
         n = int(np.hypot(*(b - a)) * 2) + 2
         points = np.rint(a + np.linspace(0.0, 1.0, n)[:, None] * (b - a)).astype(int)
         return bool(room[points[:, 0], points[:, 1]].all())
 
-    length, i = 0.0, 0
+    corners, i = [0], 0
     while i < len(cells) - 1:
         j = len(cells) - 1
         while j > i + 1 and not sees(cells[i], cells[j]):
             j -= 1
-        length += float(np.hypot(*(cells[j] - cells[i])))
+        corners.append(j)
         i = j
-    return length * resolution
+    return cells[corners]
 
 
 def reach(blocked: np.ndarray, info: MapMetaData, footprint: np.ndarray, start, goal, margin_m: float) -> Reach:
@@ -111,4 +112,7 @@ def reach(blocked: np.ndarray, info: MapMetaData, footprint: np.ndarray, start, 
     if not start_label or goal_label != start_label:
         return Reach(False, None, int(room.sum()))
     plan = GlobalPlanner(PATH_SEARCH).plan(np.where(room, 0, LETHAL).astype(np.uint8), info, start, goal)
-    return Reach(True, _taut_length(np.asarray(plan.cells), room, info.resolution), int(room.sum()))
+    corners = _taut_corners(np.asarray(plan.cells), room)
+    length = float(np.hypot(*np.diff(corners, axis=0).T).sum()) * info.resolution
+    way = np.column_stack(cell_to_world(info, corners[:, 0], corners[:, 1]))
+    return Reach(True, length, int(room.sum()), way)

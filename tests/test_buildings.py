@@ -11,7 +11,7 @@ import re
 import numpy as np
 import pytest
 
-from omninav.bench.buildings import drive_building
+from omninav.bench.buildings import drive_building, ideal_time
 from omninav.cli.main import main as cli_main
 from omninav.experiments.configuration_space import reach
 from omninav.experiments.reachability import mission_problems
@@ -64,6 +64,20 @@ def test_the_shortest_way_across_an_open_room_is_the_straight_line():
     world = world_from_mapping({"bounds": [10.0, 6.0], "goals": [[8.0, 4.0, 0.0]], "robot": {"start": [2.0, 2.0, 0.0]}}, "<room>")
     way = _way(world)
     assert way.reachable and way.shortest_m == pytest.approx(math.hypot(6.0, 2.0), abs=0.1)
+
+
+def test_the_ideal_driver_turns_on_the_spot_only_when_its_drive_must():
+    """6 m then 2 m round a corner at 2 m/s and 3 m/s² (8 / 2 + 2 / 3 s), the robot facing away
+    from the first leg and the goal's yaw a quarter turn from the last leg: a differential drive
+    turns half a turn first (π / 3 + 3 / 6 s at 3 rad/s, 6 rad/s²) and a quarter turn last; a
+    short turn never reaches 3 rad/s (π / 8: 2√(π/8 / 6) s); a holonomic robot turns meanwhile."""
+    compose = {"services": [{"name": "local_planner", "params": {"max_vel_x": 2.0, "acc_lim_x": 3.0,
+                                                                   "max_vel_theta": 3.0, "acc_lim_theta": 6.0}}]}
+    way = np.array([[0.0, 0.0], [6.0, 0.0], [6.0, 2.0]])
+    drive, half_turn, quarter_turn = 8 / 2 + 2 / 3, math.pi / 3 + 0.5, math.pi / 6 + 0.5
+    assert ideal_time(way, math.pi, 0.0, False, compose) == pytest.approx(half_turn + drive + quarter_turn)
+    assert ideal_time(way, math.pi, 0.0, True, compose) == pytest.approx(drive)
+    assert ideal_time(way, math.pi / 8, math.pi / 2, False, compose) == pytest.approx(drive + 2 * math.sqrt(math.pi / 8 / 6))
 
 
 @pytest.fixture(scope="module")
