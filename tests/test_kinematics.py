@@ -176,6 +176,22 @@ def test_limited_command_backs_off_along_the_line_from_the_previous_command():
     assert out.twist[0] < top and out.twist[2] > 0.0
 
 
+def test_a_command_with_a_wheel_at_its_limit_slides_along_the_limit_towards_the_request():
+    """The Jackal (its controller's track × 1.5, 2 m/s at the rim) at full speed in a turn, one wheel
+    at its limit, asked to turn less at full speed: the straight line from the previous command
+    leaves the wheel limit at once, and a command stopped there kept turning at 0.9 rad/s while the
+    planner asked for 0.3 (bench buildings, jackal-112). It turns less by the angular acceleration
+    limit every step, keeping that wheel at its limit."""
+    kin = Kinematics(ChassisParams(drive="diff", wheel_radius=0.098, l2=0.28169, max_wheel_speed=20.41,
+                                   acc_lim_x=3.0, acc_lim_theta=6.0))
+    turning = kin.saturate([1.8, 0.0, -0.9])
+    out = kin.limit([2.0, 0.0, -0.3], turning, 0.01)
+    assert out.accel_limited
+    assert out.twist[2] == pytest.approx(turning[2] + 6.0 * 0.01)
+    assert out.twist[0] > turning[0]
+    assert np.max(np.abs(out.wheels)) == pytest.approx(20.41)
+
+
 def test_parameters_are_validated_with_their_names():
     with pytest.raises(ValueError, match="drive"):
         ChassisParams(drive="tank")
