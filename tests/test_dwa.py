@@ -323,6 +323,22 @@ def test_the_stop_zone_is_not_stacked_on_a_padding_that_already_holds_it():
     assert legal_from_afar(thin) == [True, False, False]
 
 
+def test_a_post_inside_the_padded_outline_is_not_passed_over_by_the_outline_check():
+    # a post one cell thick 5 cm beside the robot's own outline lies inside its outline padded by the
+    # monitor's zone (and a quarter cell): that outline touches nothing, and a check set up with it
+    # let the robot move onto the post, the outline stepping over it; the padding is one that holds
+    # nothing (building-diff-84 stood 20 s in a door, every neighbouring pose illegal by such a check)
+    padding = 0.01
+    costs, info, check_cost = costmap(boxes=[(-0.05, 0.25, 0.05, 0.31)], padding=padding)
+    footprint_check = FootprintCheck(make_footprint(SQUARE, padding=padding).points, check_cost,
+                                     stop_padding=0.05, footprint_padding=padding)
+    start = (0.0, 0.0, 0.0)
+    check = footprint_check.setup(start, costs, info)
+    assert np.abs(check.outline[:, 1]).max() < 0.25
+    towards_the_post = np.array([start, (0.0, 0.05, 0.0)])
+    assert footprint_check.check_poses(check, towards_the_post, costs, info).tolist() == [True, False]
+
+
 def test_a_padding_wider_than_the_stop_zone_does_not_keep_the_robot_from_turning_round():
     # a wall 0.35 m ahead of the centre: the padded corners (0.42 m out) would sweep it, the robot's
     # own grown by the monitor's 0.02 m zone (0.31 m) do not; the path leads back the way it came,

@@ -20,7 +20,7 @@ import numpy as np
 from numba import njit
 
 from ...schemas.messages import MapMetaData
-from ...geometry.footprint import pad, transform
+from ...geometry.footprint import cells_inside, pad, transform
 from ...geometry.grid import in_grid, kernel_costs, world_to_cell
 from ...geometry.distance import nearest_cells
 from ...geometry.polygons import densify
@@ -223,7 +223,12 @@ class FootprintCheck:
         along a jagged row of obstacle cells would cross it); else the footprint padded by the
         quarter cell only, or the footprint itself, or the robot's own outline without
         footprint_padding: the robot may still move (away); when even that one lies on a lethal
-        cell, the check is `wedged` (`escape_check` then lets it drive off those cells).
+        cell, the check is `wedged` (`escape_check` then lets it drive off those cells). A padding
+        whose outline holds a lethal or unknown cell inside it at `pose` is passed over as one that
+        touches it: the outline check is sound only for a robot that starts with nothing inside
+        its outline (it cannot then move onto anything without crossing it); a door's jamb, two
+        cells thick, inside the padded outline of a robot 5 cm beside it made every neighbouring
+        pose illegal and no maneuver was found (building-diff-84 stood 20 s in a door).
         The outline is checked whatever the
         centre cost where
         `PoseCheck.near` (the circumscribed cost alone let a corner reach a cell one further). A robot
@@ -247,9 +252,14 @@ class FootprintCheck:
         for padding, margin in ((zone + quarter, info.resolution), (quarter, 0.0), (0.0, 0.0), (own, 0.0)):
             clear = self._outline_check(clearance, skips, info.resolution, padding + margin, centre_limit)
             _check_poses(start, kernel_costs(costs), clear.near, skips, grid, clear.outline, self.check_cost, centre_limit, legal)
-            if legal[0]:
+            if legal[0] and not self._holds_blocked(start[0], padding + margin, costs, info):
                 return self._outline_check(clearance, skips, info.resolution, padding, centre_limit)
         return replace(clear, wedged=True)   # the last one tried: the robot's own outline
+
+    def _holds_blocked(self, pose: np.ndarray, padding: float, costs: np.ndarray, info: MapMetaData) -> bool:
+        """Whether the footprint padded by `padding` at `pose` holds a lethal or unknown cell's centre."""
+        rows, cols = cells_inside(info, transform(pad(self.footprint, padding), pose))
+        return bool((costs[rows, cols] >= LETHAL_OBSTACLE).any())
 
     def escape_check(self, check: PoseCheck, pose, costs: np.ndarray, info: MapMetaData) -> PoseCheck:
         """A wedged `check` (the robot's own outline) with the lethal and unknown cells its outline
