@@ -11,8 +11,8 @@ from omninav.geometry.se2 import integrate, wrap_angle
 from omninav.schemas.messages import MapMetaData, Pose2D
 from omninav.services.local_planner.dwa import path_maps
 from omninav.services.local_planner.footprint_check import FootprintCheck
-from omninav.services.local_planner.maneuver import (DRIVE_TOLERANCE, FACING, TURN_TOLERANCE, ManeuverDriver,
-                                                     ManeuverParams, Segment, plan_maneuver)
+from omninav.services.local_planner.maneuver import (DRIVE_TOLERANCE, FACING, TURN_STEP, TURN_TOLERANCE,
+                                                     ManeuverDriver, ManeuverParams, Segment, plan_maneuver)
 
 INFO = MapMetaData(resolution=0.05, width=160, height=120, origin=Pose2D(-2.0, -3.0))   # x -2..6, y -3..3 m
 FOOTPRINT = np.array([[0.42, 0.32], [-0.42, 0.32], [-0.42, -0.32], [0.42, -0.32]])
@@ -33,17 +33,17 @@ def along(a, b, spacing=0.05) -> np.ndarray:
     return np.array([[a[0] + (b[0] - a[0]) * k / n, a[1] + (b[1] - a[1]) * k / n, yaw] for k in range(n + 1)])
 
 
-def driven(start, segments) -> np.ndarray:
-    """The poses the segments pass through, exactly as planned, 1 cm and 1° apart."""
+def driven(start, segments, turn_step=math.radians(1), drive_step=0.01) -> np.ndarray:
+    """The poses the segments pass through, exactly as planned, 1 cm and 1° apart (or as given)."""
     poses = [np.array(start, float)]
     for segment in segments:
         x, y, th = poses[-1]
         if segment.kind == "turn":
             turn = float(wrap_angle(segment.value - th))
-            n = max(1, math.ceil(abs(turn) / math.radians(1)))
+            n = max(1, math.ceil(abs(turn) / turn_step))
             poses += [np.array([x, y, th + turn * k / n]) for k in range(1, n + 1)]
         else:
-            n = max(1, math.ceil(abs(segment.value) / 0.01))
+            n = max(1, math.ceil(abs(segment.value) / drive_step))
             poses += [np.array([x + math.cos(th) * segment.value * k / n, y + math.sin(th) * segment.value * k / n, th])
                       for k in range(1, n + 1)]
     return np.array(poses)
@@ -83,6 +83,26 @@ def test_in_the_open_the_maneuver_turns_once_and_drives_once():
     assert [s.kind for s in segments] == ["turn", "drive"]
     assert abs(float(wrap_angle(segments[0].value - math.pi / 2))) <= FACING
     assert segments[1].value >= params.progress
+
+
+def test_a_wedged_robot_maneuvers_away_from_the_cells_it_is_forgiven_not_over_them():
+    # a jamb one cell thick under the robot's right side (it stands 2 cm into it by the costmap's
+    # cells, 5 cm off it in truth) and the way on due south: forgiven those cells, the search turned
+    # the robot's front over them, and the collision monitor, on the scan, stopped the turn for 9 s
+    # (building-diff-84); it may move off them, not towards them
+    jamb = grid((0.1, -0.35, 0.35, -0.30))
+    check_of = FootprintCheck(FOOTPRINT, stop_padding=0.05)
+    start = (0.0, 0.0, 0.0)
+    check = check_of.setup(start, jamb, INFO)
+    assert check.wedged
+    forgiven = check_of.escape_check(check, start, jamb, INFO)
+    assert len(forgiven.forgiven) > 0
+    maps = path_maps(along((0.0, 0.0), (0.0, -2.9)), start, INFO, jamb)
+    segments = plan_maneuver(start, check_of, forgiven, jamb, INFO, maps.goal_dist, ManeuverParams())
+    assert segments
+    searched = driven(start, segments, TURN_STEP, INFO.resolution)   # the poses as the search steps them
+    assert check_of.keeps_away(forgiven, searched, start).all()
+    assert check_of.check_poses(forgiven, driven(start, segments), jamb, INFO).all()
 
 
 def test_walled_in_there_is_no_maneuver():

@@ -14,20 +14,24 @@ kernels here are numba's; dwa.py's rollout calls `trajectory_cost` on every traj
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numba import njit
 
 from ...schemas.messages import MapMetaData
 from ...geometry.footprint import cells_inside, pad, transform
-from ...geometry.grid import in_grid, kernel_costs, world_to_cell
+from ...geometry.grid import cell_to_world, in_grid, kernel_costs, world_to_cell
 from ...geometry.distance import nearest_cells
-from ...geometry.polygons import densify
+from ...geometry.polygons import densify, point_segment_distance, points_in_polygons, transform_points
+from ...geometry.se2 import inverse
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, inflation_cost
 
 # the outline's points are at most this many cells apart (footprint_outline's spacing)
 OUTLINE_SPACING_CELLS = 0.5
+# m deeper over its forgiven cells than where it was wedged that a pose may bring the outline: sliding
+# along a row of cells, the outline's edge passes their centres a few millimetres nearer or farther
+KEEP_AWAY_SLACK = 0.005
 
 
 @dataclass(frozen=True)
@@ -45,6 +49,19 @@ class PoseCheck:
     # even the robot's own outline lies on a lethal or unknown cell where it stands (`escape_check`
     # lets it drive off them)
     wedged: bool = False
+    # (F, 2) the centres of the cells `escape_check` no longer counts, in the grid's frame
+    forgiven: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+
+
+def _depth_inside(outline: np.ndarray, points: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """(N,) for each pose (N, 3), how deep the deepest of `points` (P, 2; the grid's frame) lies
+    inside `outline` (K, 2, the polygon in the robot frame) placed there: its distance to the
+    outline, negative outside."""
+    local = transform_points(points, inverse(poses))                       # (N, P, 2) robot frames
+    edges = point_segment_distance(local[:, :, None, :], outline[None, None, :, :],
+                                   np.roll(outline, -1, axis=0)[None, None, :, :]).min(axis=2)
+    inside = points_in_polygons(local, outline[None])[..., 0]
+    return np.where(inside, edges, -edges).max(axis=1)
 
 
 def outline_skips(clearance: np.ndarray, resolution: float) -> np.ndarray:
@@ -272,9 +289,23 @@ class FootprintCheck:
         rows, cols = world_to_cell(info, points[:, 0], points[:, 1])
         on_grid = in_grid(info, rows, cols)
         blocked = np.ascontiguousarray(costs, np.uint8) >= LETHAL_OBSTACLE
-        blocked[rows[on_grid], cols[on_grid]] = False
+        under = np.unique(np.column_stack([rows[on_grid], cols[on_grid]]), axis=0)
+        under = under[blocked[under[:, 0], under[:, 1]]]
+        blocked[under[:, 0], under[:, 1]] = False
         clearance, skips = _clearance_and_skips(blocked, info.resolution)
-        return PoseCheck(check.outline, clearance <= _reach(check.outline, info.resolution), skips, check.centre_limit)
+        return PoseCheck(check.outline, clearance <= _reach(check.outline, info.resolution), skips, check.centre_limit,
+                         forgiven=np.column_stack(cell_to_world(info, under[:, 0], under[:, 1])))
+
+    def keeps_away(self, check: PoseCheck, poses, anchor) -> np.ndarray:
+        """(N,) whether each pose (N, 3) brings the outline no deeper over the cells `check`
+        forgives than it lies at `anchor`, where they were forgiven (the deepest cell centre's
+        signed distance inside the outline, within KEEP_AWAY_SLACK): a wedged robot may drive off or
+        along them, not over them (the collision monitor, on the scan, stops that)."""
+        poses = np.asarray(poses, np.float64).reshape(-1, 3)
+        if len(check.forgiven) == 0:
+            return np.ones(len(poses), np.bool_)
+        depths = _depth_inside(check.outline, check.forgiven, np.vstack([np.asarray(anchor, np.float64)[None, :3], poses]))
+        return depths[1:] <= depths[0] + KEEP_AWAY_SLACK
 
     def turn_check(self, check: PoseCheck, costs: np.ndarray, info: MapMetaData) -> PoseCheck | None:
         """What a last-resort turn is checked with when the padded footprint (`check`, set up for the

@@ -12,6 +12,10 @@ one-cell drives), until a pose lies `progress` metres nearer the local goal than
 distances DWA scores with (PathMaps.goal_dist: around the cells the centre may not enter) and faces
 the way on (within FACING of the direction in which those distances fall): handed back to DWA
 facing away from its way, the robot would drive back where it came from (BARN world 58's pocket).
+For a wedged robot (its check the escape check, which forgives the cells its outline lay on) no
+pose may bring the outline deeper over those cells than it lay (FootprintCheck.keeps_away): the
+collision monitor, on the scan, stops a turn over them, and a maneuver that began by swinging the
+robot's front over a door's jamb stood 9 s (building-diff-84).
 The result is a list of segments — turn on the spot to a heading, or drive a distance straight
 (negative: back) — that `ManeuverDriver` drives one after the other.
 
@@ -116,7 +120,7 @@ def plan_maneuver(start, footprint_check: FootprintCheck, check: PoseCheck, cost
         moves = ((x + c * res, y + s * res, th, res), (x - c * res, y - s * res, th, BACK_COST * res),
                  (x, y, th + TURN_STEP, TURN_COST_M * TURN_STEP), (x, y, th - TURN_STEP, TURN_COST_M * TURN_STEP))
         candidates = np.array([m[:3] for m in moves])
-        legal = footprint_check.check_poses(check, candidates, costs, info)
+        legal = footprint_check.check_poses(check, candidates, costs, info) & footprint_check.keeps_away(check, candidates, start)
         last = kinds.get(key)
         for kind, ((nx, ny, nth, cost), ok) in enumerate(zip(moves, legal)):
             if not ok:
