@@ -101,7 +101,7 @@ def test_a_wedged_robot_maneuvers_away_from_the_cells_it_is_forgiven_not_over_th
     segments = plan_maneuver(start, check_of, forgiven, jamb, INFO, maps.goal_dist, ManeuverParams())
     assert segments
     searched = driven(start, segments, TURN_STEP, INFO.resolution)   # the poses as the search steps them
-    assert check_of.keeps_away(forgiven, searched, start).all()
+    assert check_of.keeps_away(forgiven, searched).all()
     assert check_of.check_poses(forgiven, driven(start, segments), jamb, INFO).all()
 
 

@@ -49,8 +49,10 @@ class PoseCheck:
     # even the robot's own outline lies on a lethal or unknown cell where it stands (`escape_check`
     # lets it drive off them)
     wedged: bool = False
-    # (F, 2) the centres of the cells `escape_check` no longer counts, in the grid's frame
+    # (F, 2) the centres of the cells `escape_check` no longer counts, in the grid's frame, and how
+    # deep the deepest of them lay inside the outline where they were forgiven (`keeps_away`)
     forgiven: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))
+    forgiven_depth: float = -math.inf
 
 
 def _depth_inside(outline: np.ndarray, points: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -269,7 +271,9 @@ class FootprintCheck:
         for padding, margin in ((zone + quarter, info.resolution), (quarter, 0.0), (0.0, 0.0), (own, 0.0)):
             clear = self._outline_check(clearance, skips, info.resolution, padding + margin, centre_limit)
             _check_poses(start, kernel_costs(costs), clear.near, skips, grid, clear.outline, self.check_cost, centre_limit, legal)
-            if legal[0] and not self._holds_blocked(start[0], padding + margin, costs, info):
+            # nothing lies within the outline's reach of a centre whose cell is not `near`
+            if legal[0] and not ((row < 0 or clear.near[row, col])
+                                 and self._holds_blocked(start[0], padding + margin, costs, info)):
                 return self._outline_check(clearance, skips, info.resolution, padding, centre_limit)
         return replace(clear, wedged=True)   # the last one tried: the robot's own outline
 
@@ -293,19 +297,21 @@ class FootprintCheck:
         under = under[blocked[under[:, 0], under[:, 1]]]
         blocked[under[:, 0], under[:, 1]] = False
         clearance, skips = _clearance_and_skips(blocked, info.resolution)
+        forgiven = np.column_stack(cell_to_world(info, under[:, 0], under[:, 1]))
+        depth = (float(_depth_inside(check.outline, forgiven, np.asarray(pose, np.float64)[None, :3])[0])
+                 if len(forgiven) else -math.inf)
         return PoseCheck(check.outline, clearance <= _reach(check.outline, info.resolution), skips, check.centre_limit,
-                         forgiven=np.column_stack(cell_to_world(info, under[:, 0], under[:, 1])))
+                         forgiven=forgiven, forgiven_depth=depth)
 
-    def keeps_away(self, check: PoseCheck, poses, anchor) -> np.ndarray:
+    def keeps_away(self, check: PoseCheck, poses) -> np.ndarray:
         """(N,) whether each pose (N, 3) brings the outline no deeper over the cells `check`
-        forgives than it lies at `anchor`, where they were forgiven (the deepest cell centre's
-        signed distance inside the outline, within KEEP_AWAY_SLACK): a wedged robot may drive off or
-        along them, not over them (the collision monitor, on the scan, stops that)."""
+        forgives than it lay where they were forgiven (the deepest cell centre's signed distance
+        inside the outline, within KEEP_AWAY_SLACK): a wedged robot may drive off or along them,
+        not over them (the collision monitor, on the scan, stops that)."""
         poses = np.asarray(poses, np.float64).reshape(-1, 3)
         if len(check.forgiven) == 0:
             return np.ones(len(poses), np.bool_)
-        depths = _depth_inside(check.outline, check.forgiven, np.vstack([np.asarray(anchor, np.float64)[None, :3], poses]))
-        return depths[1:] <= depths[0] + KEEP_AWAY_SLACK
+        return _depth_inside(check.outline, check.forgiven, poses) <= check.forgiven_depth + KEEP_AWAY_SLACK
 
     def turn_check(self, check: PoseCheck, costs: np.ndarray, info: MapMetaData) -> PoseCheck | None:
         """What a last-resort turn is checked with when the padded footprint (`check`, set up for the

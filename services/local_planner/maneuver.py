@@ -120,7 +120,7 @@ def plan_maneuver(start, footprint_check: FootprintCheck, check: PoseCheck, cost
         moves = ((x + c * res, y + s * res, th, res), (x - c * res, y - s * res, th, BACK_COST * res),
                  (x, y, th + TURN_STEP, TURN_COST_M * TURN_STEP), (x, y, th - TURN_STEP, TURN_COST_M * TURN_STEP))
         candidates = np.array([m[:3] for m in moves])
-        legal = footprint_check.check_poses(check, candidates, costs, info) & footprint_check.keeps_away(check, candidates, start)
+        legal = footprint_check.check_poses(check, candidates, costs, info) & footprint_check.keeps_away(check, candidates)
         last = kinds.get(key)
         for kind, ((nx, ny, nth, cost), ok) in enumerate(zip(moves, legal)):
             if not ok:
