@@ -33,6 +33,7 @@ from ..experiments.scenarios.building import ROBOTS
 from ..experiments.scenarios.check import CSPACE_MARGIN_M, RESOLUTION
 from ..experiments.workers import run_in_workers
 from ..geometry.se2 import wrap_angle
+from ..services.local_planner.control import DEFAULT_CONTROLLER
 from ..services.local_planner.params import DwaParams
 from ..services.runtime.errors import exits_2_on_user_error
 from ..sim.world import load_world
@@ -108,7 +109,7 @@ def drive_building(job: tuple[str, int, float, str, bool]) -> dict:
     began = time.monotonic()
     run = run_mission(compose["services"], world, world.goals, timeout_s=timeout_s,
                       recording=folder / "run.mcap" if record else None)
-    row = scenario_row(world.name, seed, shape.drive, run.summary.to_json(), began)
+    row = scenario_row(world.name, seed, shape.drive, DEFAULT_CONTROLLER, run.summary.to_json(), began)
     shortest_s = way.shortest_m / top_speed(compose)
     return {**row, "robot": robot, "shortest_m": round(way.shortest_m, 3), "shortest_s": round(shortest_s, 2),
             "ideal_s": round(ideal_s, 2),

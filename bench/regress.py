@@ -17,6 +17,7 @@ from pathlib import Path
 from ..experiments.barn import run_world
 from ..experiments.dynabarn_bench import run_seed
 from ..experiments.workers import run_in_workers
+from ..services.local_planner.control import DEFAULT_CONTROLLER
 from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..sim.world import shared_data_dir
 from .buildings import drive_building
@@ -40,7 +41,7 @@ def run_case(job: tuple[str, str, tuple, str]) -> dict:
     family, name, arguments, out = job
     began = time.monotonic()
     if family == "scenario":
-        row = drive_world((*arguments[:2], None, "amcl", 120.0, out, False))
+        row = drive_world((*arguments[:2], None, "amcl", 120.0, out, False, DEFAULT_CONTROLLER))
         outcome = (row["success"], row["status"], row["collisions"], row["time_s"], row["path_length_m"])
     elif family == "building":
         row = drive_building((*arguments, 240.0, out, False))

@@ -20,6 +20,7 @@ from pathlib import Path
 
 from ..cli.navigate import LOCALIZATIONS, compose_for, map_for
 from ..services.chassis.kinematics import DRIVES
+from ..services.local_planner.control import CONTROLLERS, DEFAULT_CONTROLLER
 from ..services.runtime.errors import exits_2_on_user_error
 from ..sim.world import load_world
 from ..experiments.lockstep_mission import run_mission
@@ -45,40 +46,45 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--real-time", action="store_true",
                         help="also drive every world on the wall clock, every service its own process, one at a "
                              "time, and report it beside the lockstep figure")
+    parser.add_argument("--controller", nargs="+", choices=CONTROLLERS, default=[DEFAULT_CONTROLLER],
+                        help="the local planner's controller(s): each world is driven with each, reported side by "
+                             "side (default dwa)")
 
 
-def drive_world(job: tuple[str, int, str | None, str, float, str, bool]) -> dict:
-    """One world: generate it, write it and its map, drive the mission (recorded when `record`); its row."""
-    kind, seed, drive, localization, timeout_s, out, record = job
+def drive_world(job: tuple[str, int, str | None, str, float, str, bool, str]) -> dict:
+    """One world: generate it, write it and its map, drive the mission with the controller (recorded
+    when `record`); its row."""
+    kind, seed, drive, localization, timeout_s, out, record, controller = job
     folder = Path(out) / f"{kind}-{seed}"
     folder.mkdir(parents=True, exist_ok=True)
     world_file = folder / "world.yaml"
     world_file.write_text(world_text(generate_world(kind, seed)))
     world = load_world(world_file)
     drive = drive or world.robot.drive
+    recording = folder / ("run.mcap" if controller == DEFAULT_CONTROLLER else f"run-{controller}.mcap")
     compose = compose_for(world, world_file, map_for(world, world.name, folder), drive, localization,
-                          folder / "run.mcap", seed, 1.0, "r1")
+                          recording, seed, 1.0, "r1", controller=controller)
     began = time.monotonic()
     run = run_mission(compose["services"], world, world.goals, timeout_s=timeout_s,
-                      recording=folder / "run.mcap" if record else None)
-    return scenario_row(world.name, seed, drive, run.summary.to_json(), began)
+                      recording=recording if record else None)
+    return scenario_row(world.name, seed, drive, controller, run.summary.to_json(), began)
 
 
-def drive_world_live(job: tuple[str, int, str | None, str, float, str, bool]) -> dict:
-    """The world drive_world wrote, on the wall clock (experiments/realtime.py)."""
-    kind, seed, drive, localization, timeout_s, out, _ = job
+def drive_world_live(job: tuple[str, int, str | None, str, float, str, bool, str]) -> dict:
+    """The world drive_world wrote, on the wall clock (experiments/realtime.py), with the default controller."""
+    kind, seed, drive, localization, timeout_s, out, _, _ = job
     folder = Path(out) / f"{kind}-{seed}"
     world_file = folder / "world.yaml"
     world = load_world(world_file)
     began = time.monotonic()
     run = run_live(world_file, world.goals, folder / "real-time", localization=localization, timeout_s=timeout_s,
                    seed=seed, drive=drive or world.robot.drive)
-    return scenario_row(world.name, seed, drive or world.robot.drive, run.summary or {}, began)
+    return scenario_row(world.name, seed, drive or world.robot.drive, DEFAULT_CONTROLLER, run.summary or {}, began)
 
 
-def scenario_row(name: str, seed: int, drive: str, summary: dict, began: float) -> dict:
+def scenario_row(name: str, seed: int, drive: str, controller: str, summary: dict, began: float) -> dict:
     goal = summary["goals"][0] if summary.get("goals") else {}
-    return {"world": name, "seed": seed, "drive": drive, **{k: summary.get(k) for k in (
+    return {"world": name, "seed": seed, "drive": drive, "controller": controller, **{k: summary.get(k) for k in (
         "collisions", "robot_fault_collisions", "mover_fault_collisions", "shoved_collisions",
         "min_mover_clearance_m", "min_clearance_m", "time_s", "path_length_m", "plan_length_m", "final_xy_error_m",
         "contact_s", "robot_contact_s")}, "success": bool(summary.get("success")),
@@ -100,7 +106,8 @@ HEADER = (f"{'world':14} {'ok':3} {'status':13} {'robot':>5} {'mover':>5} {'move
 
 def row_line(r: dict) -> str:
     status = "false arrival" if r["status"] == "succeeded" and not r["reached"] else r["status"]
-    return (f"{r['world']:14} {'yes' if r['success'] else 'NO':3} {status:13} "
+    world = r["world"] if r["controller"] == DEFAULT_CONTROLLER else f"{r['world']} {r['controller']}"
+    return (f"{world:14} {'yes' if r['success'] else 'NO':3} {status:13} "
             f"{_fmt(r['robot_fault_collisions'], 'd'):>5} {_fmt(r['mover_fault_collisions'], 'd'):>5} "
             f"{_fmt(r['min_mover_clearance_m'], '7.3f')} {r['time_s']:7.1f} {_fmt(r['within_1m_s'], '6.1f')} "
             f"{r['path_length_m']:7.2f} {_fmt(r['plan_length_m'], '7.2f')} {_fmt(_ratio(r), '5.2f')}")
@@ -132,28 +139,34 @@ def main(args: argparse.Namespace) -> int:
                             f"{args.workers} and {args.seed}")
     out = Path(args.out or REPO / "out" / time.strftime(f"scenarios-{args.kind}-%Y%m%d-%H%M%S")).resolve()
     out.mkdir(parents=True, exist_ok=True)
-    jobs = [(args.kind, seed, args.drive, args.localization, args.timeout, str(out), args.record)
-            for seed in range(args.seed, args.seed + args.count)]
+    controllers = list(dict.fromkeys(args.controller))
+    jobs = [(args.kind, seed, args.drive, args.localization, args.timeout, str(out), args.record, controller)
+            for seed in range(args.seed, args.seed + args.count) for controller in controllers]
     if not args.json:
-        print(f"{args.count} {args.kind} worlds, {args.localization} localization, {args.workers} workers; in {out}")
+        print(f"{args.count} {args.kind} worlds, {args.localization} localization, controller "
+              f"{' and '.join(controllers)}, {args.workers} workers; in {out}")
         print(HEADER, flush=True)
     rows = run_in_workers(drive_world, jobs, args.workers, None if args.json else lambda r: print(row_line(r), flush=True))
+    by_controller = {c: overall([r for r in rows if r["controller"] == c]) for c in controllers}
     figures = {"kind": args.kind, "seeds": [args.seed, args.seed + args.count - 1], "drive": args.drive or "world's",
-               "localization": args.localization, **overall(rows), "rows": rows}
+               "localization": args.localization, "controller": controllers[0], **by_controller[controllers[0]],
+               "by_controller": by_controller, "rows": rows}
     if args.real_time:
         live = []
         for job in jobs:
-            live.append(drive_world_live(job))
-            if not args.json:
-                print("real time " + row_line(live[-1]), flush=True)
+            if job[-1] == DEFAULT_CONTROLLER:
+                live.append(drive_world_live(job))
+                if not args.json:
+                    print("real time " + row_line(live[-1]), flush=True)
         figures["real_time"] = {**overall(live), "rows": live}
     if args.json:
         print(json.dumps(figures))
     else:
-        for how, f in (("lockstep: " if args.real_time else "", figures), ("real time: ", figures.get("real_time"))):
+        lines = [(f"{c}: " if len(controllers) > 1 or args.real_time else "", f) for c, f in by_controller.items()]
+        for how, f in lines + [("real time: ", figures.get("real_time"))]:
             if f is not None:
                 print(how + summary_line(f))
-    return 0 if figures["success_rate"] == 1.0 else 1
+    return 0 if all(f["success_rate"] == 1.0 for f in by_controller.values()) else 1
 
 
 def summary_line(f: dict) -> str:

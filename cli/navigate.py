@@ -47,6 +47,7 @@ from ..schemas import decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout
 from ..schemas.messages import CancelGoal, Clock, Goal, Header, NavStatus, Pose2D
 from ..services.chassis.kinematics import DRIVES
+from ..services.local_planner.control import CONTROLLERS
 from ..services.map_server.mapio import MapError, load_map, save_map
 from ..experiments.mission_score import TERMINAL, MissionError, load_mission, summarize_mission, summary_lines
 from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
@@ -215,6 +216,18 @@ def localization_service(kind: str, start: dict, map_file: Path, seed: int, foll
 HOLONOMIC_STRAFE = 0.3     # m/s: as far as base_local_planner's y_vels reach; dwa's ±0.1 leaves a person's way too slowly
 
 
+# TEB's clearances for these robots (teb_local_planner's defaults, 0.5 / 0.6 m from the footprint,
+# leave no way through a 0.9 m door for a 0.64 m wide robot); people are kept farther than walls
+TEB_CLEARANCES = {"min_obstacle_dist": 0.05, "inflation_dist": 0.3, "dynamic_obstacle_inflation_dist": 0.8}
+
+
+def controller_params(controller: str | None) -> dict:
+    """The local planner's settings for a controller other than its default (DWA)."""
+    if controller is None:
+        return {}
+    return {"controller": controller, **({"teb": TEB_CLEARANCES} if controller == "teb" else {})}
+
+
 def drive_params(drive: str) -> dict:
     """The local planner's settings for the drive: a differential drive cannot strafe, the
     holonomic drives strafe out of a person's way at up to HOLONOMIC_STRAFE (docs/scenarios.md)."""
@@ -245,12 +258,13 @@ def robot_params(profile: Profile | None) -> dict[str, dict]:
 
 def compose_for(world: World, world_file: Path, map_file: Path, drive: str, localization: str, recording: Path,
                 seed: int, rate: float, robot: str, profile: Profile | None = None,
-                sim_dt: float | None = None, state_dir: Path | None = None) -> dict:
+                sim_dt: float | None = None, state_dir: Path | None = None, controller: str | None = None) -> dict:
     """The compose mapping of a mission (absolute paths: `up` may run anywhere). `profile`: the
     robot (cli/profile.py), else the world's robot with the sample parameters. With localization
     `odom` there is no map: no map_server, no localizer, and a global costmap of the robot's own
     scans (map→odom stays the start pose). `sim_dt`: the simulator's step (default its own).
-    `state_dir`: where the localizer, chassis and navigator keep what they resume from after a restart."""
+    `state_dir`: where the localizer, chassis and navigator keep what they resume from after a restart.
+    `controller`: the local planner's (default its own, DWA)."""
     x, y, yaw = (float(v) for v in world.robot.start)
     start = {"initial_pose_x": x, "initial_pose_y": y, "initial_pose_a": yaw}
     followers = profile is None        # the world's robot has follower wheels; a profile's says what it has
@@ -279,7 +293,8 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "tracker", "service": "tracker", "params": {**start, "use_map": localization != "slam"}},
         {"name": "global_planner", "service": "global_planner",
          "params": {"goal_topic": "plan_request", "planner_frequency": 0.0, "use_dijkstra": False, **start}},
-        {"name": "local_planner", "service": "local_planner", "params": {**drive_params(drive), **start}},
+        {"name": "local_planner", "service": "local_planner",
+         "params": {**drive_params(drive), **controller_params(controller), **start}},
         {"name": "cmd_vel_mux", "service": "cmd_vel_mux"},
         {"name": "velocity_smoother", "service": "velocity_smoother"},
         {"name": "collision_monitor", "service": "collision_monitor",
@@ -321,6 +336,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "odom (no map: odometry alone, costmaps from the robot's own scans)")
     parser.add_argument("--profile", help="a robot profile: a shipped one's name (jackal) or a profile file "
                                           "(default: the world's robot)")
+    parser.add_argument("--controller", choices=CONTROLLERS,
+                        help="the local planner's controller (default its own: dwa; teb plans among the tracked people)")
     parser.add_argument("--record", metavar="FILE", help="the recording (default OUT/run.mcap)")
     parser.add_argument("-o", "--out", help="folder for the compose file, map and logs "
                                             "(default out/navigate-<date>-<time>)")
@@ -601,7 +618,8 @@ def main(args: argparse.Namespace) -> int:
     # 0: as fast as it may (the Clock says so; in one process the pace does not apply anyway)
     rate = args.rate if args.rate is not None else 0.0 if args.lockstep or args.in_process else 1.0
     compose = compose_for(world, world_file, map_file, drive, args.localization, recording, args.seed,
-                          rate, args.robot, profile, sim_dt=args.sim_dt, state_dir=state_dir)
+                          rate, args.robot, profile, sim_dt=args.sim_dt, state_dir=state_dir,
+                          controller=args.controller)
     if args.composed:
         compose["services"] = in_containers(compose["services"], args.composed)
     compose_file = out / "compose.yaml"

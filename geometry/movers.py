@@ -26,6 +26,15 @@ class Movers:
     def __len__(self) -> int:
         return len(self.radii)
 
+    def along(self, times, sigmas: float) -> np.ndarray:
+        """(K, N, 3): each mover's predicted centre at each of the times (s after these tracks'
+        instant) and its radius grown by `sigmas` standard deviations of that prediction."""
+        t = np.asarray(times, np.float64)[:, None]
+        centres = self.positions[None] + self.velocities[None] * t[..., None]
+        variance = self.variance[:, 0] + 2.0 * t * self.variance[:, 1] + t * t * self.variance[:, 2]
+        radii = self.radii + sigmas * np.sqrt(np.maximum(variance, 0.0))
+        return np.concatenate([centres, radii[..., None]], axis=2)
+
     def nearest_edge(self, xy) -> float:
         """Distance from the point xy to the nearest mover's edge (inf when there is none)."""
         if not len(self):

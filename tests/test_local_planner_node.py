@@ -169,7 +169,7 @@ def test_ros_planner_files_configure_it(tmp_path):
     with pytest.raises(ParamError, match="max_vel_x is given twice"):
         build_node("local_planner", overrides={"DWAPlannerROS": {"max_vel_x": 0.3}, "max_vel_x": 0.4})
     with pytest.raises(ParamError, match="controller must be one of"):
-        build_node("local_planner", overrides={"controller": "teb"})
+        build_node("local_planner", overrides={"controller": "mpc"})
     with pytest.raises(ParamError, match="path_follower: drive 'holonomic' contradicts holonomic_robot False"):
         build_node("local_planner", overrides={"holonomic_robot": False, "path_follower": {"drive": "holonomic"}})
     with pytest.raises(ParamError, match="path_follower: .*unknown parameter"):

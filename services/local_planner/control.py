@@ -36,7 +36,8 @@ One tick, in order:
   its time is up, or the pose its command heads for within MANEUVER_LOOKAHEAD_S lies outside what
   the collision monitor lets through (FootprintCheck.monitor_check); then DWA again.
 - Else the controller: DWA (scoring the tracker's tracks predicted to the tick, dynamic.py), the
-  elastic band, or the path follower (braking, not ok, "path_blocked: …" when the path ahead is
+  elastic band, TEB (teb.py: bands in several homotopy classes, each pose clear of the tracks where
+  they will be when it is reached), or the path follower (braking, not ok, "path_blocked: …" when the path ahead is
   illegal on the costmap). When DWA has moved the robot less than maneuver.stall_radius over the
   last maneuver.stall_time (creeping counts: a window that slides, not one anchored where the robot
   stood) with no tracked mover within maneuver.mover_distance (a robot waiting for
@@ -72,7 +73,8 @@ from .path_ahead import ahead_of
 from .path_follower import PathFollower, segments_from_poses
 from .shim import RotationShim, RotationShimParams
 
-CONTROLLERS = ("dwa", "eband", "follower")
+CONTROLLERS = ("dwa", "eband", "teb", "follower")
+DEFAULT_CONTROLLER = "dwa"
 APPROACH_HYSTERESIS = 0.1             # m beyond final_approach_distance before an approach is given up
 START_MOVED = 0.05    # m: a path from the same goal starting farther from the last one's start is a new path
 MANEUVER_LOOKAHEAD_S = 0.1   # s of a maneuver's command whose end pose must be legal
@@ -85,12 +87,13 @@ class LocalControlParams(DwaParams, RotationShimParams):
     xy_goal_tolerance: float = param(0.02, ge=0)         # m: the controller stops here (the navigator judges success)
     yaw_goal_tolerance: float = param(0.02, ge=0)        # rad
     latch_xy_goal_tolerance: bool = True                 # the position once reached stays so while turning (geometry/goal_latch.py; ROS: false, Nav2: stateful)
-    controller: str = param("dwa", choices=CONTROLLERS)  # dwa | eband | follower
+    controller: str = param(DEFAULT_CONTROLLER, choices=CONTROLLERS)  # dwa | eband | teb | follower
     final_approach_distance: float = param(0.6, ge=0)    # m from the path's end where the final approach takes over
     rotation_shim: bool | None = None                    # turn towards a new path first (shim.py); None: with the dwa controller
     path_follower: dict = field(default_factory=dict)    # FollowerParams by name (drive: from holonomic_robot)
     maneuver: dict = field(default_factory=dict)         # ManeuverParams by name (maneuver.py; with the dwa controller)
     elastic_band: dict = field(default_factory=dict)     # ElasticBandParams by name; limits default to the above
+    teb: dict = field(default_factory=dict)              # TebParams by name (teb.py); limits default to the above
     # the robot, spelled as costmap_2d spells it (the local costmap's values)
     footprint: tuple[tuple[float, float], ...] = param(tuple(map(tuple, DEFAULT_FOOTPRINT.tolist())),
                                                        min_items=3, or_empty=True)
@@ -175,14 +178,19 @@ class LocalControl:
         p = self.params
         if p.controller == "dwa":
             return DwaPlanner(self.dwa_params, self.footprint_check)
-        if p.controller == "eband":
-            from .eband import ElasticBandPlanner    # numba-compiled: loaded only when chosen
+        if p.controller in ("eband", "teb"):
+            # numba-compiled: loaded only when chosen
+            from .eband import ElasticBandPlanner
             from .params import ElasticBandParams
+            from .teb import TebParams, TebPlanner
             # one set of robot limits: the band's default to the node's (TEB spells them alike)
             shared = ["holonomic_robot", "controller_frequency", "max_vel_x", "max_vel_theta", "acc_lim_x",
                       "acc_lim_theta", *(["max_vel_y", "acc_lim_y"] if p.holonomic_robot else [])]
-            values = {**{name: getattr(p, name) for name in shared}, **p.elastic_band}
-            return ElasticBandPlanner(load_params(ElasticBandParams, values, "elastic_band"), self.footprint_check)
+            defaults = {name: getattr(p, name) for name in shared}
+            if p.controller == "eband":
+                params = load_params(ElasticBandParams, {**defaults, **p.elastic_band}, "elastic_band")
+                return ElasticBandPlanner(params, self.footprint_check)
+            return TebPlanner(load_params(TebParams, {**defaults, **p.teb}, "teb"), self.footprint_check)
         return None     # follower: built per path
 
     def follow(self, path: Path, frames: RobotFrames) -> None:
@@ -257,7 +265,7 @@ class LocalControl:
                 if maneuver is not None:
                     return maneuver
         else:
-            result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path)
+            result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path, movers)
         reason = result.status if result.status in ("ok", "escape") else f"{result.status}: {result.message}"
         return Control(result.cmd, result.status in ("ok", "escape"), "" if result.status == "ok" else reason,
                        result.trajectory)

@@ -43,15 +43,15 @@ def _polygon_distance(u, v, polygon):
 
 
 @njit(cache=True)
-def _slack(poses, dt, footprint, positions, velocities, radii, variance, margin, sigmas, hard, soft):
-    """hard, soft (T, S): the least slack over the movers of each pose (pose k reached at k·dt),
+def _slack(poses, times, footprint, positions, velocities, radii, variance, margin, sigmas, hard, soft):
+    """hard, soft (T, S): the least slack over the movers of each pose (pose k reached at times[k]),
     without and with the sigmas of the predicted position."""
     trajectories, steps = poses.shape[0], poses.shape[1]
     for t in range(trajectories):
         for k in range(steps):
             x, y, theta = poses[t, k, 0], poses[t, k, 1], poses[t, k, 2]
             c, s = math.cos(theta), math.sin(theta)
-            tau = k * dt
+            tau = times[k]
             hard[t, k], soft[t, k] = np.inf, np.inf
             for n in range(radii.shape[0]):
                 px = positions[n, 0] + velocities[n, 0] * tau - x
@@ -62,15 +62,18 @@ def _slack(poses, dt, footprint, positions, velocities, radii, variance, margin,
                 soft[t, k] = min(soft[t, k], gap - sigmas * math.sqrt(max(var, 0.0)))
 
 
-def slack(poses: np.ndarray, dt: float, footprint: np.ndarray, movers: Movers, margin: float,
+def slack(poses: np.ndarray, dt, footprint: np.ndarray, movers: Movers, margin: float,
           sigmas: float) -> tuple[np.ndarray, np.ndarray]:
-    """(hard, soft), each (T, S), of rollouts (T, S, 3) whose poses are dt apart: metres each pose's
-    footprint keeps beyond the margin from the nearest predicted mover (negative: too close), and
-    the same less sigmas standard deviations of the mover's predicted position."""
+    """(hard, soft), each (T, S), of rollouts (T, S, 3) whose poses are dt apart (or reached at the
+    times (S,) dt gives): metres each pose's footprint keeps beyond the margin from the nearest
+    predicted mover (negative: too close), and the same less sigmas standard deviations of the
+    mover's predicted position."""
     poses = np.ascontiguousarray(poses, np.float64)
     hard, soft = np.empty(poses.shape[:2]), np.empty(poses.shape[:2])
+    times = np.arange(poses.shape[1]) * dt if np.isscalar(dt) else np.asarray(dt, np.float64)
     # contiguous (movers_at's positions are a column slice): one compiled variant, as warm_up's
-    _slack(poses, float(dt), np.ascontiguousarray(footprint, np.float64), np.ascontiguousarray(movers.positions),
+    _slack(poses, np.ascontiguousarray(times, np.float64), np.ascontiguousarray(footprint, np.float64),
+           np.ascontiguousarray(movers.positions),
            np.ascontiguousarray(movers.velocities), movers.radii, movers.variance, float(margin), float(sigmas),
            hard, soft)
     return hard, soft

@@ -53,8 +53,10 @@ from ...schemas.messages import MapMetaData
 from ..costmap.layers import LETHAL_OBSTACLE
 from ...geometry.distance import distances_to
 from ...geometry.se2 import wrap_angle
+from ...geometry.movers import Movers
 from ...geometry.polygons import densify
 from .dwa import local_path
+from .dynamic import first_contact, slack
 from .footprint_check import FootprintCheck
 from .params import ElasticBandParams
 
@@ -197,22 +199,43 @@ def _put_all(cols, vals, counts, row, slots, gradient, scale):
 
 
 @njit(cache=True)
-def _n_residuals(n_poses, holonomic, n_circles, stop_at_goal):
+def _n_residuals(n_poses, holonomic, n_circles, stop_at_goal, n_movers):
     axes = 3 if holonomic else 2
     per_interval = 4 if holonomic else 5
-    return (n_poses - 1) * per_interval + (n_poses - 1 + stop_at_goal) * axes + (n_poses - 2) * n_circles * 2
+    return ((n_poses - 1) * per_interval + (n_poses - 1 + stop_at_goal) * axes
+            + (n_poses - 2) * n_circles * 2 * (1 + n_movers))
+
+
+@njit(cache=True)
+def _clearance_rows(res, cols, vals, counts, row, column, clearance, gx, gy, lever, bounds, weights):
+    """Two rows (clearance below each bound, weighed) of one covering circle of the pose at `column`;
+    (gx, gy) the clearance's gradient at the circle's centre, `lever` the centre's offset along the
+    robot's heading (c, s); returns the next row."""
+    c, s = lever[1], lever[2]
+    for b in range(2):
+        err, d = _shortfall(clearance, bounds[b])
+        res[row] = weights[b] * err
+        if d != 0.0:
+            w = weights[b] * d
+            _put(cols, vals, counts, row, column, w * gx)
+            _put(cols, vals, counts, row, column + 1, w * gy)
+            _put(cols, vals, counts, row, column + 2, w * lever[0] * (-s * gx + c * gy))
+        row += 1
+    return row
 
 
 @njit(cache=True)
 def _evaluate(x, start, goal, v_start, stop_at_goal, holonomic, limits, weights, epsilon, obstacle,
-              field, grid, offsets, radius, res, cols, vals, counts):
+              field, grid, offsets, radius, movers, res, cols, vals, counts):
     """Fill the residuals `res` and the rows' Jacobian entries (cols, vals, counts); return the cost
     (half the squared norm).
 
     limits = (max_vel_x, max_vel_x_backwards, max_vel_y, max_vel_theta, acc_lim_x, acc_lim_y,
     acc_lim_theta); weights = square roots of (vel x, vel y, vel theta, acc x, acc y, acc theta,
-    optimal time, nh, forward drive, obstacle, inflation); obstacle = (min_obstacle_dist,
-    inflation_dist)."""
+    optimal time, nh, forward drive, obstacle, inflation, dynamic obstacle, dynamic inflation);
+    obstacle = (min_obstacle_dist, inflation_dist, dynamic_obstacle_inflation_dist); movers (K, M, 3):
+    each mover's predicted centre and radius at the time pose k is reached (held fixed while solving,
+    as TEB's dynamic-obstacle edges hold it)."""
     poses, dts = _unpack(x, start, goal)
     n_poses = poses.shape[0]
     n_intervals = n_poses - 1
@@ -295,21 +318,25 @@ def _evaluate(x, start, goal, v_start, stop_at_goal, holonomic, limits, weights,
                     _put_all(cols, vals, counts, row, slots[before], grad[before, k], -w * d / span)
                     _put(cols, vals, counts, row, 4 * before, -w * d * acc * d_span_before / span)
             row += 1
-    # clearance of the inner poses
+    # clearance of the inner poses from the static obstacles, then from each mover where it will be
+    static_bounds = np.array([obstacle[0] + epsilon, obstacle[1]])
+    dynamic_bounds = np.array([obstacle[0] + epsilon, obstacle[2]])
+    lever = np.empty(3)
     for i in range(1, n_poses - 1):
         column = _pose_column(i, n_poses)
-        c, s = math.cos(poses[i, 2]), math.sin(poses[i, 2])
+        lever[1], lever[2] = math.cos(poses[i, 2]), math.sin(poses[i, 2])
         for q in range(offsets.shape[0]):
-            value, gx, gy = _interpolate(field, poses[i, 0] + c * offsets[q], poses[i, 1] + s * offsets[q], grid)
-            clearance = value - radius
-            for bound, w in ((obstacle[0] + epsilon, weights[9]), (obstacle[1], weights[10])):
-                err, d = _shortfall(clearance, bound)
-                res[row] = w * err
-                if d != 0.0:
-                    _put(cols, vals, counts, row, column, w * d * gx)
-                    _put(cols, vals, counts, row, column + 1, w * d * gy)
-                    _put(cols, vals, counts, row, column + 2, w * d * offsets[q] * (-s * gx + c * gy))
-                row += 1
+            lever[0] = offsets[q]
+            cx, cy = poses[i, 0] + lever[1] * offsets[q], poses[i, 1] + lever[2] * offsets[q]
+            value, gx, gy = _interpolate(field, cx, cy, grid)
+            row = _clearance_rows(res, cols, vals, counts, row, column, value - radius, gx, gy, lever,
+                                  static_bounds, weights[9:11])
+            for m in range(movers.shape[1]):
+                ex, ey = cx - movers[i, m, 0], cy - movers[i, m, 1]
+                distance = math.hypot(ex, ey)
+                gx, gy = (ex / distance, ey / distance) if distance > 1e-9 else (1.0, 0.0)
+                row = _clearance_rows(res, cols, vals, counts, row, column, distance - radius - movers[i, m, 2],
+                                      gx, gy, lever, dynamic_bounds, weights[11:13])
     return 0.5 * np.dot(res, res)
 
 
@@ -371,16 +398,16 @@ def _band_cholesky_solve(band, rhs):
 
 @njit(cache=True)
 def _levenberg_marquardt(x, iterations, start, goal, v_start, stop_at_goal, holonomic, limits, weights, epsilon,
-                         obstacle, field, grid, offsets, radius):
+                         obstacle, field, grid, offsets, radius, movers):
     """(x, cost) after `iterations` Levenberg–Marquardt steps as g2o takes them (damping λ·I,
     Nielsen's update, the normal equations solved in band form); stops early when no damping
     lowers the cost."""
     n_poses = (x.shape[0] + 7) // 4
-    rows = _n_residuals(n_poses, holonomic, offsets.shape[0], stop_at_goal)
+    rows = _n_residuals(n_poses, holonomic, offsets.shape[0], stop_at_goal, movers.shape[1])
     res, cols, vals, counts = _row_buffers(rows)
     trial_res, trial_cols, trial_vals, trial_counts = _row_buffers(rows)
     cost = _evaluate(x, start, goal, v_start, stop_at_goal, holonomic, limits, weights, epsilon, obstacle,
-                     field, grid, offsets, radius, res, cols, vals, counts)
+                     field, grid, offsets, radius, movers, res, cols, vals, counts)
     damping, growth = -1.0, 2.0
     for _ in range(iterations):
         band, gradient = _normal_equations(res, cols, vals, counts, x.shape[0])
@@ -394,8 +421,8 @@ def _levenberg_marquardt(x, iterations, start, goal, v_start, stop_at_goal, holo
             if step is not None:
                 trial = x + step
                 trial_cost = _evaluate(trial, start, goal, v_start, stop_at_goal, holonomic, limits, weights,
-                                       epsilon, obstacle, field, grid, offsets, radius, trial_res, trial_cols,
-                                       trial_vals, trial_counts)
+                                       epsilon, obstacle, field, grid, offsets, radius, movers, trial_res,
+                                       trial_cols, trial_vals, trial_counts)
                 predicted = 0.5 * (damping * np.dot(step, step) - np.dot(gradient, step))
                 if trial_cost < cost and predicted > 0.0:
                     gain = (cost - trial_cost) / predicted
@@ -435,15 +462,18 @@ class BandProblem:
     other least-squares solver (scipy's, in the tests)."""
 
     def __init__(self, planner: ElasticBandPlanner, poses, dts, velocity, stop_at_goal: bool, field, info,
-                 outer: int = 0):
+                 outer: int = 0, movers: Movers | None = None, weights: np.ndarray | None = None):
         p = planner.params
         self.start, self.goal = np.array(poses[0], np.float64), np.array(poses[-1], np.float64)
-        self.x0 = _pack(np.asarray(poses, np.float64), np.asarray(dts, np.float64))
+        dts = np.asarray(dts, np.float64)
+        self.x0 = _pack(np.asarray(poses, np.float64), dts)
+        predicted = planner.predicted(dts, movers)
         self._args = (self.start, self.goal, np.asarray(velocity, np.float64), int(stop_at_goal), p.holonomic_robot,
-                      planner.limits, planner.weights(outer), p.penalty_epsilon,
-                      np.array([p.min_obstacle_dist, p.inflation_dist]), field, _grid_frame(info),
-                      planner.offsets, planner.radius)
-        self.rows = _n_residuals(len(poses), p.holonomic_robot, len(planner.offsets), int(stop_at_goal))
+                      planner.limits, planner.weights(outer) if weights is None else weights, p.penalty_epsilon,
+                      np.array([p.min_obstacle_dist, p.inflation_dist, p.dynamic_obstacle_inflation_dist]), field,
+                      _grid_frame(info), planner.offsets, planner.radius, predicted)
+        self.rows = _n_residuals(len(poses), p.holonomic_robot, len(planner.offsets), int(stop_at_goal),
+                                 predicted.shape[1])
 
     def _rows(self, x):
         res, cols, vals, counts = _row_buffers(self.rows)
@@ -452,6 +482,10 @@ class BandProblem:
 
     def residuals(self, x) -> np.ndarray:
         return self._rows(x)[0]
+
+    def cost(self) -> float:
+        """Half the squared norm of the residuals where the problem starts."""
+        return 0.5 * float(np.dot(*(self.residuals(self.x0),) * 2))
 
     def jacobian(self, x) -> np.ndarray:
         _, cols, vals, counts = self._rows(x)
@@ -567,10 +601,31 @@ class EbandResult:
 
 
 @dataclass
-class _Band:
+class Band:
+    """An optimised band and the path it was made on (the next cycle warm-starts from it)."""
     path: np.ndarray
     poses: np.ndarray
     dts: np.ndarray
+
+    def warm(self, path, start, goal, resolution: float, params: ElasticBandParams) -> tuple[np.ndarray, np.ndarray] | None:
+        """(poses, dts) of this band moved to this cycle's ends, or None when it does not apply: the
+        path changed beyond a cell (frame corrections between cycles are allowed), the local goal
+        moved past force_reinit_new_goal_dist / _angular, or too few poses lie ahead of the robot."""
+        if self.path.shape != path.shape or np.abs(self.path[:, :2] - path[:, :2]).max(initial=0.0) > resolution:
+            return None
+        old_goal = self.poses[-1]
+        if (math.hypot(*(goal[:2] - old_goal[:2])) > params.force_reinit_new_goal_dist
+                or abs(wrap_angle(goal[2] - old_goal[2])) > params.force_reinit_new_goal_angular):
+            return None
+        nearest = int(np.argmin(np.hypot(*(self.poses[:-1, :2] - start[:2]).T)))
+        poses, dts = self.poses[nearest:].copy(), self.dts[nearest:].copy()
+        if len(poses) < params.min_samples:
+            return None
+        poses[0], poses[-1] = start, goal
+        # keep headings continuous from the robot's, the ends exactly as given
+        poses[1:-1, 2] = start[2] + np.cumsum(wrap_angle(np.diff(poses[:-1, 2])))
+        poses[-1, 2] = poses[-2, 2] + wrap_angle(goal[2] - poses[-2, 2])
+        return poses, dts
 
 
 class ElasticBandPlanner:
@@ -585,7 +640,7 @@ class ElasticBandPlanner:
         self.footprint = footprint_check.footprint
         self.offsets, self.radius = covering_circles(self.footprint)
         self.reach = float(np.hypot(self.footprint[:, 0], self.footprint[:, 1]).max())
-        self._band: _Band | None = None
+        self._band: Band | None = None
         p = params
         self.limits = np.array([p.max_vel_x, p.max_vel_x_backwards, p.max_vel_y if p.holonomic_robot else 0.0,
                                  p.max_vel_theta, p.acc_lim_x, p.acc_lim_y, p.acc_lim_theta])
@@ -601,37 +656,27 @@ class ElasticBandPlanner:
         return np.sqrt([p.weight_max_vel_x, p.weight_max_vel_y, p.weight_max_vel_theta, p.weight_acc_lim_x,
                         p.weight_acc_lim_y, p.weight_acc_lim_theta, p.weight_optimaltime, p.weight_kinematics_nh,
                         p.weight_kinematics_forward_drive,
-                        p.weight_obstacle * p.weight_adapt_factor ** outer, p.weight_inflation])
+                        p.weight_obstacle * p.weight_adapt_factor ** outer, p.weight_inflation,
+                        p.weight_dynamic_obstacle * p.weight_adapt_factor ** outer,
+                        p.weight_dynamic_obstacle_inflation])
 
-    def _warm_band(self, path, start, goal, resolution: float) -> tuple[np.ndarray, np.ndarray] | None:
-        """The previous band moved to this cycle's ends, or None when it does not apply."""
-        p, band = self.params, self._band
-        # the same path, up to the costmap frame's small corrections between cycles
-        if (band is None or band.path.shape != path.shape
-                or np.abs(band.path[:, :2] - path[:, :2]).max(initial=0.0) > resolution):
-            return None
-        old_goal = band.poses[-1]
-        if (math.hypot(*(goal[:2] - old_goal[:2])) > p.force_reinit_new_goal_dist
-                or abs(wrap_angle(goal[2] - old_goal[2])) > p.force_reinit_new_goal_angular):
-            return None
-        nearest = int(np.argmin(np.hypot(*(band.poses[:-1, :2] - start[:2]).T)))
-        poses, dts = band.poses[nearest:].copy(), band.dts[nearest:].copy()
-        if len(poses) < p.min_samples:
-            return None
-        poses[0], poses[-1] = start, goal
-        # keep headings continuous from the robot's, the ends exactly as given
-        poses[1:-1, 2] = start[2] + np.cumsum(wrap_angle(np.diff(poses[:-1, 2])))
-        poses[-1, 2] = poses[-2, 2] + wrap_angle(goal[2] - poses[-2, 2])
-        return poses, dts
+    def predicted(self, dts: np.ndarray, movers: Movers | None) -> np.ndarray:
+        """(K, M, 3) the movers where they will be as the band reaches each pose (none unless
+        include_dynamic_obstacles)."""
+        if movers is None or not self.params.include_dynamic_obstacles:
+            return np.zeros((len(dts) + 1, 0, 3))
+        return movers.along(np.concatenate([[0.0], np.cumsum(dts)]), self.params.dynamic_obstacle_sigmas)
 
-    def optimise(self, poses, dts, velocity, stop_at_goal: bool, field, info: MapMetaData):
+    def optimise(self, poses, dts, velocity, stop_at_goal: bool, field, info: MapMetaData,
+                 movers: Movers | None = None):
         """The band after no_outer_iterations rounds of resizing and no_inner_iterations solver
-        steps, its intervals then stretched where a velocity limit is still exceeded."""
+        steps, its intervals then stretched where a velocity limit is still exceeded; the movers'
+        predicted places are taken at the band's times as each round begins."""
         p = self.params
         for outer in range(p.no_outer_iterations):
             poses, dts = resize(poses, dts, p)
-            poses, dts, _ = BandProblem(self, poses, dts, velocity, stop_at_goal, field, info, outer).solve(
-                p.no_inner_iterations)
+            poses, dts, _ = BandProblem(self, poses, dts, velocity, stop_at_goal, field, info, outer,
+                                        movers).solve(p.no_inner_iterations)
         return poses, np.maximum(dts, self.shortest_intervals(poses))
 
     def shortest_intervals(self, poses: np.ndarray) -> np.ndarray:
@@ -669,41 +714,78 @@ class ElasticBandPlanner:
             low[1] = high[1] = 0.0
         return low, high
 
-    def compute(self, pose, velocity, costs: np.ndarray, info: MapMetaData, path: np.ndarray) -> EbandResult:
-        """One cycle: pose (x, y, yaw) and path (N, 3) in the costmap's frame, velocity (vx, vy, wz)
-        in the robot frame."""
-        p = self.params
-        pose = np.asarray(pose, np.float64)
-        path = np.asarray(path, np.float64).reshape(-1, 3)
-        brake = np.clip(0.0, *self._reach(velocity))   # as hard as the acceleration limits allow
-        span = span_path(path, pose, info, p.max_global_plan_lookahead_dist)
+    def span(self, pose: np.ndarray, path: np.ndarray, info: MapMetaData) -> tuple[np.ndarray, np.ndarray, bool] | None:
+        """(the local path the band spans, its local goal, whether that is the path's final goal),
+        or None when no point of the path lies on the local costmap."""
+        span = span_path(path, pose, info, self.params.max_global_plan_lookahead_dist)
         if span is None:
-            self._band = None
-            return EbandResult("no_path", brake, np.zeros((0, 3)), np.zeros(0),
-                               "no point of the path lies on the local costmap")
+            return None
         span, at_final_goal = span
-        goal = local_goal(span, at_final_goal)
-        warm = self._warm_band(path, pose, goal, info.resolution)
-        poses, dts = warm if warm is not None else initial_band(span, pose, goal, p)
-        field = clearance_field(costs, info.resolution)
-        poses, dts = self.optimise(poses, dts, velocity, at_final_goal and not p.free_goal_vel, field, info)
-        poses[:, 2] = wrap_angle(poses[:, 2])
-        self._band = _Band(path.copy(), poses, dts)
+        return span, local_goal(span, at_final_goal), at_final_goal
+
+    def stops_at_goal(self, at_final_goal: bool) -> bool:
+        return at_final_goal and not self.params.free_goal_vel
+
+    def problem(self, poses: np.ndarray, dts: np.ndarray, costs: np.ndarray, info: MapMetaData, field,
+                movers: Movers | None = None, whole: bool = True) -> tuple[str, float]:
+        """(why the optimised band may not be driven, or ''; its smallest clearance over the checked
+        poses): it collides on the costmap (checked as DWA checks its rollouts, from the robot's pose,
+        the band's first; `whole`: all the band, else its first feasibility_check_no_poses poses, as
+        TEB checks), comes more than a cell below min_obstacle_dist (or the robot's own clearance when
+        smaller) within feasibility_check_no_poses poses, or — with include_dynamic_obstacles — meets
+        a mover there sooner than standing still would (dynamic.py's rule: standing in a person's way
+        is no refuge)."""
+        p = self.params
         dense, where = _interpolate_band(poses, info.resolution / 2, self.reach)
         # the clearance rule, as TEB's feasibility check, holds for the first feasibility_check_no_poses
         # poses only: further on the band is still being shaped by the coming cycles
         near = where[min(p.feasibility_check_no_poses, len(poses) - 1)]
         clearance = _clearances(dense[:near + 1], field, _grid_frame(info), self.offsets, self.radius)
         closest = float(clearance.min())
-        # checked as DWA checks its rollouts, from the robot's pose (the band's first)
-        if not self.footprint_check.legal_poses(dense, costs, info)[1:].all():
-            return EbandResult("no_valid_trajectory", brake, poses, dts,
-                               "the optimised band collides in the costmap; braking", closest, warm is not None)
+        if not self.footprint_check.legal_poses(dense if whole else dense[:near + 1], costs, info)[1:].all():
+            return "the optimised band collides in the costmap; braking", closest
         if closest < min(p.min_obstacle_dist, float(clearance[0])) - info.resolution:
-            return EbandResult("no_valid_trajectory", brake, poses, dts,
-                               f"the optimised band comes within {max(closest, 0.0):.2f} m of an obstacle "
-                               f"(min_obstacle_dist {p.min_obstacle_dist} m); braking", closest, warm is not None)
+            return (f"the optimised band comes within {max(closest, 0.0):.2f} m of an obstacle "
+                    f"(min_obstacle_dist {p.min_obstacle_dist} m); braking"), closest
+        if movers is not None and len(movers) and p.include_dynamic_obstacles:
+            times = np.interp(np.arange(near + 1), where, np.concatenate([[0.0], np.cumsum(dts)]))
+            checked = dense[None, :near + 1]
+            footprint = self.footprint_check.footprint
+            hard, _ = slack(checked, times, footprint, movers, 0.0, 0.0)
+            standing, _ = slack(np.repeat(dense[None, :1], near + 1, axis=1), times, footprint, movers, 0.0, 0.0)
+            if first_contact(hard)[0] < first_contact(standing)[0]:
+                return "the optimised band meets a mover sooner than standing still would; braking", closest
+        return "", closest
+
+    def compute(self, pose, velocity, costs: np.ndarray, info: MapMetaData, path: np.ndarray,
+                movers: Movers | None = None) -> EbandResult:
+        """One cycle: pose (x, y, yaw) and path (N, 3) in the costmap's frame, velocity (vx, vy, wz)
+        in the robot frame, movers (the tracker's tracks at this instant, in the costmap's frame)
+        heeded with include_dynamic_obstacles."""
+        pose = np.asarray(pose, np.float64)
+        path = np.asarray(path, np.float64).reshape(-1, 3)
+        brake = self.brake(velocity)
+        spanned = self.span(pose, path, info)
+        if spanned is None:
+            self._band = None
+            return EbandResult("no_path", brake, np.zeros((0, 3)), np.zeros(0),
+                               "no point of the path lies on the local costmap")
+        span, goal, at_final_goal = spanned
+        warm = self._band.warm(path, pose, goal, info.resolution, self.params) if self._band is not None else None
+        poses, dts = warm if warm is not None else initial_band(span, pose, goal, self.params)
+        field = clearance_field(costs, info.resolution)
+        poses, dts = self.optimise(poses, dts, velocity, self.stops_at_goal(at_final_goal), field, info, movers)
+        poses[:, 2] = wrap_angle(poses[:, 2])
+        self._band = Band(path.copy(), poses, dts)
+        problem, closest = self.problem(poses, dts, costs, info, field, movers)
+        if problem:
+            return EbandResult("no_valid_trajectory", brake, poses, dts, problem, closest, warm is not None)
         return EbandResult("ok", self.command(poses, dts, velocity), poses, dts, "", closest, warm is not None)
+
+    def brake(self, velocity) -> np.ndarray:
+        """The twist braking as hard as the acceleration limits allow."""
+        return np.clip(0.0, *self._reach(velocity))
+
 
 def _interpolate_band(poses: np.ndarray, spacing: float, reach: float) -> tuple[np.ndarray, np.ndarray]:
     """((N, 3) poses along the band, linear between band poses (headings turned the short way), so
@@ -720,12 +802,15 @@ def _interpolate_band(poses: np.ndarray, spacing: float, reach: float) -> tuple[
 
 
 def warm_up() -> None:
-    """Compile (or load from cache) the numba kernels, outside any control cycle."""
+    """Compile (or load from cache) the numba kernels (the mover terms' and checks' too: TEB's are
+    these), outside any control cycle."""
     info = MapMetaData(resolution=0.1, width=20, height=20)
     square = np.array([[0.1, 0.1], [-0.1, 0.1], [-0.1, -0.1], [0.1, -0.1]])
     path = np.column_stack([np.linspace(0.5, 1.5, 5), np.full(5, 1.0), np.zeros(5)])
     costs = np.zeros((20, 20), np.uint8)
     costs[0] = LETHAL_OBSTACLE
+    movers = Movers(np.array([[1.2, 1.5]]), np.array([[0.0, -0.3]]), np.full(1, 0.2), np.zeros((1, 3)))
     for holonomic in (True, False):
-        params = ElasticBandParams(holonomic_robot=holonomic, max_vel_y=0.1)
-        ElasticBandPlanner(params, FootprintCheck(square)).compute((0.5, 1.0, 0.0), (0.0, 0.0, 0.0), costs, info, path)
+        params = ElasticBandParams(holonomic_robot=holonomic, max_vel_y=0.1, include_dynamic_obstacles=True)
+        ElasticBandPlanner(params, FootprintCheck(square)).compute((0.5, 1.0, 0.0), (0.0, 0.0, 0.0), costs, info, path,
+                                                                    movers)

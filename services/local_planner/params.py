@@ -113,6 +113,9 @@ class ElasticBandParams(Parameters):
     # obstacles
     min_obstacle_dist: float = param(0.5, ge=0)                 # m between the footprint and an obstacle
     inflation_dist: float = param(0.6, ge=0)                    # m: a small extra penalty within this distance
+    include_dynamic_obstacles: bool = False                     # the tracker's movers, each pose held clear of where they will be
+    dynamic_obstacle_inflation_dist: float = param(0.6, ge=0)   # m: likewise for the movers
+    dynamic_obstacle_sigmas: float = param(0.0, ge=0)           # a mover's radius grows by this many σ of its predicted position (ours; TEB: none)
     # optimisation
     no_inner_iterations: int = param(5, ge=1)                   # solver iterations per outer iteration
     no_outer_iterations: int = param(4, ge=1)                   # resize + solve rounds per cycle
@@ -128,11 +131,15 @@ class ElasticBandParams(Parameters):
     weight_optimaltime: float = param(1.0, ge=0)
     weight_obstacle: float = param(50.0, ge=0)
     weight_inflation: float = param(0.1, ge=0)
+    weight_dynamic_obstacle: float = param(50.0, ge=0)
+    weight_dynamic_obstacle_inflation: float = param(0.1, ge=0)
     weight_adapt_factor: float = param(2.0, ge=1.0)             # weight_obstacle grows by this factor every outer iteration
 
     rules = (Rule("max_vel_y", lambda p: not p.holonomic_robot or (p.max_vel_y > 0 and p.acc_lim_y > 0),
                   "> 0, with acc_lim_y ({p.acc_lim_y}) > 0, on a holonomic robot"),
              Rule("dt_hysteresis", lambda p: p.dt_hysteresis < p.dt_ref, "below dt_ref ({p.dt_ref})"),
              Rule("inflation_dist", lambda p: p.inflation_dist >= p.min_obstacle_dist,
+                  "at least min_obstacle_dist ({p.min_obstacle_dist})"),
+             Rule("dynamic_obstacle_inflation_dist", lambda p: p.dynamic_obstacle_inflation_dist >= p.min_obstacle_dist,
                   "at least min_obstacle_dist ({p.min_obstacle_dist})"),
              Rule("max_samples", lambda p: p.max_samples >= p.min_samples, "at least min_samples ({p.min_samples})"))
