@@ -8,7 +8,12 @@ import math
 import numpy as np
 import pytest
 
+from omninav.geometry.grid import cell_to_world
+from omninav.geometry.polygons import transform_points
+from omninav.geometry.raycast import cast_grid
+from omninav.geometry.se2 import relative
 from omninav.schemas.messages import MapMetaData, Pose2D
+from omninav.services.slam.hector import HectorMapper, HectorParams
 from omninav.services.slam.hector_match import coarser, interpolate, match
 
 RES = 0.05
@@ -65,3 +70,37 @@ def test_a_coarser_level_keeps_every_wall():
     half, info = coarser(grid, INFO)
     assert info.resolution == pytest.approx(2 * RES) and half.shape == (60, 80)
     assert half[20, 30:60].all() and half[20:50, 60].all()
+
+
+def scan(grid: np.ndarray, pose, beams: int = 360, max_range: float = 10.0) -> np.ndarray:
+    """End points (robot frame) of a lidar at pose in the room, cast through its cells."""
+    angles = pose[2] + np.linspace(-math.pi, math.pi, beams, endpoint=False)
+    ranges = cast_grid(pose[0] / RES, pose[1] / RES, angles, grid > 0.5, max_range / RES) * RES
+    seen = np.isfinite(ranges)
+    local = angles[seen] - pose[2]
+    return np.column_stack([ranges[seen] * np.cos(local), ranges[seen] * np.sin(local)])
+
+
+def test_hector_maps_a_room_and_keeps_its_pose_without_odometry():
+    """Driven 3.2 m and turned 0.8 rad through the room in 5 cm and 0.0125 rad steps, no odometry:
+    each scan matched to the grids built so far (0.05 m cells). The pose drifts as hector's does,
+    here 3.5 cm (1.1 % of the way); the walls mapped lie within a cell of the room's."""
+    grid = room()
+    mapper = HectorMapper(HectorParams(map_resolution=0.05, map_size=512))
+    start = np.array([2.0, 3.5, 0.0])     # the map frame: where the first scan was taken
+    truth = start.copy()
+    for k in range(64):
+        pose = mapper.step(scan(grid, truth))
+        truth = truth + [0.05 * math.cos(truth[2]), 0.05 * math.sin(truth[2]), 0.0125]
+    pose = mapper.step(scan(grid, truth))
+    expected = relative(start, truth)
+    assert math.hypot(*(pose[:2] - expected[:2])) < 0.05
+    assert abs(pose[2] - expected[2]) < math.radians(1.0)
+    probability, info = mapper.probabilities()[0]
+    rows, cols = np.nonzero(probability > 0.5)
+    x, y = cell_to_world(info, rows, cols)
+    world = transform_points(np.column_stack([x, y]), start[None])[0]     # the map frame is the start's
+    wall_rows, wall_cols = np.nonzero(grid)
+    walls = np.column_stack([(wall_cols + 0.5) * RES, (wall_rows + 0.5) * RES])
+    nearest = np.min(np.hypot(*(world[:, None, :] - walls[None, :, :]).transpose(2, 0, 1)), axis=1)
+    assert len(world) > 200 and np.quantile(nearest, 0.95) <= 0.05
