@@ -104,3 +104,18 @@ def test_hector_maps_a_room_and_keeps_its_pose_without_odometry():
     walls = np.column_stack([(wall_cols + 0.5) * RES, (wall_rows + 0.5) * RES])
     nearest = np.min(np.hypot(*(world[:, None, :] - walls[None, :, :]).transpose(2, 0, 1)), axis=1)
     assert len(world) > 200 and np.quantile(nearest, 0.95) <= 0.05
+
+
+def test_a_guess_holds_the_match_along_a_corridor_where_the_walls_do_not():
+    """Two long walls 2 m apart: the scan fixes the pose across the corridor and its heading, not
+    along it. Held to the guess by its weights, the match keeps the guess's x and corrects y."""
+    corridor = np.zeros((INFO.height, INFO.width))
+    corridor[[40, 80], :] = 1.0            # y = 2.0 and 4.0 m, the whole 8 m
+    truth = np.array([4.0, 3.0, 0.0])
+    points = seen_from(corridor, truth)
+    points = points[np.abs(points[:, 0]) < 2.0]          # the walls' stretch beside the robot
+    levels = [(corridor, INFO), coarser(corridor, INFO)]
+    guess = truth + [0.1, 0.06, 0.02]
+    held = match(levels, points, guess, prior=guess, prior_weights=(100.0, 100.0, 400.0))
+    assert held[0] == pytest.approx(guess[0], abs=0.005)
+    assert held[1] == pytest.approx(truth[1], abs=0.01) and held[2] == pytest.approx(truth[2], abs=math.radians(0.5))

@@ -1,6 +1,6 @@
 """Hector mapping (Kohlbrecher et al. 2011) as a pure core: occupancy grids at several resolutions,
 each scan matched to them coarse to fine (hector_match.py) without odometry — a pose from
-odometry is only the first guess when given — and the grids updated from the matched pose once
+odometry, when given, is the first guess and a weak prior that holds the match along corridors — and the grids updated from the matched pose once
 the robot has moved map_update_distance_thresh or turned map_update_angle_thresh since the last
 update (hector_mapping's parameter names and defaults).
 
@@ -41,6 +41,10 @@ class HectorParams(Parameters):
     laser_min_dist: float = param(0.4, ge=0)                 # m: nearer returns are dropped
     laser_max_dist: float = param(30.0, gt=0)                # m: farther returns are dropped
     iterations: int = param(10, ge=1)                        # Gauss-Newton steps a level
+    # how firmly a guess (odometry's) holds the match: weights per m² and rad² beside the scan's
+    # sum of squared (1 − occupancy); ours, hector has none
+    guess_weight_xy: float = param(100.0, ge=0)
+    guess_weight_yaw: float = param(400.0, ge=0)
 
 
 class HectorMapper:
@@ -72,8 +76,9 @@ class HectorMapper:
         reach = np.hypot(points[:, 0], points[:, 1])
         points = points[(reach >= self.params.laser_min_dist) & (reach <= self.params.laser_max_dist)]
         if self._updated_at is not None:
-            self.pose = match(self.probabilities(), points, self.pose if guess is None else guess,
-                              self.params.iterations)
+            p = self.params
+            self.pose = match(self.probabilities(), points, self.pose if guess is None else guess, p.iterations,
+                              guess, (p.guess_weight_xy, p.guess_weight_xy, p.guess_weight_yaw))
         if self._updated_at is None or self._moved():
             self._update(points)
             self._updated_at = self.pose.copy()

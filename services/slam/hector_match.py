@@ -6,7 +6,8 @@ probability M interpolated bilinearly between cell centres, coarse grid first.
 For end points s_i (robot frame) placed at S_i(ξ), the matcher minimises Σ (1 − M(S_i(ξ)))²; one
 step solves H Δξ = Σ (∇M(S_i) ∂S_i/∂ξ)ᵀ (1 − M(S_i)) with H = Σ (∇M ∂S_i/∂ξ)ᵀ (∇M ∂S_i/∂ξ), where
 ∂S_i/∂ξ = [[1, 0, −sin ψ s_x − cos ψ s_y], [0, 1, cos ψ s_x − sin ψ s_y]]. Points off the grid
-count for nothing. The levels are (probability, MapMetaData) pairs, finest first (hector keeps one
+count for nothing. With a prior pose ξ₀ (odometry's), (ξ − ξ₀)ᵀ W (ξ − ξ₀) is added: negligible
+where the walls fix the pose, it holds it along a corridor, where they do not. The levels are (probability, MapMetaData) pairs, finest first (hector keeps one
 map per level, each half the resolution of the one before; `coarser` makes one from another).
 
 Pure: numpy only; grid rows are y, columns x (geometry/grid.py).
@@ -44,26 +45,34 @@ def interpolate(probability: np.ndarray, info: MapMetaData, x, y) -> tuple[np.nd
             np.where(inside, s * du + c * dv, zero))
 
 
-def gauss_newton_step(probability: np.ndarray, info: MapMetaData, points: np.ndarray, pose) -> np.ndarray:
-    """The pose after one Gauss-Newton step from `pose` for end points (N, 2) in the robot frame."""
+def gauss_newton_step(probability: np.ndarray, info: MapMetaData, points: np.ndarray, pose,
+                      prior=None, prior_weights=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """The pose after one Gauss-Newton step from `pose` for end points (N, 2) in the robot frame,
+    held towards `prior` (x, y, yaw) by prior_weights (per m², m², rad²) when given."""
     x, y, psi = (float(v) for v in pose)
     c, s = math.cos(psi), math.sin(psi)
     sx, sy = points[:, 0], points[:, 1]
     value, gx, gy = interpolate(probability, info, x + c * sx - s * sy, y + s * sx + c * sy)
     rows = np.column_stack([gx, gy, gx * (-s * sx - c * sy) + gy * (c * sx - s * sy)])   # ∇M ∂S/∂ξ
-    hessian = rows.T @ rows
+    hessian, gradient = rows.T @ rows, rows.T @ (1.0 - value)
+    if prior is not None:
+        weights = np.asarray(prior_weights, np.float64)
+        off = np.array([x - prior[0], y - prior[1], math.remainder(psi - prior[2], 2 * math.pi)])
+        hessian, gradient = hessian + np.diag(weights), gradient - weights * off
     if abs(np.linalg.det(hessian)) < SINGULAR:
         return np.array([x, y, psi])
-    return np.array([x, y, psi]) + np.linalg.solve(hessian, rows.T @ (1.0 - value))
+    return np.array([x, y, psi]) + np.linalg.solve(hessian, gradient)
 
 
-def match(levels: list[tuple[np.ndarray, MapMetaData]], points: np.ndarray, pose, iterations: int = 10) -> np.ndarray:
-    """The pose matched coarse to fine (levels finest first), `iterations` steps a level."""
+def match(levels: list[tuple[np.ndarray, MapMetaData]], points: np.ndarray, pose, iterations: int = 10,
+          prior=None, prior_weights=(0.0, 0.0, 0.0)) -> np.ndarray:
+    """The pose matched coarse to fine (levels finest first), `iterations` steps a level, from
+    `pose` (held towards `prior` when given, as gauss_newton_step)."""
     pose = np.asarray(pose, np.float64)[:3].copy()
     points = np.asarray(points, np.float64).reshape(-1, 2)
     for probability, info in reversed(levels):
         for _ in range(iterations):
-            pose = gauss_newton_step(probability, info, points, pose)
+            pose = gauss_newton_step(probability, info, points, pose, prior, prior_weights)
     return pose
 
 
