@@ -194,6 +194,7 @@ CORE_READERS = {
                                                            "services/global_planner/path_smoother.py"],
     "services.slam.params:SlamParams": ["services/slam/rbpf.py", "services/slam/scanmatch.py",
                                         "services/slam/particle_grids.py", "services/slam/relations.py"],
+    "services.slam.hector:HectorParams": ["services/slam/hector.py", "services/slam/hector_match.py"],
     "services.localizer.params:DiffMotionParams": ["services/localizer/params.py"],
     "services.localizer.params:OmniMotionParams": ["services/localizer/params.py"],
     "services.localizer.params:BeamModelParams": ["services/localizer/sensor.py"],

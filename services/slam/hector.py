@@ -25,11 +25,11 @@ import numpy as np
 from numba import njit
 
 from ...geometry.grid import grid_coords
-from ...geometry.se2 import compose, relative, wrap_angle
+from ...geometry.se2 import compose, inverse, relative, wrap_angle
 from ...parameters.declare import Parameters, param
-from ...schemas.messages import MapMetaData, Pose2D
-from .hector_match import match, mismatch
-from .particle_grids import segment_cells
+from ...schemas.messages import Header, MapMetaData, OccupancyGrid, Pose2D
+from .hector_match import match, mismatch, pose_covariance
+from .particle_grids import occupancy_data, segment_cells
 
 LOG_ODDS_LIMIT = 10.0
 
@@ -58,25 +58,33 @@ class HectorParams(Parameters):
 
 class HectorMapper:
     """`step(points)` matches a scan's end points (N, 2, robot frame) and updates the grids; `pose`
-    is the robot's in the map frame, which starts at the first scan's pose (0, 0, 0)."""
+    is the robot's in the map frame, where the first scan is taken at `start` (the grids centred
+    there as map_start_x / map_start_y say)."""
 
-    def __init__(self, params: HectorParams = HectorParams()):
+    def __init__(self, params: HectorParams = HectorParams(), start=(0.0, 0.0, 0.0)):
         self.params = params
+        self.pose = np.asarray(start, np.float64)[:3].copy()
         self.infos, self.log_odds, self._probability, self._marks = [], [], [], []
         for level in range(params.map_multi_res_levels):
             resolution, size = params.map_resolution * 2 ** level, params.map_size // 2 ** level
-            origin = Pose2D(-params.map_start_x * size * resolution, -params.map_start_y * size * resolution, 0.0)
+            origin = Pose2D(self.pose[0] - params.map_start_x * size * resolution,
+                            self.pose[1] - params.map_start_y * size * resolution, 0.0)
             self.infos.append(MapMetaData(resolution=resolution, width=size, height=size, origin=origin))
             self.log_odds.append(np.zeros((size, size), np.float32))
             self._probability.append(np.full((size, size), 0.5, np.float32))
             self._marks.append(np.zeros((size, size), np.int32))
-        self.pose = np.zeros(3)
         self._updated_at: np.ndarray | None = None
         self._scans_integrated = 0
         self._previous: np.ndarray | None = None
+        self._matched: np.ndarray | None = None     # the end points of the last scan matched
         p = params
         self._free = math.log(p.update_factor_free / (1 - p.update_factor_free))
         self._occupied = math.log(p.update_factor_occupied / (1 - p.update_factor_occupied))
+
+    @property
+    def updates(self) -> int:
+        """Scans the grids have taken."""
+        return self._scans_integrated
 
     def probabilities(self) -> list[tuple[np.ndarray, MapMetaData]]:
         """The grids as occupancy probabilities, finest first."""
@@ -94,10 +102,29 @@ class HectorMapper:
             weights = (p.guess_weight_xy, p.guess_weight_xy, p.guess_weight_yaw)
             matches = [match(levels, points, start, prior=guess, prior_weights=weights) for start in self._starts(guess)]
             self._previous, self.pose = self.pose, min(matches, key=lambda pose: mismatch(*levels[0], points, pose))
+            self._matched = points
         if self._updated_at is None or self._moved():
             self._update(points)
             self._updated_at = self.pose.copy()
         return self.pose
+
+    def occupancy_grid(self, occ_thresh: float) -> OccupancyGrid:
+        """The finest grid, cropped to the cells beams have reached (OccupancyGrid values as the
+        filter's maps)."""
+        rows, cols = np.nonzero(self._marks[0])
+        r0, r1, c0, c1 = (rows.min(), rows.max() + 1, cols.min(), cols.max() + 1) if len(rows) else (0, 1, 0, 1)
+        info = self.infos[0]
+        data = occupancy_data(self.log_odds[0][r0:r1, c0:c1], occ_thresh)
+        origin = Pose2D(info.origin.x + c0 * info.resolution, info.origin.y + r0 * info.resolution, 0.0)
+        return OccupancyGrid(header=Header(frame_id="map"), info=MapMetaData(
+            resolution=info.resolution, width=data.shape[1], height=data.shape[0], origin=origin), data=data)
+
+    def covariance(self) -> np.ndarray:
+        """The last match's pose covariance, Gauss-Newton's: the cost per end point times H⁻¹ at the
+        finest grid (zeros before the first match or where H is singular)."""
+        if self._matched is None:
+            return np.zeros((3, 3))
+        return pose_covariance(*self.probabilities()[0], self._matched, self.pose)
 
     def _starts(self, guess) -> list[np.ndarray]:
         """Where matches start: the last pose (hector_mapping's only start) and it turned by
@@ -154,3 +181,43 @@ def _integrate(log_odds, probability, marks, mark, u0, v0, us, vs, free, occupie
             value = min(max(value, -LOG_ODDS_LIMIT), LOG_ODDS_LIMIT)
             log_odds[row, col] = value
             probability[row, col] = 1.0 / (1.0 + math.exp(-value))
+
+
+class HectorSlam:
+    """HectorMapper behind the slam node's core interface (Rbpf's): `process` takes a scan's ranges
+    and, when odometry is used, the odometry pose at its stamp — only for the first guess."""
+
+    def __init__(self, params: HectorParams, angles, range_max: float, laser=(0.0, 0.0, 0.0), start=(0.0, 0.0, 0.0)):
+        self.mapper = HectorMapper(params, start)
+        self.laser = np.asarray(laser, np.float64)
+        self.angles = np.asarray(angles, np.float64) + self.laser[2]
+        self.max_range = float(range_max) - 0.01      # a return at range_max is no return (the filter's rule)
+        self._odom: np.ndarray | None = None
+
+    @property
+    def updates(self) -> int:
+        return self.mapper.updates
+
+    def process(self, stamp_ns: int, odom_pose, ranges) -> None:
+        """One scan (`stamp_ns` unused: hector keeps no time), with the odometry pose at its stamp or None."""
+        ranges = np.asarray(ranges, np.float64)
+        seen = np.isfinite(ranges) & (ranges < self.max_range)
+        r, a = ranges[seen], self.angles[seen]
+        points = np.column_stack([self.laser[0] + r * np.cos(a), self.laser[1] + r * np.sin(a)])
+        odom = None if odom_pose is None else np.asarray(odom_pose, np.float64)
+        guess = None if odom is None or self._odom is None else compose(self.mapper.pose, relative(self._odom, odom))
+        self.mapper.step(points, guess)
+        self._odom = odom
+
+    def pose(self) -> np.ndarray:
+        return self.mapper.pose.copy()
+
+    def map_to_odom(self) -> np.ndarray | None:
+        """The map → odom transform, None without odometry."""
+        return None if self._odom is None else compose(self.mapper.pose, inverse(self._odom))
+
+    def covariance(self) -> np.ndarray:
+        return self.mapper.covariance()
+
+    def occupancy_grid(self, occ_thresh: float) -> OccupancyGrid:
+        return self.mapper.occupancy_grid(occ_thresh)

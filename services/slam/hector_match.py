@@ -142,6 +142,17 @@ def mismatch(probability: np.ndarray, info: MapMetaData, points: np.ndarray, pos
                      float(pose[0]), float(pose[1]), float(pose[2]))
 
 
+def pose_covariance(probability: np.ndarray, info: MapMetaData, points: np.ndarray, pose) -> np.ndarray:
+    """Gauss-Newton's covariance of a matched pose: the cost per end point times H⁻¹ (zeros where H
+    is singular)."""
+    hessian, gradient = np.empty((3, 3)), np.empty(3)
+    points = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 2))
+    _normal_equations(probability, _origin(info), points, float(pose[0]), float(pose[1]), float(pose[2]), hessian, gradient)
+    if abs(np.linalg.det(hessian)) < SINGULAR:
+        return np.zeros((3, 3))
+    return mismatch(probability, info, points, pose) * np.linalg.inv(hessian)
+
+
 def coarser(probability: np.ndarray, info: MapMetaData) -> tuple[np.ndarray, MapMetaData]:
     """The grid at half the resolution: each cell the most occupied of the four it covers (an odd
     last row or column is dropped)."""

@@ -1,18 +1,21 @@
-"""The slam service: gmapping's node around the RBPF core (rbpf.py).
+"""The slam service: gmapping's node around the RBPF core (rbpf.py), or hector_mapping's around
+hector's (hector.py) with `method: hector`.
 
-Inputs, in merge order: odom and scan (synced). A scan stamped t is used once odometry stamped ≥ t
-has come; the odometry pose at t is interpolated between the two odometry messages around it
-(OdomHistory, shared with the localizer), so the filter sees where the robot was when the scan was
-taken. In the sim both come at every step, so the odometry at the scan's own stamp is used as is.
+Inputs, in merge order: odom and scan (synced). With `method: hector` the node subscribes to odom
+only when use_tf_pose_start_estimate (hector_mapping's name) asks for odometry as the match's first
+guess; otherwise each scan is processed as it comes and no map → odom is published. A scan
+stamped t is used once odometry stamped ≥ t has come; the odometry pose at t is interpolated
+between the two odometry messages around it (OdomHistory, shared with the localizer), so the filter
+sees where the robot was when the scan was taken. In the sim both come at every step, so the odometry at the scan's own stamp is used as is.
 
 The filter is built at the first usable scan (its beam angles and range_max fix the laser model);
 a later scan with another beam count is rejected as malformed, as are scans no laser model can use
 and odometry that goes back in time.
 
 Outputs: on every scan, `pose` (the best particle's PoseWithCovariance in the map frame; the
-covariance is the particles' weighted spread) and `tf/map_odom`; every map_update_interval of sim
-time, `map` (the best particle's OccupancyGrid, cropped to what was seen), as gmapping does.
-`get` on map answers the current map, `get` on pose the last pose.
+covariance is the particles' weighted spread, or hector's Gauss-Newton's) and `tf/map_odom`; every
+map_update_interval of sim time, `map` (the best particle's OccupancyGrid, or hector's finest grid,
+cropped to what was seen), as gmapping does. `get` on map answers the current map, `get` on pose the last pose.
 
 The map frame: the core's convention is the robot's pose at the first scan. initial_pose_x/y/a
 place that first pose elsewhere; in the sim, set them to the world's start pose (`omninav map
@@ -29,6 +32,7 @@ from ...schemas import MessageError
 from ...schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, Pose2D, PoseWithCovariance, Transform
 from ...geometry.odometry_history import OdomHistory
 from ..runtime.node import NS_PER_S, Node
+from .hector import HectorParams, HectorSlam
 from .params import SlamParams
 from .rbpf import Rbpf
 from ...parameters.declare import param
@@ -36,9 +40,14 @@ from ...parameters.declare import param
 MAX_PENDING_SCANS = 100     # scans waiting for odometry; beyond this the oldest are dropped
 
 
+METHODS = ("rbpf", "hector")
+
+
 @dataclass(frozen=True)
-class SlamNodeParams(SlamParams):
-    """SlamParams plus what the node needs around the core (gmapping's frame names)."""
+class SlamNodeParams(SlamParams, HectorParams):
+    """SlamParams and HectorParams plus what the node needs around the cores (gmapping's frame names)."""
+    method: str = param("rbpf", choices=METHODS)     # the gmapping-class filter, or hector mapping
+    use_tf_pose_start_estimate: bool = False         # hector: odometry as each match's first guess
     initial_pose_x: float = param(0.0, finite=True)  # m, m, rad: the map-frame pose of the robot at the first scan
     initial_pose_y: float = param(0.0, finite=True)
     initial_pose_a: float = param(0.0, finite=True)
@@ -54,7 +63,8 @@ class SlamNode(Node):
 
     def setup(self) -> None:
         p = self.params
-        self.slam: Rbpf | None = None
+        self.slam: Rbpf | HectorSlam | None = None
+        self.uses_odometry = p.method == "rbpf" or p.use_tf_pose_start_estimate
         self.n_beams = 0
         self.odom = OdomHistory(round(p.odom_history_s * NS_PER_S))
         self.scans: list[tuple[int, np.ndarray]] = []           # waiting for odometry past their stamp
@@ -64,7 +74,8 @@ class SlamNode(Node):
         self.pose_pub = self.publisher("pose")
         self.tf_pub = self.publisher("tf/map_odom")
         self.keys_in = {name: self.keys.resolve(name) for name in ("odom", "scan")}
-        self.subscribe("odom", self.on_odom)
+        if self.uses_odometry:
+            self.subscribe("odom", self.on_odom)
         self.subscribe("scan", self.on_scan)
         self.queryable("map", lambda _params: self.current_map())
         self.queryable("pose", lambda _params: self.last_pose)
@@ -88,9 +99,15 @@ class SlamNode(Node):
         if self.slam is None:
             p = self.params
             angles = msg.angle_min + np.arange(msg.ranges.size) * msg.angle_increment
-            self.slam = Rbpf(p, angles, msg.range_max, msg.range_min,
-                             start=(p.initial_pose_x, p.initial_pose_y, p.initial_pose_a))
+            start = (p.initial_pose_x, p.initial_pose_y, p.initial_pose_a)
+            if p.method == "hector":
+                self.slam = HectorSlam(p, angles, msg.range_max, (p.laser_x, p.laser_y, p.laser_yaw), start)
+            else:
+                self.slam = Rbpf(p, angles, msg.range_max, msg.range_min, start=start)
             self.n_beams = msg.ranges.size
+        if not self.uses_odometry:
+            self._update(msg.header.stamp_ns, None, np.asarray(msg.ranges, np.float64))
+            return
         self.scans.append((msg.header.stamp_ns, np.asarray(msg.ranges, np.float64)))
         if len(self.scans) > MAX_PENDING_SCANS:
             self.scans.pop(0)
@@ -122,37 +139,28 @@ class SlamNode(Node):
 
     # ------------------------------------------------------------ the filter and its outputs
 
-    def _update(self, stamp_ns: int, odom: np.ndarray, ranges: np.ndarray) -> None:
+    def _update(self, stamp_ns: int, odom: np.ndarray | None, ranges: np.ndarray) -> None:
         p, slam = self.params, self.slam
-        result = slam.process(stamp_ns, odom, ranges)
+        updates = slam.updates
+        slam.process(stamp_ns, odom, ranges)
         self.counters["scans"] += 1
-        if result is not None:
-            self.counters["filter_updates"] += 1
-            self.counters["resamples"] += int(result.resampled)
+        self.counters["filter_updates"] += slam.updates - updates
         x, y, theta = (float(v) for v in slam.pose())
         self.last_pose = PoseWithCovariance(header=Header(stamp_ns=stamp_ns, frame_id=p.map_frame),
-                                            pose=Pose2D(x, y, theta), covariance=self._covariance())
+                                            pose=Pose2D(x, y, theta), covariance=slam.covariance())
         self.pose_pub.publish(self.last_pose)
-        tx, ty, ttheta = (float(v) for v in slam.map_to_odom())
-        self.tf_pub.publish(Transform(header=Header(stamp_ns=stamp_ns, frame_id=p.map_frame),
-                                      child_frame_id=p.odom_frame, transform=Pose2D(tx, ty, ttheta)))
-
-    def _covariance(self) -> np.ndarray:
-        """The particles' weighted spread at their last update (headings about the best one's)."""
-        slam = self.slam
-        poses, w = slam.poses.copy(), slam.weights
-        best = poses[slam.best]
-        poses[:, 2] = best[2] + np.arctan2(np.sin(poses[:, 2] - best[2]), np.cos(poses[:, 2] - best[2]))
-        d = poses - w @ poses
-        return (w[:, None] * d).T @ d
+        if odom is not None:
+            tx, ty, ttheta = (float(v) for v in slam.map_to_odom())
+            self.tf_pub.publish(Transform(header=Header(stamp_ns=stamp_ns, frame_id=p.map_frame),
+                                          child_frame_id=p.odom_frame, transform=Pose2D(tx, ty, ttheta)))
 
     def current_map(self) -> OccupancyGrid | None:
-        """The best particle's map (made again only after the filter has changed it)."""
+        """The best particle's map, or hector's (made again only after the core has changed it)."""
         slam = self.slam
         if slam is None:
             return None
         if self._map is None or self._map[0] != slam.updates:
-            grid = slam.grids.occupancy_grid(slam.best, self.params.occ_thresh)
+            grid = slam.occupancy_grid(self.params.occ_thresh)
             grid.header.frame_id = self.params.map_frame
             self._map = (slam.updates, grid)
         grid = self._map[1]

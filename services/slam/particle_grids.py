@@ -57,6 +57,13 @@ class GridGeometry:
         return (self.height + TILE - 1) // TILE, (self.width + TILE - 1) // TILE
 
 
+def occupancy_data(log_odds: np.ndarray, occ_thresh: float) -> np.ndarray:
+    """OccupancyGrid cells of log-odds: 100 where the occupancy probability is above occ_thresh,
+    0 where it is below one half, −1 otherwise (never seen, or undecided)."""
+    occupied = log_odds > math.log(occ_thresh / (1.0 - occ_thresh))
+    return np.where(occupied, 100, np.where(log_odds < 0.0, 0, -1)).astype(np.int8)
+
+
 # ---------------------------------------------------------------- kernels
 
 @njit(cache=True, inline="always")
@@ -344,9 +351,7 @@ class TiledGrids:
         g = self.geometry
         box = self.known_box(index) or (0, 1, 0, 1)
         r0, r1, c0, c1 = box
-        l = self.logodds(index)[r0:r1, c0:c1]
-        occupied = l > math.log(occ_thresh / (1.0 - occ_thresh))
-        data = np.where(occupied, 100, np.where(l < 0.0, 0, -1)).astype(np.int8)
+        data = occupancy_data(self.logodds(index)[r0:r1, c0:c1], occ_thresh)
         info = MapMetaData(resolution=g.delta, width=data.shape[1], height=data.shape[0],
                            origin=Pose2D(g.xmin + c0 * g.delta, g.ymin + r0 * g.delta, 0.0))
         return OccupancyGrid(header=Header(stamp_ns=stamp_ns, frame_id="map"), info=info, data=data)

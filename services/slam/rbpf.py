@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...geometry.se2 import compose, inverse, relative, wrap_angle
+from ...schemas.messages import OccupancyGrid
 from .particle_grids import GridGeometry, TiledGrids, cut_beams
 from .params import SlamParams
 from .scanmatch import gaussian_kernel, match_all
@@ -141,6 +142,18 @@ class Rbpf:
     def map_to_odom(self) -> np.ndarray:
         """The map → odom transform: the best pose composed with the inverse odometry pose."""
         return compose(self.pose(), inverse(self._odom))
+
+    def covariance(self) -> np.ndarray:
+        """The particles' weighted spread at their last update (headings about the best one's)."""
+        poses, w = self.poses.copy(), self.weights
+        best = poses[self.best]
+        poses[:, 2] = best[2] + wrap_angle(poses[:, 2] - best[2])
+        d = poses - w @ poses
+        return (w[:, None] * d).T @ d
+
+    def occupancy_grid(self, occ_thresh: float) -> OccupancyGrid:
+        """The best particle's map."""
+        return self.grids.occupancy_grid(self.best, occ_thresh)
 
     def trajectory(self) -> tuple[np.ndarray, np.ndarray]:
         """The best particle's (scan indices, poses) at the scans it processed, oldest first."""
