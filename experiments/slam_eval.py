@@ -1,4 +1,8 @@
-"""`omninav slam-eval LOG --relations REL`: run SLAM on a CARMEN log in-process and score it.
+"""`omninav slam-eval LOG --relations REL [--method hector [--no-odometry]]`: run SLAM on a CARMEN
+log in-process and score it.
+
+With --method hector, hector mapping (services/slam/hector.py) sees every scan, with odometry's
+pose as its first guess unless --no-odometry, and its pose at every scan is scored.
 
 The filter sees every scan of the log's front laser with the odometry pose at its stamp, as fast
 as it can. Its trajectory — the best particle's poses at the scans it processed, and in between
@@ -26,6 +30,7 @@ from ..services.runtime.params import parse_overrides, read_yaml, unwrap_ros
 from ..parameters.declare import ParamError
 from ..parameters.from_mapping import load_params
 from ..geometry.se2 import compose, relative
+from ..services.slam.hector import HectorParams, HectorSlam
 from ..services.slam.params import MODES, SlamParams
 from ..services.slam.rbpf import Rbpf
 from ..services.slam.relations import RelationsError, interpolate, load_relations, score
@@ -41,6 +46,10 @@ BENCHMARK_SETTINGS = {
     "lstep": 0.1,
     "astep": 0.02,
 }
+
+# hector_mapping's defaults but for the map: hector's 1024 cells of 2.5 cm cover 25.6 m, the
+# building is about 60 m across and its lasers reach 80 m
+HECTOR_BENCHMARK_SETTINGS = {"map_resolution": 0.05, "map_size": 2048}
 
 
 @dataclass
@@ -103,6 +112,18 @@ def run(params: SlamParams, data: LogData) -> tuple[Rbpf, np.ndarray, float]:
     return slam, full_trajectory(slam, data.odom), wall
 
 
+def run_hector(params: HectorParams, data: LogData, odometry: bool) -> tuple[HectorSlam, np.ndarray, float]:
+    """Hector over the whole log (odometry as the first guess if `odometry`); returns it, its pose at
+    every scan and the wall time (s)."""
+    slam = HectorSlam(params, data.angles, data.range_max, data.laser_offset)
+    poses = np.empty((len(data.stamps_ns), 3))
+    start = time.perf_counter()
+    for i, (stamp, odom, ranges) in enumerate(zip(data.stamps_ns, data.odom, data.ranges)):
+        slam.process(int(stamp), odom if odometry else None, ranges)
+        poses[i] = slam.pose()
+    return slam, poses, time.perf_counter() - start
+
+
 def warm_up(params: SlamParams, data: LogData) -> float:
     """Compile (or load from cache) the kernels on the first scans, outside the timed run."""
     start = time.perf_counter()
@@ -114,9 +135,12 @@ def warm_up(params: SlamParams, data: LogData) -> float:
     return time.perf_counter() - start
 
 
-def settings(args: argparse.Namespace, data: LogData) -> SlamParams:
-    values = dict(BENCHMARK_SETTINGS)
-    if np.any(np.abs(data.laser_offset) > 1e-9):
+def settings(args: argparse.Namespace, data: LogData) -> SlamParams | HectorParams:
+    if args.method == "hector":
+        values = dict(HECTOR_BENCHMARK_SETTINGS)
+    else:
+        values = dict(BENCHMARK_SETTINGS)
+    if args.method == "rbpf" and np.any(np.abs(data.laser_offset) > 1e-9):
         values.update(laser_x=float(data.laser_offset[0]), laser_y=float(data.laser_offset[1]),
                       laser_yaw=float(data.laser_offset[2]))
     if args.params:
@@ -127,7 +151,7 @@ def settings(args: argparse.Namespace, data: LogData) -> SlamParams:
     values.update(parse_overrides(args.set))
     if args.mode:
         values["mode"] = args.mode
-    return load_params(SlamParams, values, "omninav slam-eval")
+    return load_params(HectorParams if args.method == "hector" else SlamParams, values, "omninav slam-eval")
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -136,7 +160,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--json", action="store_true", help="print one JSON object instead of a table")
     parser.add_argument("--params", help="YAML file of SLAM parameters (over the benchmark settings)")
     parser.add_argument("--set", action="append", default=[], metavar="NAME=VALUE", help="override one parameter")
-    parser.add_argument("--mode", choices=MODES, help="rbpf (default) or scan_matching")
+    parser.add_argument("--method", choices=("rbpf", "hector"), default="rbpf", help="the particle filter (default) or hector mapping")
+    parser.add_argument("--no-odometry", action="store_true", help="hector: no odometry, not even as the first guess")
+    parser.add_argument("--mode", choices=MODES, help="the filter's: rbpf (default) or scan_matching")
     parser.add_argument("--max-seconds", type=float, metavar="S", help="only the first S seconds of the log")
     parser.add_argument("--save-map", metavar="PATH", help="also write the best particle's map (map_server YAML + PGM)")
     parser.add_argument("--picture", metavar="FILE.png", help="also draw the map with both trajectories")
@@ -153,15 +179,21 @@ def _table(result: dict) -> str:
         rows.append((label, fmt.format(result[key]), fmt.format(result["odometry"][key])))
     width = max(len(r[0]) for r in rows)
     lines = [f"{a:<{width}}  {b:>10}  {c:>10}" for a, b, c in rows]
-    lines.append(f"relations scored: {result['relations']}; mode {result['params']['mode']}, "
-                 f"{result['particles']} particles, {result['updates']} of {result['scans']} scans processed, "
-                 f"{result['resamples']} resamplings")
+    if result["method"] == "hector":
+        lines.append(f"relations scored: {result['relations']}; hector, odometry as the first guess: "
+                     f"{'yes' if result['odometry_guess'] else 'no'}; the grids took {result['updates']} of "
+                     f"{result['scans']} scans")
+    else:
+        lines.append(f"relations scored: {result['relations']}; mode {result['params']['mode']}, "
+                     f"{result['particles']} particles, {result['updates']} of {result['scans']} scans processed, "
+                     f"{result['resamples']} resamplings")
     lines.append(f"wall {result['wall_s']:.1f} s for {result['log_s']:.1f} s of log: "
                  f"{result['realtime_factor']:.1f}x real time (load {result['load_s']:.1f} s, "
                  f"warm-up {result['warmup_s']:.1f} s not included)")
-    lines.append(f"map memory: {result['bytes_per_particle'] / 1e6:.2f} MB per particle "
-                 f"({result['tiles_in_use']} tiles of 4 KiB shared among them); "
-                 f"process peak {result['peak_rss_mb']:.0f} MB")
+    if result["method"] == "rbpf":
+        lines.append(f"map memory: {result['bytes_per_particle'] / 1e6:.2f} MB per particle "
+                     f"({result['tiles_in_use']} tiles of 4 KiB shared among them)")
+    lines.append(f"process peak {result['peak_rss_mb']:.0f} MB")
     return "\n".join(lines)
 
 
@@ -175,8 +207,20 @@ def main(args: argparse.Namespace) -> int:
     except (CarmenError, RelationsError, ParamError) as exc:
         print(f"omninav slam-eval: {exc}", file=sys.stderr)
         return 2
-    warmup_s = warm_up(params, data)
-    slam, trajectory, wall = run(params, data)
+    if args.method == "hector":
+        start = time.perf_counter()
+        run_hector(params, LogData(data.stamps_ns[:12], data.odom[:12], data.ranges[:12], data.angles, data.range_max,
+                                   data.laser_offset), True)      # compiles the kernels, or loads them
+        warmup_s = time.perf_counter() - start
+        slam, trajectory, wall = run_hector(params, data, not args.no_odometry)
+        facts = dict(method="hector", odometry_guess=not args.no_odometry)
+        occ_thresh = SlamParams.occ_thresh
+    else:
+        warmup_s = warm_up(params, data)
+        slam, trajectory, wall = run(params, data)
+        facts = dict(method="rbpf", resamples=slam.resamples, particles=slam.n,
+                     bytes_per_particle=slam.bytes_per_particle(), tiles_in_use=slam.grids.tiles_in_use())
+        occ_thresh = params.occ_thresh
     # relation times are seconds since the epoch: both sides lose the same whole seconds, so the
     # float seconds keep microsecond precision
     base = int(data.stamps_ns[0] // 1_000_000_000)
@@ -190,13 +234,11 @@ def main(args: argparse.Namespace) -> int:
         print(f"omninav slam-eval: {args.relations}: {exc}", file=sys.stderr)
         return 2
     result.update(wall_s=wall, log_s=data.duration_s, realtime_factor=data.duration_s / wall if wall > 0 else 0.0,
-                  load_s=load_s, warmup_s=warmup_s, scans=len(data.stamps_ns), updates=slam.updates,
-                  resamples=slam.resamples, particles=slam.n, bytes_per_particle=slam.bytes_per_particle(),
-                  tiles_in_use=slam.grids.tiles_in_use(),
+                  load_s=load_s, warmup_s=warmup_s, scans=len(data.stamps_ns), updates=slam.updates, **facts,
                   peak_rss_mb=resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,  # Linux: KiB
                   params=dataclasses.asdict(params), odometry=odometry)
     if args.save_map or args.picture:
-        grid = slam.grids.occupancy_grid(slam.best, params.occ_thresh)
+        grid = slam.occupancy_grid(occ_thresh)
         if args.save_map:
             from ..services.map_server.mapio import save_map
             save_map(grid, args.save_map)

@@ -164,6 +164,20 @@ def test_slam_eval_beats_raw_odometry_on_the_start_of_the_mit_csail_log(capsys):
     assert result["wall_s"] > 0 and result["realtime_factor"] > 0
 
 
+@pytest.mark.skipif(not (CARMEN / "mit-csail.clf").is_file(),
+                    reason=f"the MIT CSAIL benchmark log is not in {CARMEN}")
+def test_slam_eval_runs_hector_without_odometry_on_the_start_of_the_mit_csail_log(capsys):
+    from omninav.cli.main import main as omninav
+
+    code = omninav(["slam-eval", str(CARMEN / "mit-csail.clf"), "--relations", str(CARMEN / "mit-csail.relations"),
+                    "--max-seconds", "80", "--method", "hector", "--no-odometry", "--json"])
+    assert code == 0
+    result = json.loads(capsys.readouterr().out)
+    assert result["method"] == "hector" and not result["odometry_guess"] and result["relations"] > 50
+    assert result["trans_abs_mean_m"] < 0.75 * result["odometry"]["trans_abs_mean_m"]
+    assert result["rot_abs_mean_deg"] < 0.25 * result["odometry"]["rot_abs_mean_deg"]
+
+
 def test_the_trajectory_tree_drops_branches_no_particle_reaches():
     nodes = _Nodes(capacity=8)
     heads = np.full(3, -1, np.int64)
