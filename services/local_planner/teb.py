@@ -35,6 +35,7 @@ import numpy as np
 from scipy import ndimage
 
 from ...geometry.footprint import radii
+from ...geometry.grid import cell_to_world
 from ...geometry.movers import Movers
 from ...parameters.declare import param
 from ...schemas.messages import MapMetaData
@@ -249,27 +250,20 @@ def _blobs(span, costs, info: MapMetaData, max_extent: float, reach: float) -> l
     """(distance along the span, obstacle) of each 8-connected blob of lethal cells no longer than
     max_extent whose edge comes within `reach` of the span, beyond the span's first point."""
     labels, count = ndimage.label(costs >= LETHAL_OBSTACLE, structure=np.ones((3, 3)))
-    if not count:
-        return []
-    rows, cols = np.nonzero(labels)
-    which = labels[rows, cols] - 1
-    c, s = math.cos(info.origin.theta), math.sin(info.origin.theta)
-    u, v = (cols + 0.5) * info.resolution, (rows + 0.5) * info.resolution
-    xy = np.column_stack([info.origin.x + c * u - s * v, info.origin.y + s * u + c * v])
     along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(span[:, :2], axis=0).T))])
     found = []
-    for blob in range(count):
-        points = xy[which == blob]
-        low, high = points.min(axis=0), points.max(axis=0)
-        if max(high - low) > max_extent:
-            continue
-        centre = (low + high) / 2
+    for index, (rows, cols) in enumerate(ndimage.find_objects(labels)):
+        if max(rows.stop - rows.start, cols.stop - cols.start) * info.resolution > max_extent:
+            continue    # a wall
+        r, c = np.nonzero(labels[rows, cols] == index + 1)
+        x, y = cell_to_world(info, r + rows.start, c + cols.start)
+        points = np.column_stack([x, y])
+        centre = (points.min(axis=0) + points.max(axis=0)) / 2
         extent = float(np.hypot(*(points - centre).T).max()) + info.resolution / 2
         distance = np.hypot(*(span[:, :2] - centre).T)
         k = int(np.argmin(distance))
-        if k == 0 or distance[k] - extent > reach:
-            continue
-        found.append((float(along[k]), Obstacle(centre, extent)))
+        if k > 0 and distance[k] - extent <= reach:
+            found.append((float(along[k]), Obstacle(centre, extent)))
     return found
 
 
