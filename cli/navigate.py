@@ -218,7 +218,8 @@ HOLONOMIC_STRAFE = 0.3     # m/s: as far as base_local_planner's y_vels reach; d
 
 # TEB's clearances for these robots (teb_local_planner's defaults, 0.5 / 0.6 m from the footprint,
 # leave no way through a 0.9 m door for a 0.64 m wide robot); people are kept farther than walls
-TEB_CLEARANCES = {"min_obstacle_dist": 0.05, "inflation_dist": 0.3, "dynamic_obstacle_inflation_dist": 0.8}
+TEB_CLEARANCES = {"min_obstacle_dist": 0.05, "inflation_dist": 0.3, "dynamic_obstacle_inflation_dist": 0.8,
+                  "weight_strafe": 1.0}
 
 
 def controller_params(controller: str | None) -> dict:
@@ -273,6 +274,8 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
                                      "costmap_global_movers_params.yaml"),
                  "local": (profile and profile.costmap_local_params) or PARAMS / "costmap_local_params.yaml"}
     costmap_files = {f"{which}_costmap_files": [str(common), str(own)] for which, own in own_files.items()}
+    if controller == "teb" and localization != "odom":
+        costmap_files["global_costmap_files"].append(str(PARAMS / "costmap_global_teb_params.yaml"))
     services = [
         {"name": "recorder", "service": "recorder", "params": {"output": str(recording)}},
         {"name": "sim", "service": "sim", "params": {"world": str(world_file), "drive": drive, "seed": seed,

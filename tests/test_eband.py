@@ -235,3 +235,16 @@ def test_bad_parameters_name_the_problem():
         ElasticBandParams(min_obstacle_dist=0.5, inflation_dist=0.4)
     with pytest.raises(ValueError, match="dt_hysteresis"):
         ElasticBandParams(dt_ref=0.1, dt_hysteresis=0.1)
+
+
+def test_a_strafing_weight_has_a_holonomic_band_face_the_way_it_goes():
+    costs, info, check = costmap()
+    path = straight(-2.5, 0.0, 2.5, 0.0, n=101)
+    sideways = []
+    for weight in (0.0, 2.0):
+        planner = ElasticBandPlanner(replace(HOLO, weight_strafe=weight), FootprintCheck(FOOTPRINT.points, check))
+        for _ in range(3):
+            result = planner.compute((-1.5, 0.0, 0.8), (0.0, 0.0, 0.0), costs, info, path)   # facing 46° off the path
+        assert result.status == "ok", result.message
+        sideways.append(np.abs(band_twists(result.trajectory, result.time_intervals)[:, 1]).mean())
+    assert sideways[1] < 0.5 * sideways[0]

@@ -201,7 +201,7 @@ def _put_all(cols, vals, counts, row, slots, gradient, scale):
 @njit(cache=True)
 def _n_residuals(n_poses, holonomic, n_circles, stop_at_goal, n_movers):
     axes = 3 if holonomic else 2
-    per_interval = 4 if holonomic else 5
+    per_interval = 5
     return ((n_poses - 1) * per_interval + (n_poses - 1 + stop_at_goal) * axes
             + (n_poses - 2) * n_circles * 2 * (1 + n_movers))
 
@@ -232,7 +232,8 @@ def _evaluate(x, start, goal, v_start, stop_at_goal, holonomic, limits, weights,
 
     limits = (max_vel_x, max_vel_x_backwards, max_vel_y, max_vel_theta, acc_lim_x, acc_lim_y,
     acc_lim_theta); weights = square roots of (vel x, vel y, vel theta, acc x, acc y, acc theta,
-    optimal time, nh, forward drive, obstacle, inflation, dynamic obstacle, dynamic inflation);
+    optimal time, nh, forward drive, obstacle, inflation, dynamic obstacle, dynamic inflation,
+    strafe);
     obstacle = (min_obstacle_dist, inflation_dist, dynamic_obstacle_inflation_dist); movers (K, M, 3):
     each mover's predicted centre and radius at the time pose k is reached (held fixed while solving,
     as TEB's dynamic-obstacle edges hold it)."""
@@ -276,7 +277,11 @@ def _evaluate(x, start, goal, v_start, stop_at_goal, holonomic, limits, weights,
         res[row] = weights[6] * dt   # time optimality
         _put(cols, vals, counts, row, 4 * i, weights[6] * dt)
         row += 1
-        if not holonomic:
+        if holonomic:   # strafing, softly: a long robot faces the way it goes unless it must not
+            res[row] = weights[13] * vel[i, 1]
+            _put_all(cols, vals, counts, row, slots[i], g[1], weights[13])
+            row += 1
+        else:
             ci, si = math.cos(poses[i, 2]), math.sin(poses[i, 2])
             cj, sj = math.cos(poses[j, 2]), math.sin(poses[j, 2])
             # both poses on one arc: the chord bisects their headings
@@ -396,7 +401,7 @@ def _band_cholesky_solve(band, rhs):
     return x
 
 
-@njit(cache=True)
+@njit(cache=True, nogil=True)     # TEB optimises its homotopy classes' bands on threads
 def _levenberg_marquardt(x, iterations, start, goal, v_start, stop_at_goal, holonomic, limits, weights, epsilon,
                          obstacle, field, grid, offsets, radius, movers):
     """(x, cost) after `iterations` Levenberg–Marquardt steps as g2o takes them (damping λ·I,
@@ -658,7 +663,7 @@ class ElasticBandPlanner:
                         p.weight_kinematics_forward_drive,
                         p.weight_obstacle * p.weight_adapt_factor ** outer, p.weight_inflation,
                         p.weight_dynamic_obstacle * p.weight_adapt_factor ** outer,
-                        p.weight_dynamic_obstacle_inflation])
+                        p.weight_dynamic_obstacle_inflation, p.weight_strafe])
 
     def predicted(self, dts: np.ndarray, movers: Movers | None) -> np.ndarray:
         """(K, M, 3) the movers where they will be as the band reaches each pose (none unless

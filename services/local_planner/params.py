@@ -133,6 +133,7 @@ class ElasticBandParams(Parameters):
     weight_inflation: float = param(0.1, ge=0)
     weight_dynamic_obstacle: float = param(50.0, ge=0)
     weight_dynamic_obstacle_inflation: float = param(0.1, ge=0)
+    weight_strafe: float = param(0.0, ge=0)                     # holonomic: per (m/s)² sideways (ours; TEB: none)
     weight_adapt_factor: float = param(2.0, ge=1.0)             # weight_obstacle grows by this factor every outer iteration
 
     rules = (Rule("max_vel_y", lambda p: not p.holonomic_robot or (p.max_vel_y > 0 and p.acc_lim_y > 0),

@@ -29,23 +29,26 @@ max_number_classes bands in different homotopy classes and drives the best. One 
 from __future__ import annotations
 
 import math
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 from scipy import ndimage
 
 from ...geometry.footprint import radii
-from ...geometry.grid import cell_to_world
+from ...geometry.grid import cell_to_world, in_grid, world_to_cell
+from ...geometry.polygons import densify
 from ...geometry.movers import Movers
 from ...parameters.declare import param
 from ...schemas.messages import MapMetaData
-from ..costmap.layers import FREE_SPACE, LETHAL_OBSTACLE, NO_INFORMATION
+from ..costmap.layers import FREE_SPACE, INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, NO_INFORMATION
 from .eband import Band, BandProblem, EbandResult, ElasticBandPlanner, clearance_field, initial_band
 from .footprint_check import FootprintCheck
 from .params import ElasticBandParams
 
 VIA_MARGIN = 0.1    # m beyond the footprint's reach and min_obstacle_dist at which a via point passes an obstacle
 EXPLORED = 3        # obstacles explored around per cycle, the nearest along the path
+THREADS = 2         # the machines this runs on have two cores
 MARKS_LAG_S = 0.6   # s the costmap's marks of a mover lag behind it (scans, the costmap's update, delays)
 
 
@@ -54,6 +57,7 @@ class TebParams(ElasticBandParams):
     """The elastic band's (teb_local_planner's names), movers on, and teb's homotopy-class planning."""
     include_dynamic_obstacles: bool = True
     enable_homotopy_class_planning: bool = True
+    enable_multithreading: bool = True                          # the classes' bands optimised on THREADS threads
     max_number_classes: int = param(4, ge=1)                    # bands kept and optimised each cycle
     selection_cost_hysteresis: float = param(1.0, gt=0)         # a new band must cost below the driven one's × this
     selection_obst_cost_scale: float = param(100.0, ge=0)       # the obstacle terms' extra weight when selecting
@@ -93,6 +97,7 @@ class TebPlanner:
         self.band = ElasticBandPlanner(params, footprint_check)
         self.inscribed = radii(footprint_check.footprint)[0]
         self._kept: list[Band] = []     # the last cycle's feasible bands, the driven one first
+        self._pool: ThreadPoolExecutor | None = None
 
     def reset(self) -> None:
         """Forget the kept bands (a new goal, or after a recovery)."""
@@ -119,12 +124,12 @@ class TebPlanner:
         field = clearance_field(costs, info.resolution)
         obstacles = self._obstacles(span, costs, info, movers) if p.enable_homotopy_class_planning else []
         interaction = self._interaction()
-        candidates = []
-        for start in self._starts(span, pose, goal, path, info, obstacles, movers):
-            start.poses, start.dts = band.optimise(start.poses, start.dts, velocity, stop, field, info, movers)
-            start.poses[:, 2] = np.arctan2(np.sin(start.poses[:, 2]), np.cos(start.poses[:, 2]))
-            start.signature = signature(start.poses, start.dts, obstacles, movers, interaction)
-            candidates.append(start)
+        candidates = self._starts(span, pose, goal, path, costs, info, obstacles, movers)
+        optimised = self._map(lambda c: band.optimise(c.poses, c.dts, velocity, stop, field, info, movers), candidates)
+        for c, (poses, dts) in zip(candidates, optimised):
+            c.poses, c.dts = poses, dts
+            c.poses[:, 2] = np.arctan2(np.sin(c.poses[:, 2]), np.cos(c.poses[:, 2]))
+            c.signature = signature(c.poses, c.dts, obstacles, movers, interaction)
         weights = band.weights(0)
         weights[9:13] *= math.sqrt(p.selection_obst_cost_scale)
         initial = {c.signature for c in candidates if c.initial}
@@ -149,14 +154,23 @@ class TebPlanner:
         return EbandResult("ok", band.command(best.poses, best.dts, velocity), best.poses, best.dts, "",
                            best.clearance, best.warm)
 
+    def _map(self, work, items: list) -> list:
+        """work(item) for each item, on enable_multithreading's threads (the solver releases the GIL;
+        each band's optimisation is its own, so the results are the same either way)."""
+        if not self.params.enable_multithreading or len(items) < 2:
+            return [work(item) for item in items]
+        if self._pool is None:
+            self._pool = ThreadPoolExecutor(THREADS, thread_name_prefix="teb")
+        return list(self._pool.map(work, items))
+
     def _interaction(self) -> float:
         """m: an obstacle whose edge comes this near the band's centre line is passed on a side."""
         return self.band.reach + self.params.inflation_dist
 
-    def _starts(self, span, pose, goal, path, info, obstacles, movers) -> list[_Candidate]:
+    def _starts(self, span, pose, goal, path, costs, info, obstacles, movers) -> list[_Candidate]:
         """The candidates' first bands, one per class, at most max_number_classes: the kept ones
         warm-started (the one driven last first), the global path's, then a detour on each side of
-        every explored obstacle."""
+        every explored obstacle whose via point is open."""
         p = self.params
         warm = [_Candidate(*w, warm=True, driven=i == 0) for i, w in
                 enumerate(kept.warm(path, pose, goal, info.resolution, p) for kept in self._kept) if w is not None]
@@ -167,7 +181,7 @@ class TebPlanner:
         for obstacle in obstacles:
             for side in (1.0, -1.0):
                 detour = _detour(span, obstacle, side, clearance)
-                if detour is not None:
+                if detour is not None and _open(detour[len(detour) // 2 - 1:len(detour) // 2 + 2], costs, info):
                     starts.append(_Candidate(*initial_band(detour, pose, goal, p)))
         interaction, distinct = self._interaction(), {}
         for start in starts:
@@ -280,6 +294,15 @@ def _movers_met(span, movers: Movers, speed: float, reach: float) -> list[tuple[
         if k > 0 and gap[k] <= reach:
             found.append((float(along[k]), Obstacle(centres[k], float(movers.radii[m]), m)))
     return found
+
+
+def _open(polyline: np.ndarray, costs: np.ndarray, info: MapMetaData) -> bool:
+    """Whether the robot's centre may pass along the polyline: every cell it crosses on the grid
+    below the inscribed cost (a detour whose via point lies in a wall is not worth optimising)."""
+    points = densify(polyline, info.resolution / 2)
+    rows, cols = world_to_cell(info, points[:, 0], points[:, 1])
+    on = in_grid(info, rows, cols)
+    return bool((costs[rows[on], cols[on]] < INSCRIBED_INFLATED_OBSTACLE).all())
 
 
 def _detour(span: np.ndarray, obstacle: Obstacle, side: float, clearance: float) -> np.ndarray | None:
