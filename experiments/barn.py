@@ -136,20 +136,22 @@ class WorldResult(Verdict):
     world: int
 
 
-def barn_mission(world: World, seed: int) -> list[dict]:
-    """The services of a BARN run: the Jackal, no map, goal from the rules."""
+def barn_mission(world: World, seed: int, controller: str | None = None) -> list[dict]:
+    """The services of a BARN run: the Jackal, no map, goal from the rules; `controller` the local
+    planner's (default its own)."""
     profile = load_profile(PROFILE)
     world_file = Path(world.source).resolve()
     return compose_for(world, world_file, None, profile.drive, "odom", None, seed, 1.0, ROBOT, profile,
-                       sim_dt=SIM_DT)["services"]
+                       sim_dt=SIM_DT, controller=controller)["services"]
 
 
-def drive_to_goal(world: World, seed: int, start, goal) -> tuple[ArrivalWatch, LockstepRun]:
+def drive_to_goal(world: World, seed: int, start, goal, controller: str | None = None) -> tuple[ArrivalWatch, LockstepRun]:
     """One run as the challenge runs it: the Jackal's stack driven in lockstep from start to goal,
     ended once the robot is within SUCCESS_RADIUS of the goal or out of time; the watch knows when
     it moved and when it arrived."""
     watch = ArrivalWatch(start, goal, ROBOT)
-    run = run_mission(barn_mission(world, seed), world, np.array([goal]), timeout_s=TIME_LIMIT_S + START_WAIT_S,
+    run = run_mission(barn_mission(world, seed, controller), world, np.array([goal]),
+                      timeout_s=TIME_LIMIT_S + START_WAIT_S,
                       robot=ROBOT, max_sim_s=START_S + TIME_LIMIT_S + START_WAIT_S, watch=watch.see,
                       until=lambda: watch.done)
     return watch, run

@@ -18,6 +18,7 @@ import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from ..services.local_planner.control import CONTROLLERS, DEFAULT_CONTROLLER
 from ..services.runtime.errors import exits_2_on_user_error
 from ..sim.world import load_world
 from .barn import Verdict, drive_to_goal, drive_to_goal_live, judge, tally
@@ -35,19 +36,20 @@ class DynaBarnResult(Verdict):
     seed: int
     robot_fault_collisions: int
     mover_fault_collisions: int
+    controller: str = DEFAULT_CONTROLLER
 
 
-def run_seed(job: tuple[str, int, str]) -> DynaBarnResult:
-    """One world: draw it, write it into the folder, drive it, judge it."""
-    difficulty, seed, folder = job
+def run_seed(job: tuple[str, int, str, str]) -> DynaBarnResult:
+    """One world: draw it, write it into the folder, drive it with the controller, judge it."""
+    difficulty, seed, folder, controller = job
     world_file = Path(folder) / f"{KIND}-{difficulty}-{seed}.yaml"
     world_file.write_text(world_text(generate_world(KIND, seed, difficulty)))
     world = load_world(world_file)
-    watch, run = drive_to_goal(world, seed, world.robot.start, world.goals[0])
+    watch, run = drive_to_goal(world, seed, world.robot.start, world.goals[0], controller)
     sim = run.nodes["sim"].sim
     return DynaBarnResult(**asdict(judge(watch, sim.collisions > 0, OT_S)), difficulty=difficulty, seed=seed,
                           robot_fault_collisions=sim.robot_fault_collisions,
-                          mover_fault_collisions=sim.mover_fault_collisions)
+                          mover_fault_collisions=sim.mover_fault_collisions, controller=controller)
 
 
 def run_seed_live(difficulty: str, seed: int, folder: Path) -> DynaBarnResult:
@@ -70,7 +72,8 @@ def figures(results: list[DynaBarnResult]) -> dict:
 
 def run_line(r: DynaBarnResult) -> str:
     time = "-" if r.time_s is None else f"{r.time_s:6.1f} s"
-    return (f"{KIND}-{r.difficulty}-{r.seed}: {'success' if r.success else 'FAIL   '} contacts "
+    controller = "" if r.controller == DEFAULT_CONTROLLER else f" {r.controller}"
+    return (f"{KIND}-{r.difficulty}-{r.seed}{controller}: {'success' if r.success else 'FAIL   '} contacts "
             f"{r.robot_fault_collisions} robot's, {r.mover_fault_collisions} movers' timeout {r.timeout!s:5} "
             f"time {time} score {r.score:.3f}")
 
@@ -86,6 +89,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--real-time", action="store_true",
                         help="also run every world on the wall clock, every service its own process, one world "
                              "at a time, and report it beside the lockstep figure")
+    parser.add_argument("--controller", nargs="+", choices=CONTROLLERS, default=[DEFAULT_CONTROLLER],
+                        help="the local planner's controller(s): each world is driven with each, reported side by "
+                             "side (default dwa; real time runs the default only)")
 
 
 @exits_2_on_user_error("bench dynabarn")
@@ -96,24 +102,32 @@ def main(args: argparse.Namespace) -> int:
     if args.out is not None and not args.out.is_dir():
         raise ScenarioError(f"-o {args.out}: no such folder")
     difficulties = list(dict.fromkeys(args.difficulty))
+    controllers = list(dict.fromkeys(args.controller))
     with tempfile.TemporaryDirectory(prefix="dynabarn-") as scratch:
         folder = str(args.out or scratch)
-        jobs = [(d, seed, folder) for d in difficulties for seed in range(args.seed, args.seed + args.count)]
+        jobs = [(d, seed, folder, c) for d in difficulties for seed in range(args.seed, args.seed + args.count)
+                for c in controllers]
         results = run_in_workers(run_seed, jobs, args.workers, None if args.json else lambda r: print(run_line(r), flush=True))
         live = []
-        for difficulty, seed, _ in jobs if args.real_time else ():
-            live.append(run_seed_live(difficulty, seed, Path(folder)))
-            if not args.json:
-                print("real time " + run_line(live[-1]), flush=True)
-    by_difficulty = {d: figures([r for r in results if r.difficulty == d]) for d in difficulties}
+        for difficulty, seed, _, controller in jobs if args.real_time else ():
+            if controller == DEFAULT_CONTROLLER:
+                live.append(run_seed_live(difficulty, seed, Path(folder)))
+                if not args.json:
+                    print("real time " + run_line(live[-1]), flush=True)
+    by_controller = {c: {d: figures([r for r in results if r.difficulty == d and r.controller == c])
+                         for d in difficulties} for c in controllers}
+    by_difficulty = by_controller[controllers[0]]
     live_by_difficulty = {d: figures([r for r in live if r.difficulty == d]) for d in difficulties} if live else None
     if args.json:
-        print(json.dumps({"seeds": [args.seed, args.seed + args.count - 1], "ot_s": OT_S, "difficulties": by_difficulty,
+        print(json.dumps({"seeds": [args.seed, args.seed + args.count - 1], "ot_s": OT_S, "controller": controllers[0],
+                          "difficulties": by_difficulty, "by_controller": by_controller,
                           "runs": [asdict(r) for r in results],
                           **({"real_time": {"difficulties": live_by_difficulty, "runs": [asdict(r) for r in live]}}
                              if live else {})}))
         return 0
-    for how, tallies in (("lockstep  " if live else "", by_difficulty), ("real time ", live_by_difficulty)):
+    lines = [(f"{c:5} " if len(controllers) > 1 else "", tallies) for c, tallies in by_controller.items()]
+    for how, tallies in [(("lockstep  " if live else "") + how, t) for how, t in lines] + [("real time ",
+                                                                                            live_by_difficulty)]:
         for d, f in (tallies or {}).items():
             median = "-" if f["median_time_s"] is None else f"{f['median_time_s']:.1f} s"
             print(f"{how}{d:6}: {f['runs']} runs, success {f['success_rate']:.3f}, runs with a contact "
