@@ -1,5 +1,5 @@
 """`omninav bench regress [--save] [--json]`: about thirty lockstep missions across every generated
-kind, DynaBARN, BARN, the shipped missions and buildings — all on tuning seeds — one line each
+kind, DynaBARN, BARN, the shipped missions and buildings, and four with TEB — all on tuning seeds — one line each
 with what changed since the result stored in the repo (bench/regress.json), so that a change
 which fixes one world and breaks another is seen the day it is made. Lockstep missions are
 deterministic, so any difference is the code's. `--save` stores this run as the new reference
@@ -33,15 +33,20 @@ CASES = ([("scenario", f"{kind}-{seed}", (kind, seed)) for kind in SCENARIO_KIND
          + [("barn", f"barn-{n}", (n,)) for n in (0, 60, 104)]
          + [("mission", f"mission-{w}-{d}", (w, d)) for w, d in (("office", "mecanum"), ("warehouse", "diff"),
                                                                   ("crossing", "omni3"))]
-         + [("building", f"building-{r}-0", (r, 0)) for r in ("mecanum", "omni3", "diff", "jackal")])
+         + [("building", f"building-{r}-0", (r, 0)) for r in ("mecanum", "omni3", "diff", "jackal")]
+         # TEB beside DWA, where it differs most
+         + [("scenario", f"{kind}-{seed}-teb", (kind, seed, "teb")) for kind, seed in (("hall", 0), ("shelves", 0),
+                                                                                     ("crossing", 1))]
+         + [("dynabarn", "dynabarn-medium-1-teb", ("medium", 1, "teb"))])
 
 
 def run_case(job: tuple[str, str, tuple, str]) -> dict:
     """One case, whatever its family, as {name, success, status, contacts, time_s, path_m}."""
     family, name, arguments, out = job
     began = time.monotonic()
+    controller = arguments[2] if family in ("scenario", "dynabarn") and len(arguments) > 2 else DEFAULT_CONTROLLER
     if family == "scenario":
-        row = drive_world((*arguments[:2], None, "amcl", 120.0, out, False, DEFAULT_CONTROLLER))
+        row = drive_world((*arguments[:2], None, "amcl", 120.0, out, False, controller))
         outcome = (row["success"], row["status"], row["collisions"], row["time_s"], row["path_length_m"])
     elif family == "building":
         row = drive_building((*arguments, 240.0, out, False))
@@ -54,7 +59,7 @@ def run_case(job: tuple[str, str, tuple, str]) -> dict:
     elif family == "dynabarn":
         folder = Path(out) / name
         folder.mkdir(parents=True, exist_ok=True)
-        r = run_seed((*arguments, str(folder), DEFAULT_CONTROLLER))
+        r = run_seed((*arguments[:2], str(folder), controller))
         outcome = (r.success, "timeout" if r.timeout else "arrived" if r.time_s is not None else "contact",
                    r.robot_fault_collisions + r.mover_fault_collisions, r.time_s, None)
     else:

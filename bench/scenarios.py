@@ -55,13 +55,14 @@ def drive_world(job: tuple[str, int, str | None, str, float, str, bool, str]) ->
     """One world: generate it, write it and its map, drive the mission with the controller (recorded
     when `record`); its row."""
     kind, seed, drive, localization, timeout_s, out, record, controller = job
-    folder = Path(out) / f"{kind}-{seed}"
+    # a folder of its own per controller: the same world's missions run at once on two workers
+    folder = Path(out) / (f"{kind}-{seed}" if controller == DEFAULT_CONTROLLER else f"{kind}-{seed}-{controller}")
     folder.mkdir(parents=True, exist_ok=True)
     world_file = folder / "world.yaml"
     world_file.write_text(world_text(generate_world(kind, seed)))
     world = load_world(world_file)
     drive = drive or world.robot.drive
-    recording = folder / ("run.mcap" if controller == DEFAULT_CONTROLLER else f"run-{controller}.mcap")
+    recording = folder / "run.mcap"
     compose = compose_for(world, world_file, map_for(world, world.name, folder), drive, localization,
                           recording, seed, 1.0, "r1", controller=controller)
     began = time.monotonic()
