@@ -56,8 +56,8 @@ REFERENCE_SAMPLES, REFERENCE_CYCLES = 40, 5
 BAR_MS = 10.0
 PARAMS = DwaParams(vx_samples=6, vy_samples=10, vtheta_samples=20, max_vel_y=0.5, min_vel_y=-0.5)
 EBAND_PARAMS = ElasticBandParams(holonomic_robot=True, max_vel_y=0.4, min_obstacle_dist=0.1, inflation_dist=0.2)
-TEB_PARAMS = TebParams(**{f.name: getattr(EBAND_PARAMS, f.name) for f in fields(ElasticBandParams)
-                          if f.name != "include_dynamic_obstacles"})
+TEB_PARAMS = TebParams(**{**{f.name: getattr(EBAND_PARAMS, f.name) for f in fields(ElasticBandParams)},
+                          "include_dynamic_obstacles": True})
 PERSON_AHEAD_M, PERSON_SPEED, PERSON_RADIUS = 1.5, 1.0, 0.25
 BANDS = ("eband", "teb")
 

@@ -216,17 +216,19 @@ def localization_service(kind: str, start: dict, map_file: Path, seed: int, foll
 HOLONOMIC_STRAFE = 0.3     # m/s: as far as base_local_planner's y_vels reach; dwa's ±0.1 leaves a person's way too slowly
 
 
-# TEB's clearances for these robots (teb_local_planner's defaults, 0.5 / 0.6 m from the footprint,
-# leave no way through a 0.9 m door for a 0.64 m wide robot); people are kept farther than walls
-TEB_CLEARANCES = {"min_obstacle_dist": 0.05, "inflation_dist": 0.3, "dynamic_obstacle_inflation_dist": 0.8,
-                  "weight_strafe": 1.0}
+# TEB for these robots: among the tracked people (include_dynamic_obstacles, off in TEB by default);
+# its clearances (teb_local_planner's defaults, 0.5 / 0.6 m from the footprint, leave no way through
+# a 0.9 m door for a 0.64 m wide robot), people kept farther than walls; a long holonomic robot
+# facing the way it goes (weight_strafe, docs/local_planner.md)
+TEB_SETTINGS = {"include_dynamic_obstacles": True, "min_obstacle_dist": 0.05, "inflation_dist": 0.3,
+                "dynamic_obstacle_inflation_dist": 0.8, "weight_strafe": 1.0}
 
 
 def controller_params(controller: str | None) -> dict:
     """The local planner's settings for a controller other than its default (DWA)."""
     if controller is None:
         return {}
-    return {"controller": controller, **({"teb": TEB_CLEARANCES} if controller == "teb" else {})}
+    return {"controller": controller, **({"teb": TEB_SETTINGS} if controller == "teb" else {})}
 
 
 def drive_params(drive: str) -> dict:

@@ -12,7 +12,8 @@ from omninav.services.local_planner.teb import TebParams, TebPlanner, signature,
 from test_dwa import FOOTPRINT, costmap, straight
 from test_eband import assert_within_velocity_limits, band_twists
 
-CLEAR = dict(min_obstacle_dist=0.15, inflation_dist=0.25, dynamic_obstacle_inflation_dist=0.25)
+CLEAR = dict(min_obstacle_dist=0.15, inflation_dist=0.25, dynamic_obstacle_inflation_dist=0.25,
+             include_dynamic_obstacles=True)
 HOLO = TebParams(holonomic_robot=True, max_vel_y=0.3, **CLEAR)
 DIFF = TebParams(holonomic_robot=False, **CLEAR)
 BOTH = pytest.mark.parametrize("params", [HOLO, DIFF], ids=["holonomic", "diff"])

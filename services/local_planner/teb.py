@@ -54,8 +54,8 @@ MARKS_LAG_S = 0.6   # s the costmap's marks of a mover lag behind it (scans, the
 
 @dataclass(frozen=True)
 class TebParams(ElasticBandParams):
-    """The elastic band's (teb_local_planner's names), movers on, and teb's homotopy-class planning."""
-    include_dynamic_obstacles: bool = True
+    """The elastic band's (teb_local_planner's names; include_dynamic_obstacles, off by default as
+    in TEB, puts the movers in) and teb's homotopy-class planning."""
     enable_homotopy_class_planning: bool = True
     enable_multithreading: bool = True                          # the classes' bands optimised on THREADS threads
     max_number_classes: int = param(4, ge=1)                    # bands kept and optimised each cycle
