@@ -23,6 +23,7 @@ ROBOT_TOPICS: dict[str, type] = {
     "cmd_vel_smoothed": m.Twist,        # velocity smoother -> collision monitor (which sends cmd_vel)
     "wheel_cmd": m.WheelCommand,        # chassis -> sim
     "wheel_state": m.WheelState,        # sim -> chassis
+    "imu": m.Imu,                       # sim -> whoever fuses odometry: yaw rate, planar acceleration
     "odom": m.Odometry,
     "odom_follower": m.Odometry,        # follower-wheel + gyro odometry
     "scan": m.LaserScan,

@@ -136,6 +136,30 @@ class WheelState:
             same_length(("velocities", "positions"), (self.velocities, self.positions))
 
 
+@message("Imu", 1)
+@dataclass(slots=True)
+class Imu:
+    """sensor_msgs/Imu as a planar robot needs it: the yaw rate and the acceleration in the plane,
+    in the IMU's frame (header.frame_id). No orientation: a 2-D IMU integrates none (ROS says so
+    with orientation_covariance[0] = -1). Gravity is not included: on a level floor it lies along
+    z, which the plane drops, so x and y hold the body's own acceleration (REP 145's x and y).
+    The variances are the diagonals of ROS's covariances: the white noise of one reading, never
+    its bias."""
+    header: Header = field(default_factory=Header)
+    angular_velocity_z: float = 0.0                     # rad/s
+    linear_acceleration_x: float = 0.0                  # m/s^2, forward
+    linear_acceleration_y: float = 0.0                  # m/s^2, left
+    angular_velocity_z_variance: float = 0.0            # (rad/s)^2: angular_velocity_covariance[8]
+    linear_acceleration_x_variance: float = 0.0         # (m/s^2)^2: linear_acceleration_covariance[0]
+    linear_acceleration_y_variance: float = 0.0         # (m/s^2)^2: linear_acceleration_covariance[4]
+
+    def problem(self) -> Problem:
+        for name in ("angular_velocity_z_variance", "linear_acceleration_x_variance", "linear_acceleration_y_variance"):
+            if getattr(self, name) < 0:
+                return name, f"{getattr(self, name)} is a negative variance"
+        return None
+
+
 @message("LaserScan", 1)
 @dataclass(slots=True)
 class LaserScan:

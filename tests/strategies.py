@@ -57,6 +57,8 @@ def sound(msg):
             value = value / 2.0 + value.T / 2.0     # halves first: no overflow near the float limit
             np.fill_diagonal(value, np.abs(np.diagonal(value)))
             setattr(msg, name, value)
+        elif isinstance(value, float) and name.endswith("_variance"):
+            setattr(msg, name, abs(value))
     kind = type(msg).__name__
     if kind in ("OccupancyGrid", "Costmap"):
         msg.info.height, msg.info.width = msg.data.shape

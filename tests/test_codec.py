@@ -11,7 +11,7 @@ from omninav.schemas import MessageError, all_types, decode, encode, peek_type
 from omninav.schemas.codec import _checked_decode, _fast_decoder, describe, to_wire
 from omninav.schemas.fields import sign_bytes, surely_finite
 from omninav.experiments.fuzz import example, mutated_payloads
-from omninav.schemas.messages import (Chatter, Clock, Costmap, LaserScan, MapMetaData, Obstacles, OccupancyGrid,
+from omninav.schemas.messages import (Chatter, Clock, Costmap, Imu, LaserScan, MapMetaData, Obstacles, OccupancyGrid,
                                       Odometry, ParticleCloud, Path, PoseWithCovariance, WheelCommand, WheelState)
 
 from strategies import sound, struct_strategy
@@ -217,6 +217,7 @@ def test_every_type_has_a_schema(name, cls):
     (ParticleCloud(poses=np.zeros((2, 3)), weights=np.ones(3)), "ParticleCloud.weights"),
     (Obstacles(circles=np.array([[0.0, 0.0, -0.3]]), velocities=np.zeros((1, 2))), "Obstacles.circles"),
     (Clock(rate=-1.0), "Clock.rate"),
+    (Imu(linear_acceleration_y_variance=-1e-4), "Imu.linear_acceleration_y_variance"),
 ])
 def test_messages_whose_fields_disagree_are_refused_naming_the_field(msg, field):
     with pytest.raises(MessageError) as err:
