@@ -14,11 +14,13 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from ..schemas.messages import Clock, Diagnostic, Obstacles, Odometry, Pose2D, Twist, WheelCommand, WheelState
+from ..schemas.messages import (Clock, Diagnostic, Imu, Obstacles, Odometry, Pose2D, Twist, WheelCommand,
+                                WheelState)
 from ..services.chassis.kinematics import ChassisParams
 from ..services.runtime.node import NS_PER_S, Node
 from ..parameters.from_mapping import load_params
 from .body import BodyParams
+from .imu import ImuModel, ImuParams, ImuReading
 from .people.social_force import warm_up as warm_people
 from .physics import Readings, SimParams, Simulation
 from .world import World, WorldError, load_world, shipped_worlds, world_path
@@ -34,6 +36,7 @@ class SimNodeParams(SimParams):
     chassis: dict = field(default_factory=dict)                 # ChassisParams by name: the wheels the chassis drives
     body: dict = field(default_factory=dict)                    # BodyParams by name (sim/body.py): the robot as it is; {} = ideal
     wheel_cmd_timeout_s: float = param(0.5, ge=0)               # sim s of steps without a wheel command that stop the wheels; 0: never
+    imu: dict = field(default_factory=dict)                     # ImuParams by name (sim/imu.py): every robot has one
 
     def chassis_params(self) -> ChassisParams:
         """The wheels the chassis service drives (the body's own `wheels` override them)."""
@@ -42,10 +45,14 @@ class SimNodeParams(SimParams):
     def body_params(self) -> BodyParams:
         return load_params(BodyParams, self.body, "sim.body")
 
+    def imu_params(self) -> ImuParams:
+        return load_params(ImuParams, self.imu, "sim.imu")
+
     rules = (Rule("footprint", lambda p: not p.footprint or abs(polygon_area(np.array(p.footprint))) >= 1e-6,
                   "a polygon enclosing an area"),
              Rule("chassis", lambda p: bool(p.chassis_params()), "ChassisParams by name"),
-             Rule("body", lambda p: bool(p.body_params()), "BodyParams by name"))
+             Rule("body", lambda p: bool(p.body_params()), "BodyParams by name"),
+             Rule("imu", lambda p: bool(p.imu_params()), "ImuParams by name"))
 
     def robot_world(self, world: World) -> World:
         """The world with this robot's footprint (counter-clockwise) in place of the world file's."""
@@ -77,6 +84,9 @@ class SimNode(Node):
         if len(self.sim.walkers):
             warm_people()       # compile the social force kernels now, never inside a step
         self.step_ns = round(p.dt * NS_PER_S)
+        # its own stream of the sim's seeded generator: adding the IMU left every other reading as it was
+        self.imu_model = ImuModel(p.imu_params(), p.dt, self.sim.rng.spawn(1)[0])
+        self.imu = self.publisher("imu")
         self.wheel_state = self.publisher("wheel_state")
         self.truth = self.publisher("sim/truth")
         self.movers = self.publisher("sim/movers")
@@ -121,6 +131,9 @@ class SimNode(Node):
         r = self.sim.step()
         self.now_ns = self.sim.steps * self.step_ns
         self.wheel_state.publish(self._wheel_state(r))
+        imu_reading = self.imu_model.step(r.twist)
+        if imu_reading is not None:
+            self.imu.publish(self._imu(imu_reading))
         self.last_truth = self._truth(r.pose, r.twist)
         self.truth.publish(self.last_truth)
         self.movers.publish(Obstacles(header=self.header("world"), circles=r.mover_circles,
@@ -130,6 +143,15 @@ class SimNode(Node):
     def _wheel_state(self, r: Readings) -> WheelState:
         return WheelState(header=self.header("base_link"), drive=self.sim.drive, positions=r.encoder_positions,
                           velocities=r.wheel_speeds, follower_positions=r.follower_positions, gyro_z=r.gyro_z)
+
+    def _imu(self, reading: ImuReading) -> Imu:
+        model = self.imu_model
+        ax, ay = (float(v) for v in reading.linear_acceleration)
+        return Imu(header=self.header(model.params.frame_id), angular_velocity_z=reading.angular_velocity_z,
+                   linear_acceleration_x=ax, linear_acceleration_y=ay,
+                   angular_velocity_z_variance=model.gyro_std ** 2,
+                   linear_acceleration_x_variance=model.accel_std ** 2,
+                   linear_acceleration_y_variance=model.accel_std ** 2)
 
     def _truth(self, pose: np.ndarray, twist: np.ndarray) -> Odometry:
         x, y, theta = (float(v) for v in pose)

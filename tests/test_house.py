@@ -203,6 +203,7 @@ CORE_READERS = {
     "services.velocity_smoother.smoother:VelocitySmootherParams": ["services/velocity_smoother/smoother.py"],
     "services.collision_monitor.collision:CollisionMonitorParams": ["services/collision_monitor/collision.py"],
     "services.explore.frontiers:ExploreParams": ["services/explore/frontiers.py"],
+    "sim.imu:ImuParams": ["sim/imu.py", "sim/node.py"],
 }
 
 

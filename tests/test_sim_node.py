@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from omninav.schemas import MessageError, decode, encode
-from omninav.schemas.messages import Clock, Header, Obstacles, Odometry, WheelCommand, WheelState
+from omninav.schemas.messages import Clock, Header, Imu, Obstacles, Odometry, WheelCommand, WheelState
 from omninav.services.runtime.run import build_node
 from omninav.services.runtime.zenoh_config import open_client
 from omninav.sim.node import SimNode, SimNodeParams
@@ -29,21 +29,22 @@ def command(node, velocities, drive="mecanum", stamp_ns=0):
     node.process(0, decode(encode(msg)))
 
 
-def test_tick_publishes_four_outputs_stamped_with_the_new_sim_time():
+def test_tick_publishes_five_outputs_stamped_with_the_new_sim_time():
     node = SimNode(SimNodeParams(world="warehouse", rate=2.0))
     assert node.pace_s() == pytest.approx(0.005)
     assert [i.key for i in node.inputs] == ["omninav/r1/wheel_cmd"] and not node.inputs[0].synced
     out = capture(node)
     node.tick()
     node.tick()
-    assert [k for k, _, _ in out[:4]] == ["omninav/r1/wheel_state", "omninav/sim/r1/truth",
+    assert [k for k, _, _ in out[:5]] == ["omninav/r1/wheel_state", "omninav/r1/imu", "omninav/sim/r1/truth",
                                           "omninav/sim/movers", "omninav/sim/clock"]   # the clock last
-    for tick, batch in enumerate((out[:4], out[4:]), start=1):
+    for tick, batch in enumerate((out[:5], out[5:]), start=1):
         for key, stamp, msg in batch:
             assert stamp == msg.header.stamp_ns == tick * STEP_NS and msg.header.seq == tick
-    state, truth, movers, clock = (m for _, _, m in out[4:])
+    state, imu, truth, movers, clock = (m for _, _, m in out[5:])
     assert isinstance(state, WheelState) and state.drive == "mecanum" and state.positions.shape == (4,)
     assert state.follower_positions.shape == (2,) and state.header.frame_id == "base_link"
+    assert isinstance(imu, Imu) and imu.header.frame_id == "base_link"
     assert isinstance(truth, Odometry) and truth.header.frame_id == "world" and truth.child_frame_id == "base_link"
     assert [truth.pose.x, truth.pose.y, truth.pose.theta] == pytest.approx([1.0, 1.0, 0.0], abs=1e-6)
     assert not truth.pose_covariance.any() and not truth.twist_covariance.any()
