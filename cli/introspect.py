@@ -7,7 +7,6 @@ from __future__ import annotations
 import argparse
 import json
 import queue
-import signal
 import sys
 import threading
 import time
@@ -24,6 +23,7 @@ from ..schemas.keys import ALL
 from ..schemas.readable import to_plain, to_text
 from ..services.runtime.selector import join_selector, split_selector
 from ..services.runtime.zenoh_config import open_client, router_endpoint
+from ..services.runtime.stop_signals import stop_event
 
 ROUTER_HELP = "router endpoint (default $OMNINAV_ROUTER or tcp/127.0.0.1:7447)"
 _NOTICE_S = 2.0      # how long to wait for the router before saying that we are waiting
@@ -91,11 +91,7 @@ def key_expression(text: str) -> str:
 
 def _stop_on_signals() -> threading.Event:
     """SIGINT/SIGTERM end a listening command normally (it still prints its summary and closes)."""
-    stop = threading.Event()
-    if threading.current_thread() is threading.main_thread():
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: stop.set())
-    return stop
+    return stop_event()
 
 
 @dataclass(frozen=True)

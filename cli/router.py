@@ -2,10 +2,9 @@
 from __future__ import annotations
 
 import argparse
-import signal
-import threading
 
 from ..services.runtime.zenoh_config import open_router, router_endpoint
+from ..services.runtime.stop_signals import stop_event
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -13,9 +12,7 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 
 
 def main(args: argparse.Namespace) -> int:
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_event()
     endpoint = router_endpoint(args.listen)
     with open_router(endpoint):
         print(f"router listening on {endpoint}", flush=True)

@@ -34,6 +34,7 @@ from ..services.runtime.run import add_lockstep_argument, lockstep_of
 from ..services.runtime.node import NS_PER_S, Node
 from ..services.runtime.zenoh_config import router_endpoint
 from ..parameters.declare import Parameters
+from ..services.runtime.stop_signals import stop_event
 
 ZERO = (0.0, 0.0, 0.0)
 KEY_AXES = {"w": (0, 1.0), "s": (0, -1.0), "a": (1, 1.0), "d": (1, -1.0), "q": (2, 1.0), "e": (2, -1.0)}
@@ -258,9 +259,7 @@ def _clock_notice(node: TeleopNode, router: str, started: float, noticed: bool, 
 
 def _run_script(node: TeleopNode, worker: threading.Thread, steps: tuple[ScriptStep, ...], router: str) -> bool:
     started, noticed = time.monotonic(), False
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_event()
     while not node.finished.wait(0.1):
         if stop.is_set():
             print("teleop: interrupted; the chassis stops by itself when commands stop coming", file=sys.stderr)

@@ -3,8 +3,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
-import threading
 
 from ...schemas.keys import ALL
 from ...parameters.declare import ParamError
@@ -12,6 +10,7 @@ from ...parameters.from_mapping import load_params
 from ..runtime.run import configure_logging
 from ..runtime.zenoh_config import router_endpoint
 from .node import RecorderNode, RecorderParams
+from ..runtime.stop_signals import stop_event
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,8 +41,6 @@ def main(args: argparse.Namespace) -> int:
     except (ParamError, ValueError) as exc:
         logging.getLogger("omninav.record").error("%s", exc)
         return 2
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_event()
     node.run_live(router, stop)
     return 1 if node.failed else 0

@@ -10,7 +10,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import logging
-import signal
 import threading
 import time
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ from ..runtime.node import NS_PER_S
 from ..runtime.run import configure_logging
 from ..runtime.acl import publishers_of
 from ..runtime.zenoh_config import open_client, router_endpoint
+from ..runtime.stop_signals import stop_event
 
 log = logging.getLogger("omninav.replay")
 
@@ -154,9 +154,7 @@ def main_live(args: argparse.Namespace) -> int:
     except (ReplayError, FileNotFoundError, McapError, ValueError) as exc:
         log.error("%s", exc)
         return 2
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_event()
     passes = 0
     started = time.monotonic()
     with contextlib.ExitStack() as sessions:

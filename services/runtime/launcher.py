@@ -48,6 +48,7 @@ from .live import LISTENERS_ENV, tokens_present
 from .lockstep import LOCKSTEP_ENV, Lockstep, service_names
 from .run import build_node
 from .zenoh_config import ROUTER_ENV, open_router, router_endpoint
+from .stop_signals import stop_event
 
 DEFAULT_COMPOSE = "compose/demo.yaml"
 BACKOFF_FIRST_S = 0.5
@@ -358,9 +359,7 @@ def main(args: argparse.Namespace) -> int:
 
 def _launch(args: argparse.Namespace, out: Output, child: Answers, loaded: Loaded, endpoint: str, users: list[str]) -> int:
     compose = loaded.compose
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop = stop_event()
     with tempfile.TemporaryDirectory(prefix="omninav-up-") as params_dir:
         credentials = Path(args.credentials or Path(params_dir) / "credentials")
         try:
