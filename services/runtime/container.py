@@ -30,7 +30,6 @@ from __future__ import annotations
 import argparse
 import logging
 import queue
-import signal
 import sys
 import threading
 import time
@@ -42,6 +41,7 @@ from ...parameters.declare import ParamError
 from .service_registry import UnknownService
 from .run import build_node
 from .zenoh_config import open_client
+from .stop_signals import on_stop_signals
 
 STOP_TIMEOUT_S = 10.0       # per service: its thread finishing after its stop
 READY_TIMEOUT_S = 60.0      # for the others' tokens before the sources start anyway
@@ -154,7 +154,7 @@ class Container:
         self.failed: list[str] = []      # services that ended on an error
 
     def stop(self) -> None:
-        """Ask the container to stop; safe from a signal handler."""
+        """Ask the container to stop, from any thread (at a signal on_stop_signals calls it on one of its own)."""
         self.stopping.set()
 
     def run(self) -> None:
@@ -240,8 +240,7 @@ def main(args: argparse.Namespace) -> int:
         log.error("%s", exc)
         return 2
     container = Container(nodes, args.router)
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: container.stop())
+    on_stop_signals(container.stop)
     log.info("started %s (robot %s)", ", ".join(n.name for n in nodes), compose.robot)
     container.run()
     if container.failed:

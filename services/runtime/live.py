@@ -147,9 +147,9 @@ class LiveRunner:
         self.taps: list[Callable[[str, str, bytes, int, int], None]] = []
 
     def stop(self) -> None:
-        """Ask the loop to finish; safe from a signal handler. The wake-up item matters: on
-        CPython 3.11 a SimpleQueue.get(timeout) interrupted by a signal can block until the next
-        put, and a source (no inputs) would never get one."""
+        """Ask the loop to finish, from any thread (at a signal on_stop_signals calls it on one of its
+        own). The wake-up item matters: on CPython 3.11 a SimpleQueue.get(timeout) interrupted by a
+        signal can block until the next put, and a source (no inputs) would never get one."""
         self.stop_event.set()
         self._inbox.put(("wake",))
 

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 
 from .live import LiveRunner
@@ -11,6 +10,7 @@ from .lockstep import Lockstep, service_names
 from ...parameters.declare import ParamError
 from .params import load_node_params, parse_overrides, read_params_mapping
 from .service_registry import UnknownService, node_class
+from .stop_signals import on_stop_signals
 
 
 def build_node(service: str, params_file: str | None = None, overrides: dict | None = None,
@@ -77,8 +77,7 @@ def main(args: argparse.Namespace) -> int:
     except ValueError as exc:       # a router endpoint off loopback, or not an endpoint at all
         log.error("%s", exc)
         return 2
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: runner.stop())
+    on_stop_signals(runner.stop)
     log.info("started (robot %s)", args.robot)
     if hasattr(node, "run_live"):
         node.run_live(args.router, runner.stop_event)
