@@ -212,10 +212,7 @@ def without_movers(costs: np.ndarray, info: MapMetaData, movers: Movers, inscrib
     out too; the footprint check of the first poses and the collision monitor still see the
     scans."""
     out = costs.copy()
-    rows, cols = np.indices(costs.shape)
-    c, s = math.cos(info.origin.theta), math.sin(info.origin.theta)
-    u, v = (cols + 0.5) * info.resolution, (rows + 0.5) * info.resolution
-    x, y = info.origin.x + c * u - s * v, info.origin.y + s * u + c * v
+    x, y = cell_to_world(info, *np.indices(costs.shape))
     lethal = costs >= LETHAL_OBSTACLE
     for (px, py), (vx, vy), radius in zip(movers.positions, movers.velocities, movers.radii):
         # distance from each cell to the segment the mover walked over the last MARKS_LAG_S
