@@ -42,7 +42,9 @@ class DynaBarnResult(Verdict):
 def run_seed(job: tuple[str, int, str, str]) -> DynaBarnResult:
     """One world: draw it, write it into the folder, drive it with the controller, judge it."""
     difficulty, seed, folder, controller = job
-    world_file = Path(folder) / f"{KIND}-{difficulty}-{seed}.yaml"
+    # a file of its own per controller: the same world's runs go at once on two workers
+    own = "" if controller == DEFAULT_CONTROLLER else f"-{controller}"
+    world_file = Path(folder) / f"{KIND}-{difficulty}-{seed}{own}.yaml"
     world_file.write_text(world_text(generate_world(KIND, seed, difficulty)))
     world = load_world(world_file)
     watch, run = drive_to_goal(world, seed, world.robot.start, world.goals[0], controller)
