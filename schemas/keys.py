@@ -26,6 +26,9 @@ ROBOT_TOPICS: dict[str, type] = {
     "imu": m.Imu,                       # sim -> whoever fuses odometry: yaw rate, planar acceleration
     "odom": m.Odometry,
     "odom_follower": m.Odometry,        # follower-wheel + gyro odometry
+    "odom_wheel": m.Odometry,           # the chassis's odometry when a fusion publishes odom (fused_odometry)
+    "odom_laser": m.Odometry,           # laser odometry: scans matched to a local map, with covariance
+    "odom_doubt": m.OdometryDoubt,      # the odometry fusion: do wheels, gyro and scans agree?
     "scan": m.LaserScan,
     "map": m.OccupancyGrid,
     "pose": m.PoseWithCovariance,       # amcl_pose / slam pose in the map frame

@@ -255,6 +255,22 @@ class PoseFit:
         return None if self.beams >= 0 else ("beams", f"{self.beams} returns is negative")
 
 
+@message("OdometryDoubt", 1)
+@dataclass(slots=True)
+class OdometryDoubt:
+    """The odometry fusion's verdict on its own estimate (no ROS equivalent: robot_localization only
+    rejects a measurement): doubtful while the wheels, the gyro and the scans disagree beyond their
+    noise (a slip, a push, a wheel off the ground). A navigator declares no goal reached on a pose
+    built on doubtful odometry."""
+    header: Header = field(default_factory=Header)   # the newest measurement judged, the odom frame
+    doubtful: bool = False
+    reason: str = ""           # which sources disagree and by how much; "" while not doubtful
+    mahalanobis: float = 0.0   # the squared Mahalanobis distance of the worst recent innovation
+
+    def problem(self) -> Problem:
+        return None if self.mahalanobis >= 0 else ("mahalanobis", f"{self.mahalanobis} is negative")
+
+
 @message("ParticleCloud", 1)
 @dataclass(slots=True)
 class ParticleCloud:

@@ -89,6 +89,8 @@ def sound(msg):
     elif kind == "PoseFit":
         msg.beam_fit = min(abs(msg.beam_fit), 1.0)
         msg.beams = abs(msg.beams)
+    elif kind == "OdometryDoubt":
+        msg.mahalanobis = abs(msg.mahalanobis)
     elif kind == "ClearCostmaps":
         msg.reset_distance = abs(msg.reset_distance)
     return msg
