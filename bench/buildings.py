@@ -26,6 +26,7 @@ import numpy as np
 
 from ..cli.navigate import compose_for, map_for
 from ..cli.profile import load_profile
+from ..experiments.mission_score import false_success_runs
 from ..experiments.configuration_space import reach
 from ..experiments.lockstep_mission import run_mission
 from ..experiments.scenarios import ScenarioError, generate_world, world_text
@@ -124,7 +125,7 @@ def robot_figures(rows: list[dict]) -> dict:
     return {"worlds": len(rows), "success_rate": sum(r["success"] for r in rows) / len(rows),
             "contacts": sum(r["collisions"] or 0 for r in rows),
             "not_reached": sum(not r["reached"] for r in rows),
-            "false_arrivals": sum(r["status"] == "succeeded" and not r["reached"] for r in rows),
+            "false_successes": len(false_success_runs(rows)), "false_success_worlds": false_success_runs(rows),
             "mean_time_ratio": statistics.fmean(ratios) if ratios else None,
             "worst_time_ratio": max(ratios) if ratios else None,
             "mean_ideal_ratio": statistics.fmean(ideal) if ideal else None,
@@ -137,7 +138,8 @@ def summary_line(robot: str, f: dict) -> str:
     def show(value, spec):
         return "-" if value is None else format(value, spec)
     return (f"{robot:8} success {round(f['success_rate'] * f['worlds'])}/{f['worlds']} (no contact of any kind; aim "
-            f"100 %), contacts {f['contacts']}, not reached {f['not_reached']}, false arrivals {f['false_arrivals']}; "
+            f"100 %), contacts {f['contacts']}, not reached {f['not_reached']}, false successes {f['false_successes']}"
+            f"{' (' + ', '.join(f['false_success_worlds']) + ')' if f['false_successes'] else ''}; "
             f"time / shortest way's: mean {show(f['mean_time_ratio'], '.2f')} (aim <= {AIM_TIME_RATIO}), worst "
             f"{show(f['worst_time_ratio'], '.2f')}; time / the ideal driver's: mean {show(f['mean_ideal_ratio'], '.2f')} "
             f"(the ideal's own: {f['ideal_over_shortest']:.2f} x the shortest way's); detour (driven / planned): median {show(f['median_detour'], '.2f')}, "

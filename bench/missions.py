@@ -26,6 +26,7 @@ import numpy as np
 from ..cli.navigate import LOCALIZATIONS, compose_for, map_for
 from ..services.chassis.kinematics import DRIVES
 from ..sim.node import open_world
+from ..experiments.mission_score import false_success_runs
 from ..experiments.lockstep_mission import run_mission
 from ..experiments.realtime import run_live
 from ..experiments.workers import run_in_workers
@@ -90,7 +91,9 @@ def tallies(rows: list[dict]) -> dict:
     mover_fault = sum(r.get("mover_fault_collisions") or 0 for r in rows)
     return {"success_rate": sum(bool(r["success"]) for r in rows) / len(rows), "robot_fault_collisions": robot_fault,
             "mover_fault_collisions": mover_fault, "collisions": robot_fault + mover_fault,
-            "contact_s": sum(r.get("contact_s") or 0.0 for r in rows)}
+            "contact_s": sum(r.get("contact_s") or 0.0 for r in rows),
+            "false_successes": len(false_success_runs(rows)),
+            "false_success_missions": [f"{r['world']}-{r['drive']}" for r in rows if r.get("false_successes")]}
 
 
 def _fmt(value, spec: str) -> str:
@@ -136,5 +139,7 @@ def main(args: argparse.Namespace) -> int:
         if f is not None and not args.json:
             print(f"{how}: success rate {f['success_rate']:.0%} (no contact of any kind), contacts "
                   f"{f['robot_fault_collisions']} the robot's fault, {f['mover_fault_collisions']} a mover's, "
-                  f"{f['contact_s']:.2f} s in contact ({args.localization} localization; runs in {out})")
+                  f"{f['contact_s']:.2f} s in contact, false successes {f['false_successes']}"
+                  f"{' (' + ', '.join(f['false_success_missions']) + ')' if f['false_successes'] else ''} "
+                  f"({args.localization} localization; runs in {out})")
     return 0 if figures["success_rate"] == 1.0 else 1

@@ -28,6 +28,7 @@ import time
 import traceback
 from pathlib import Path
 
+from ..experiments.mission_score import false_success_runs
 from ..experiments.workers import run_in_workers
 
 REPO = Path(__file__).resolve().parents[1]
@@ -122,7 +123,8 @@ def main(args: argparse.Namespace) -> int:
     else:
         print(f"{result['reached']}/{len(rows)} reached; within {AIM_XY_M * 100:.0f} cm and {AIM_YAW_DEG:g}°: "
               f"{result['within_aim']}; within the paper's {PAPER_XY_M * 100:.0f} cm and {PAPER_YAW_DEG:g}°: "
-              f"{result['within_paper']}; collisions {result['collisions']}; {result['wall_s']:g} wall s")
+              f"{result['within_paper']}; collisions {result['collisions']}; false successes "
+              f"{len(result['false_successes'])} {result['false_successes'] or ''}; {result['wall_s']:g} wall s")
         if result["xy_error_m"]:
             xy, yaw = result["xy_error_m"], result["yaw_error_deg"]
             print(f"final error: mean {xy['mean'] * 100:.2f} cm (max {xy['max'] * 100:.2f}), "
@@ -143,6 +145,7 @@ def summarize(rows: list[dict], localization: str) -> dict:
     yaw = [r["final_yaw_error_deg"] for r in scored]
     return {
         "runs": len(rows), "reached": sum(bool(r["success"]) for r in rows),
+        "false_successes": false_success_runs(rows, "seed"),
         "within_aim": sum(r["within_aim"] for r in rows),
         "within_paper": sum(bool(r["success"]) and r["final_xy_error_m"] <= PAPER_XY_M
                             and r["final_yaw_error_deg"] <= PAPER_YAW_DEG for r in scored),

@@ -23,6 +23,7 @@ from ..services.chassis.kinematics import DRIVES
 from ..services.local_planner.control import CONTROLLERS, DEFAULT_CONTROLLER
 from ..services.runtime.errors import exits_2_on_user_error
 from ..sim.world import load_world
+from ..experiments.mission_score import false_success_runs
 from ..experiments.lockstep_mission import run_mission
 from ..experiments.realtime import run_live
 from ..experiments.workers import run_in_workers
@@ -88,7 +89,7 @@ def scenario_row(name: str, seed: int, drive: str, controller: str, summary: dic
     return {"world": name, "seed": seed, "drive": drive, "controller": controller, **{k: summary.get(k) for k in (
         "collisions", "robot_fault_collisions", "mover_fault_collisions", "shoved_collisions",
         "min_mover_clearance_m", "min_clearance_m", "time_s", "path_length_m", "plan_length_m", "final_xy_error_m",
-        "contact_s", "robot_contact_s")}, "success": bool(summary.get("success")),
+        "contact_s", "robot_contact_s", "false_successes")}, "success": bool(summary.get("success")),
         "status": goal.get("status", "none"), "reached": goal.get("reached", False), "within_1m_s": goal.get("within_1m_s"),
         "wall_s": round(time.monotonic() - began, 1)}
 
@@ -106,7 +107,7 @@ HEADER = (f"{'world':14} {'ok':3} {'status':13} {'robot':>5} {'mover':>5} {'move
 
 
 def row_line(r: dict) -> str:
-    status = "false arrival" if r["status"] == "succeeded" and not r["reached"] else r["status"]
+    status = "FALSE SUCCESS" if r.get("false_successes") else r["status"]
     world = r["world"] if r["controller"] == DEFAULT_CONTROLLER else f"{r['world']} {r['controller']}"
     return (f"{world:14} {'yes' if r['success'] else 'NO':3} {status:13} "
             f"{_fmt(r['robot_fault_collisions'], 'd'):>5} {_fmt(r['mover_fault_collisions'], 'd'):>5} "
@@ -123,7 +124,7 @@ def overall(rows: list[dict]) -> dict:
             "shoved_collisions": sum(r["shoved_collisions"] or 0 for r in rows),
             "contact_s": sum(r.get("contact_s") or 0.0 for r in rows),
             "worlds_with_robot_fault": sum(bool(r["robot_fault_collisions"]) for r in rows),
-            "false_arrivals": sum(r["status"] == "succeeded" and not r["reached"] for r in rows),
+            "false_successes": len(false_success_runs(rows)), "false_success_worlds": false_success_runs(rows),
             "closest_mover_approach_m": min(approaches) if approaches else None,
             "median_time_s": statistics.median(r["time_s"] for r in rows),
             "median_path_over_plan": statistics.median(ratios) if ratios else None}
@@ -176,4 +177,5 @@ def summary_line(f: dict) -> str:
             f"worlds), {f['mover_fault_collisions']} a mover's ({f['shoved_collisions']} of them the robot shoved "
             f"into a wall), {f['contact_s']:.2f} s in contact; closest to a mover "
             f"{_fmt(f['closest_mover_approach_m'], '.3f')} m; median {f['median_time_s']:.1f} sim s, "
-            f"path/plan {_fmt(f['median_path_over_plan'], '.2f')}")
+            f"path/plan {_fmt(f['median_path_over_plan'], '.2f')}; false successes {f['false_successes']}"
+            + (f" ({', '.join(f['false_success_worlds'])})" if f["false_successes"] else ""))

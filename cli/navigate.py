@@ -49,7 +49,8 @@ from ..schemas.messages import CancelGoal, Clock, Goal, Header, NavStatus, Pose2
 from ..services.chassis.kinematics import DRIVES
 from ..services.local_planner.control import CONTROLLERS
 from ..services.map_server.mapio import MapError, load_map, save_map
-from ..experiments.mission_score import TERMINAL, MissionError, load_mission, summarize_mission, summary_lines
+from ..experiments.mission_score import (TERMINAL, MissionError, goal_tolerance, load_mission, summarize_mission,
+                                         summary_lines)
 from ..services.runtime.acl import CREDENTIALS_ENV, OPERATOR
 from ..services.runtime.child import Child, call_in_child
 from ..services.runtime.errors import UserError, exits_2_on_user_error
@@ -645,7 +646,7 @@ def main(args: argparse.Namespace) -> int:
     names = tuple(s["name"] for s in compose["services"])
     try:
         summary = summarize_mission(load_mission(recording, args.robot, names), world, goals_total=len(goals),
-                                    recording=str(recording))
+                                    recording=str(recording), goal_tolerance_m=goal_tolerance(compose["services"]))
     except MissionError as exc:
         if not problem:
             raise

@@ -117,18 +117,21 @@ class Verdict:
     success: bool
     collision: bool
     timeout: bool
+    false_success: bool        # the navigator said the goal succeeded where the truth had not reached it
     time_s: float | None       # from starting to move to within 1 m of the goal (None: never)
     ot_s: float
     score: float
 
 
-def judge(watch: ArrivalWatch, collision: bool, ot_s: float) -> Verdict:
-    """Success: within SUCCESS_RADIUS of the goal within TIME_LIMIT_S of starting to move, and no collision."""
+def judge(watch: ArrivalWatch, collision: bool, ot_s: float, false_success: bool) -> Verdict:
+    """Success: within SUCCESS_RADIUS of the goal within TIME_LIMIT_S of starting to move, no
+    collision, and no goal said succeeded that the truth had not reached (issue 36)."""
     time_s = None if not watch.arrived else watch.arrived_s - (watch.moved_s or START_S)
     in_time = time_s is not None and time_s <= TIME_LIMIT_S
-    success = in_time and not collision
-    return Verdict(success=success, collision=collision, timeout=not in_time and not collision, time_s=time_s,
-                   ot_s=ot_s, score=barn_score(success, time_s or 0.0, ot_s))
+    success = in_time and not collision and not false_success
+    return Verdict(success=success, collision=collision, timeout=not in_time and not collision,
+                   false_success=false_success, time_s=time_s, ot_s=ot_s,
+                   score=barn_score(success, time_s or 0.0, ot_s))
 
 
 @dataclass
@@ -162,7 +165,8 @@ def run_world(world_file: Path, path_file: Path, seed: int) -> WorldResult:
     world = load_world(world_file)
     watch, run = drive_to_goal(world, seed, START, GOAL)
     collision = bool(run.summary.collisions) or run.summary.min_clearance_m <= 0.0
-    return WorldResult(world=world_number(world_file), **asdict(judge(watch, collision, optimal_time(np.load(path_file)))))
+    verdict = judge(watch, collision, optimal_time(np.load(path_file)), run.summary.false_successes > 0)
+    return WorldResult(world=world_number(world_file), **asdict(verdict))
 
 
 def run_world_live(world_file: Path, path_file: Path, seed: int, out: Path) -> WorldResult:
@@ -181,7 +185,7 @@ def drive_to_goal_live(world_file: Path, seed: int, start, goal, ot_s: float, ou
         watch.see(record.key, record.payload, record.stamp_ns)
     summary = run.summary or {}
     collision = summary.get("collisions") != 0 or summary.get("min_clearance_m", 0.0) <= 0.0
-    return judge(watch, collision, ot_s), summary
+    return judge(watch, collision, ot_s, bool(summary.get("false_successes"))), summary
 
 
 def world_number(path: Path) -> int:
@@ -227,6 +231,7 @@ def tally(results: list[WorldResult]) -> dict:
             "collision_rate": sum(r.collision for r in results) / count,
             "timeout_rate": sum(r.timeout for r in results) / count,
             "collisions": sum(r.collision for r in results), "timeouts": sum(r.timeout for r in results),
+            "false_successes": sum(r.false_success for r in results),
             "mean_score": float(np.mean([r.score for r in results])),
             "median_time_s": float(np.median(times)) if times else None}
 
@@ -248,7 +253,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def say_result(say, result: WorldResult, how: str = "") -> None:
     t = "-" if result.time_s is None else f"{result.time_s:6.1f} s"
     say(f"{how}world {result.world:3d}: {'success' if result.success else 'FAIL   '} collision "
-        f"{result.collision!s:5} timeout {result.timeout!s:5} time {t} (OT {result.ot_s:.1f} s) "
+        f"{result.collision!s:5} timeout {result.timeout!s:5} "
+        f"{'FALSE SUCCESS ' if result.false_success else ''}time {t} (OT {result.ot_s:.1f} s) "
         f"score {result.score:.3f}")
 
 
@@ -277,7 +283,7 @@ def print_tallies(figures: dict, how: str) -> None:
         f = figures[name]
         if f["runs"]:
             print(f"{how}{name:5}: {f['runs']} runs, success {f['success_rate']:.3f}, collisions {f['collisions']}, "
-                  f"timeouts {f['timeouts']}, mean score {f['mean_score']:.3f}")
+                  f"timeouts {f['timeouts']}, false successes {f['false_successes']}, mean score {f['mean_score']:.3f}")
 
 
 @exits_2_on_user_error("bench barn")

@@ -49,7 +49,8 @@ def run_seed(job: tuple[str, int, str, str]) -> DynaBarnResult:
     world = load_world(world_file)
     watch, run = drive_to_goal(world, seed, world.robot.start, world.goals[0], controller)
     sim = run.nodes["sim"].sim
-    return DynaBarnResult(**asdict(judge(watch, sim.collisions > 0, OT_S)), difficulty=difficulty, seed=seed,
+    verdict = judge(watch, sim.collisions > 0, OT_S, run.summary.false_successes > 0)
+    return DynaBarnResult(**asdict(verdict), difficulty=difficulty, seed=seed,
                           robot_fault_collisions=sim.robot_fault_collisions,
                           mover_fault_collisions=sim.mover_fault_collisions, controller=controller)
 
@@ -77,6 +78,7 @@ def run_line(r: DynaBarnResult) -> str:
     controller = "" if r.controller == DEFAULT_CONTROLLER else f" {r.controller}"
     return (f"{KIND}-{r.difficulty}-{r.seed}{controller}: {'success' if r.success else 'FAIL   '} contacts "
             f"{r.robot_fault_collisions} robot's, {r.mover_fault_collisions} movers' timeout {r.timeout!s:5} "
+            f"{'FALSE SUCCESS ' if r.false_success else ''}"
             f"time {time} score {r.score:.3f}")
 
 
@@ -134,6 +136,7 @@ def main(args: argparse.Namespace) -> int:
             median = "-" if f["median_time_s"] is None else f"{f['median_time_s']:.1f} s"
             print(f"{how}{d:6}: {f['runs']} runs, success {f['success_rate']:.3f}, runs with a contact "
                   f"{f['collisions']} ({f['robot_fault_collisions']} contacts the robot's fault, "
-                  f"{f['mover_fault_collisions']} a mover's), timeouts {f['timeouts']}, mean score "
+                  f"{f['mover_fault_collisions']} a mover's), timeouts {f['timeouts']}, false successes "
+                  f"{f['false_successes']}, mean score "
                   f"{f['mean_score']:.3f}, median time {median}")
     return 0

@@ -136,6 +136,8 @@ def run_mission(services: list[dict], world: World, goals: np.ndarray, *, timeou
     finally:
         if writer is not None:
             writer.close()
+    navigator = nodes.get("navigator")
     summary = summarize_mission(collector.record(str(recording or "in-process run")), world,
-                                goals_total=len(goals), recording=str(recording or ""))
+                                goals_total=len(goals), recording=str(recording or ""),
+                                goal_tolerance_m=navigator.params.xy_goal_tolerance if navigator else None)
     return LockstepRun(summary, dict(sequencer.outcomes), sim.now_ns / NS_PER_S, nodes)

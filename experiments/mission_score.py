@@ -17,9 +17,10 @@ pure and computes:
 - per goal, within_1m_s: the sim s from sending it until the robot's true position first came
   within WITHIN_M of it (None if it never did) — how long the way took, apart from the final approach.
 
-A goal is reached when the navigator said succeeded and the truth agrees: the robot stood within
-ARRIVED_M of it. A navigator misled by its pose (a shove, a localizer settled on a wrong pose) can
-declare a goal reached metres away from it; that is a false arrival, not a reached goal.
+A goal is reached when the navigator said succeeded and the truth agrees: when it said so the robot
+stood within the navigator's xy_goal_tolerance + FALSE_SUCCESS_MARGIN_M of the goal. A navigator
+misled by its pose (a shove, a slip, a localizer settled on a wrong pose) can declare a goal reached
+metres away from it; that is a false success, not a reached goal, and it fails the mission.
 
 success: every requested goal reached and no contact of any kind (BARN's rule): the robot's and
 the movers' shares (sim/contacts.py) and the seconds in contact are reported beside it; a
@@ -40,6 +41,7 @@ import numpy as np
 from ..schemas import MessageError, decode
 from ..schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
 from ..schemas.messages import Goal, NavStatus, Path as PathMsg
+from ..services.navigator.params import NavigatorParams
 from ..sim.world import World
 from ..geometry.polygons import point_segment_distance, points_in_polygons, transform_points
 from ..services.recorder.mcap_io import RecordingError, read_records
@@ -51,9 +53,9 @@ from ..geometry.se2 import wrap_angle
 TERMINAL = ("succeeded", "aborted", "canceled")
 CLEARANCE_CHUNK = 2048      # poses per vectorised clearance computation (bounds the temporaries)
 WITHIN_M = 1.0              # the radius of a goal's within_1m_s
-# a succeeded goal farther than this from the truth was a false arrival: ten times navigate's
-# arrival tolerance (3 cm) plus AMCL's usual error of a few cm, well below the robot's width
-ARRIVED_M = 0.25
+# a goal said succeeded while the truth stood farther than the navigator's xy_goal_tolerance plus this
+# was a false success (issue 36: the tolerance + 5 cm)
+FALSE_SUCCESS_MARGIN_M = 0.05
 FAR = 1.0e6             # m: where a moment with fewer movers puts the ones it lacks
 
 
@@ -86,11 +88,12 @@ class GoalOutcome:
     yaw_error_deg: float
     plan_length_m: float | None     # the first global plan's length
     within_1m_s: float | None       # sim s from sending it until the robot first came within WITHIN_M
+    false_success: bool = False     # said succeeded while the truth stood beyond the tolerance + margin
 
     @property
     def reached(self) -> bool:
-        """Succeeded, and the truth within ARRIVED_M of the goal (not a false arrival)."""
-        return self.status == "succeeded" and self.xy_error_m <= ARRIVED_M
+        """Succeeded, and the truth agreed when it was said (not a false success)."""
+        return self.status == "succeeded" and not self.false_success
 
 
 @dataclass(frozen=True)
@@ -114,6 +117,7 @@ class MissionSummary:
     restarts: dict[str, int] = field(default_factory=dict)   # service -> times restarted (only those that were)
     contact_s: float | None = None          # s in contact with anything (None: a sim from before it was counted)
     robot_contact_s: float | None = None    # s of that the robot's
+    false_successes: int = 0                # goals said succeeded the truth did not reach
 
     def to_json(self) -> dict:
         mapping = asdict(self)
@@ -279,9 +283,18 @@ def _first_within(record: MissionRecord, goal: np.ndarray, sent_ns: int, ended_n
     return (int(record.truth_stamps[near[0]]) - sent_ns) / NS_PER_S if len(near) else None
 
 
+def goal_tolerance(services: list[dict]) -> float:
+    """The xy_goal_tolerance of a compose's navigator (its own default where the compose sets none)."""
+    navigator = next((s for s in services if s.get("service") == "navigator"), {})
+    return float((navigator.get("params") or {}).get("xy_goal_tolerance", NavigatorParams().xy_goal_tolerance))
+
+
 def summarize_mission(record: MissionRecord, world: World, goals_total: int | None = None,
-                      recording: str = "") -> MissionSummary:
-    """The mission's figures; goals_total is how many goals were to be sent (default: those sent)."""
+                      recording: str = "", goal_tolerance_m: float | None = None) -> MissionSummary:
+    """The mission's figures; goals_total is how many goals were to be sent (default: those sent);
+    goal_tolerance_m the navigator's xy_goal_tolerance (default its own default), which a success
+    must have been within, plus FALSE_SUCCESS_MARGIN_M, by the truth."""
+    tolerance = NavigatorParams().xy_goal_tolerance if goal_tolerance_m is None else goal_tolerance_m
     goals_total = len(record.goals) if goals_total is None else goals_total
     end_ns = int(record.truth_stamps[-1])
     outcomes, last_end_ns = [], None
@@ -293,12 +306,15 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
         target = np.array([goal.pose.x, goal.pose.y, goal.pose.theta])
         pose = record.truth_poses[-1] if index == len(record.goals) - 1 else _truth_at(record, ended_ns)
         xy, yaw = _pose_error(pose, target)
-        outcomes.append(GoalOutcome(goal.goal_id, tuple(float(v) for v in target),
-                                    final.status if final is not None else "none",
+        status = final.status if final is not None else "none"
+        # judged where the robot stood when success was said: a shove after it is no false success
+        said_xy = _pose_error(_truth_at(record, ended_ns), target)[0]
+        outcomes.append(GoalOutcome(goal.goal_id, tuple(float(v) for v in target), status,
                                     final.reason if final is not None else "",
                                     (ended_ns - goal.header.stamp_ns) / NS_PER_S, xy, yaw,
                                     _first_plan_length(record.plans, goal.goal_id),
-                                    _first_within(record, target, goal.header.stamp_ns, ended_ns)))
+                                    _first_within(record, target, goal.header.stamp_ns, ended_ns),
+                                    status == "succeeded" and said_xy > tolerance + FALSE_SUCCESS_MARGIN_M))
     start_ns = record.goals[0].header.stamp_ns if record.goals else int(record.truth_stamps[0])
     span = (record.truth_stamps >= start_ns) & (record.truth_stamps <= end_ns)
     poses = record.truth_poses[span] if span.any() else record.truth_poses[-1:]
@@ -322,7 +338,13 @@ def summarize_mission(record: MissionRecord, world: World, goals_total: int | No
         collisions=collisions, robot_fault_collisions=robot_fault, mover_fault_collisions=mover_fault,
         shoved_collisions=shoved, min_clearance_m=clearance, min_mover_clearance_m=mover_clearance if math.isfinite(mover_clearance) else None,
         recording=recording, goals=outcomes, restarts=dict(record.restarts), contact_s=contact_s,
-        robot_contact_s=robot_contact_s)
+        robot_contact_s=robot_contact_s, false_successes=sum(o.false_success for o in outcomes))
+
+
+def false_success_runs(rows: list[dict], name: str = "world") -> list:
+    """The runs of a bench (rows holding their summary's false_successes) in which a goal was said
+    succeeded that the truth had not reached: each of them failed, and a bench lists them."""
+    return [r[name] for r in rows if r.get("false_successes")]
 
 
 def summary_lines(summary: MissionSummary) -> list[str]:
@@ -342,8 +364,8 @@ def summary_lines(summary: MissionSummary) -> list[str]:
              "restarts: " + (", ".join(f"{name} {n}" for name, n in sorted(summary.restarts.items())) or "none")]
     for o in summary.goals:
         why = f" ({o.reason})" if o.reason else ""
-        if o.status == "succeeded" and not o.reached:
-            why += f" (a false arrival: {o.xy_error_m:.2f} m from the goal by the truth)"
+        if o.false_success:
+            why += f" (a FALSE SUCCESS: {o.xy_error_m:.2f} m from the goal by the truth)"
         near = f"within {WITHIN_M:g} m after {o.within_1m_s:.1f} s" if o.within_1m_s is not None else \
             f"never within {WITHIN_M:g} m"
         lines.append(f"  {o.goal_id} ({o.goal[0]:.2f}, {o.goal[1]:.2f}, {math.degrees(o.goal[2]):.1f} deg): "

@@ -132,31 +132,43 @@ def _watch(arrive_s: float | None) -> ArrivalWatch:
 
 
 def test_a_run_with_a_contact_is_not_a_success(monkeypatch, tmp_path):
-    clean = judge(_watch(31.02), False, bench.OT_S)
+    clean = judge(_watch(31.02), False, bench.OT_S, False)
     assert clean.success and clean.time_s == pytest.approx(30.0) and clean.score == pytest.approx(10.0 / 30.0)
-    touched = judge(_watch(31.02), True, bench.OT_S)
+    touched = judge(_watch(31.02), True, bench.OT_S, False)
     assert not touched.success and touched.collision and not touched.timeout and touched.score == 0.0
-    late = judge(_watch(None), False, bench.OT_S)
+    late = judge(_watch(None), False, bench.OT_S, False)
     assert not late.success and late.timeout and late.time_s is None
 
     # the bench counts every contact the simulator counts, a mover's fault too
     sim = SimpleNamespace(collisions=1, robot_fault_collisions=0, mover_fault_collisions=1)
-    monkeypatch.setattr(bench, "drive_to_goal", lambda *args: (_watch(12.02), SimpleNamespace(nodes={"sim": SimpleNamespace(sim=sim)})))
+    monkeypatch.setattr(bench, "drive_to_goal", lambda *args: (_watch(12.02), SimpleNamespace(
+        nodes={"sim": SimpleNamespace(sim=sim)}, summary=SimpleNamespace(false_successes=0))))
     result = bench.run_seed(("easy", 3, str(tmp_path), "dwa"))
     assert (tmp_path / "dynabarn-easy-3.yaml").is_file()
     assert not result.success and result.collision and result.score == 0.0
     assert (result.robot_fault_collisions, result.mover_fault_collisions) == (0, 1)
 
 
+def test_a_false_success_fails_the_run_and_is_counted():
+    """The navigator said succeeded where the truth had not reached the goal (issue 36): the run fails
+    even though the robot later arrived, and the tally counts it."""
+    fooled = judge(_watch(31.02), False, bench.OT_S, True)
+    assert not fooled.success and fooled.false_success and not fooled.timeout and fooled.score == 0.0
+    results = [bench.DynaBarnResult(**vars(v), difficulty="easy", seed=0, robot_fault_collisions=0,
+                                    mover_fault_collisions=0) for v in (fooled, judge(_watch(20.0), False, bench.OT_S, False))]
+    assert bench.figures(results)["false_successes"] == 1 and bench.figures(results)["success_rate"] == 0.5
+    assert "FALSE SUCCESS" in bench.run_line(results[0]) and "FALSE SUCCESS" not in bench.run_line(results[1])
+
+
 def test_the_figures_per_difficulty():
     def run(success, robot, mover, time_s, timeout=False):
-        verdict = judge(_watch(None if time_s is None else 1.02 + time_s), bool(robot or mover), bench.OT_S)
+        verdict = judge(_watch(None if time_s is None else 1.02 + time_s), bool(robot or mover), bench.OT_S, False)
         assert (verdict.success, verdict.timeout) == (success, timeout)
         return bench.DynaBarnResult(**vars(verdict), difficulty="easy", seed=0, robot_fault_collisions=robot,
                                     mover_fault_collisions=mover)
     figures = bench.figures([run(True, 0, 0, 12.0), run(False, 1, 2, 30.0), run(False, 0, 0, None, timeout=True),
                              run(True, 0, 0, 40.0)])
-    assert figures["runs"] == 4 and figures["success_rate"] == 0.5
+    assert figures["runs"] == 4 and figures["success_rate"] == 0.5 and figures["false_successes"] == 0
     assert (figures["collisions"], figures["timeouts"]) == (1, 1)
     assert (figures["robot_fault_collisions"], figures["mover_fault_collisions"]) == (1, 2)
     assert figures["mean_score"] == pytest.approx((0.5 + 0.25) / 4) and figures["median_time_s"] == pytest.approx(26.0)

@@ -26,7 +26,8 @@ from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import Clock, Goal, Header, NavStatus, Odometry, Pose2D, Twist
 from omninav.schemas.messages import Path as PathMsg
 from omninav.services.chassis.node import ChassisNode
-from omninav.experiments.mission_score import (MissionError, MissionRecord, load_mission, summarize_mission,
+from omninav.services.navigator.params import NavigatorParams
+from omninav.experiments.mission_score import (MissionError, MissionRecord, goal_tolerance, load_mission, summarize_mission,
                                                 summary_lines)
 from omninav.services.truth_pose.node import TruthPoseNode, TruthPoseParams
 from omninav.services.map_server.mapio import load_map
@@ -143,13 +144,13 @@ def test_summary_of_a_mission_with_two_goals(box_world):
     record = MissionRecord(stamps, poses,
                            goals=[goal("g1", 2.5, 1.0, 0.0, 1.0), goal("g2", 4.0, 1.02, 0.5, 5.5)],
                            statuses=[status("g1", "active", 1.1), status("g1", "succeeded", 5.0),
-                                     status("g2", "active", 5.6), status("g2", "succeeded", 9.0)],
+                                     status("g2", "active", 5.6), status("g2", "succeeded", 10.0)],
                            plans=[plan("g1#1", []), plan("g1#2", [[1, 1, 0], [2, 1, 0], [2.5, 1, 0]]),
                                   plan("g1#3", [[1, 1, 0], [9, 1, 0]]), plan("g2#4", [[2.5, 1, 0], [4, 1, 0]])],
                            sim_values={"collisions": 0})
     s = summarize_mission(record, world, recording="run.mcap")
     assert s.success and (s.goals_reached, s.goals_total) == (2, 2)
-    assert s.time_s == pytest.approx(8.0)                        # first goal sent at 1 s, last ended at 9 s
+    assert s.time_s == pytest.approx(9.0)                        # first goal sent at 1 s, last ended at 10 s
     assert s.path_length_m == pytest.approx(2.7, abs=1e-9)       # truth from 1 s to the end (10 s)
     assert s.plan_length_m == pytest.approx(1.5 + 1.5)           # the first non-empty plan of each goal
     assert s.final_xy_error_m == pytest.approx(0.02) and s.final_yaw_error_deg == pytest.approx(0.0, abs=1e-9)
@@ -173,15 +174,31 @@ def test_time_within_1m_of_each_goal_on_a_synthetic_record(box_world):
     assert "never within 1 m" in "\n".join(summary_lines(summarize_mission(record, box_world)))
 
 
-def test_a_goal_declared_reached_far_from_the_truth_is_a_false_arrival(box_world):
+def test_a_goal_said_succeeded_beyond_the_tolerance_and_5_cm_is_a_false_success(box_world):
+    """Issue 36: the truth must stand within the navigator's xy_goal_tolerance + 5 cm when success is said."""
     stamps, poses = straight_run(np.arange(0.0, 4.01, 0.01))     # the robot ends at (4, 1)
-    for goal_x, reached in ((4.2, True), (5.0, False)):
+    for goal_x, tolerance, reached in ((4.07, 0.03, True), (4.09, 0.03, False), (4.09, 0.1, True), (5.0, 0.1, False)):
         record = MissionRecord(stamps, poses, goals=[goal("g1", goal_x, 1.0, 0.5, 0.5)],
                                statuses=[status("g1", "succeeded", 4.0)], sim_values={"collisions": 0})
-        s = summarize_mission(record, box_world)
+        s = summarize_mission(record, box_world, goal_tolerance_m=tolerance)
         assert (s.success, s.goals_reached, s.goals[0].reached, s.to_json()["goals"][0]["reached"]) == (
             reached, int(reached), reached, reached)
-        assert ("a false arrival: 1.00 m from the goal" in "\n".join(summary_lines(s))) == (not reached)
+        assert (s.false_successes, s.goals[0].false_success) == (int(not reached), not reached)
+        assert ("a FALSE SUCCESS" in "\n".join(summary_lines(s))) == (not reached)
+
+
+def test_a_false_success_is_judged_where_the_robot_stood_when_it_was_said(box_world):
+    """A shove after the goal succeeded moves the robot away from it: no false success."""
+    stamps, poses = straight_run(np.arange(0.0, 4.01, 0.01))     # x = 1 + 0.75 t: at 2 s it stood at x = 2.5
+    record = MissionRecord(stamps, poses, goals=[goal("g1", 2.5, 1.0, 0.5, 0.5)],
+                           statuses=[status("g1", "succeeded", 2.0)], sim_values={"collisions": 0})
+    s = summarize_mission(record, box_world, goal_tolerance_m=0.03)
+    assert s.success and not s.goals[0].false_success and s.goals[0].xy_error_m == pytest.approx(1.5)
+
+
+def test_the_goal_tolerance_of_a_compose_is_its_navigators():
+    assert goal_tolerance([{"name": "nav", "service": "navigator", "params": {"xy_goal_tolerance": 0.03}}]) == 0.03
+    assert goal_tolerance([{"name": "navigator", "service": "navigator"}]) == NavigatorParams().xy_goal_tolerance
 
 
 @pytest.mark.parametrize("values, success", [

@@ -10,7 +10,7 @@ from scipy import ndimage
 
 from omninav.cli.main import main as cli_main
 from omninav.experiments.scenarios import DYNAMIC_KINDS, EXPLORE_KINDS, KINDS, ScenarioError, generate_world, world_text
-from omninav.bench.scenarios import overall
+from omninav.bench.scenarios import overall, row_line, summary_line
 from omninav.experiments.scenarios.route import TIMING
 from omninav.services.global_planner.astar import GlobalPlanner
 from omninav.services.global_planner.params import GlobalPlannerParams
@@ -144,17 +144,25 @@ def test_unknown_kinds_and_bad_seeds_are_one_line_errors(tmp_path, capsys):
 
 def test_bench_figures_over_the_worlds():
     def row(success, robot, mover, approach, time_s, path, plan, status="succeeded", shoved=0):
-        return {"success": success, "robot_fault_collisions": robot, "mover_fault_collisions": mover, "shoved_collisions": shoved,
+        return {"world": f"w{len(rows)}", "success": success, "robot_fault_collisions": robot,
+                "mover_fault_collisions": mover, "shoved_collisions": shoved,
                 "min_mover_clearance_m": approach, "time_s": time_s, "path_length_m": path, "plan_length_m": plan,
-                "status": status, "reached": success, "contact_s": 0.25 * (robot + mover)}
-    figures = overall([row(True, 0, 0, 0.4, 20.0, 10.0, 10.0), row(False, 2, 1, 0.0, 60.0, 15.0, 10.0),
-                       row(True, 0, 3, 0.0, 30.0, 11.0, 10.0, shoved=1), row(False, 0, 0, None, 40.0, 1.0, None, "aborted")])
-    assert figures["success_rate"] == 0.5 and figures["worlds"] == 4
+                "status": status, "reached": success, "contact_s": 0.25 * (robot + mover),
+                "false_successes": int(status == "succeeded" and not success and not robot + mover)}
+    rows = []
+    for args, kwargs in (((True, 0, 0, 0.4, 20.0, 10.0, 10.0), {}), ((False, 2, 1, 0.0, 60.0, 15.0, 10.0), {}),
+                         ((True, 0, 3, 0.0, 30.0, 11.0, 10.0), {"shoved": 1}),
+                         ((False, 0, 0, None, 40.0, 1.0, None, "aborted"), {}), ((False, 0, 0, None, 50.0, 5.0, 5.0), {})):
+        rows.append(row(*args, **kwargs))
+    figures = overall(rows)
+    assert figures["success_rate"] == 0.4 and figures["worlds"] == 5
     assert (figures["robot_fault_collisions"], figures["mover_fault_collisions"], figures["worlds_with_robot_fault"]) == (2, 4, 1)
     assert figures["shoved_collisions"] == 1 and figures["contact_s"] == pytest.approx(1.5)
-    assert figures["false_arrivals"] == 1                               # the second: succeeded, not reached
-    assert figures["closest_mover_approach_m"] == 0.0 and figures["median_time_s"] == 35.0
-    assert figures["median_path_over_plan"] == pytest.approx(1.1)           # of the worlds with a plan
+    assert (figures["false_successes"], figures["false_success_worlds"]) == (1, ["w4"])   # said succeeded, not reached
+    assert figures["closest_mover_approach_m"] == 0.0 and figures["median_time_s"] == 40.0
+    assert figures["median_path_over_plan"] == pytest.approx(1.05)          # of the worlds with a plan
+    assert "false successes 1 (w4)" in summary_line(figures) and "FALSE SUCCESS" in row_line(
+        {**rows[4], "controller": "dwa", "within_1m_s": None})
 
 
 def test_bench_scenarios_refuses_an_unknown_kind_or_no_worlds(capsys):
