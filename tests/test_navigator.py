@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from omninav.schemas.messages import GOAL_REACHED, PLAN_UNREACHABLE, CancelGoal, Goal, Header, Pose2D
-from omninav.services.navigator.core import (WAITING_FOR_CONFIDENT_POSE, ControlResult, Navigator, NavInputs,
+from omninav.services.navigator.core import (WAITING_FOR_CONFIDENT_POSE, WAITING_FOR_TRUSTED_ODOMETRY, ControlResult, Navigator, NavInputs,
                                              PlanResult, State)
 from omninav.services.navigator.params import NavigatorParams
 from omninav.services.navigator.recovery import back_up, behaviour, clear_costmaps, rotate, wait
@@ -58,7 +58,7 @@ class LatchedController:
 
 
 def run(nav, steps, planner=straight_planner, controller=holonomic_controller, events=None, start=(0, 0, 0),
-        beam_fit=lambda k: None, jumps=None):
+        beam_fit=lambda k: None, jumps=None, odometry_doubt=lambda k: None):
     """Close the loop: the planner answers a request one step later, the controller answers every
     step from the pose the last command produced; beam_fit(k) is the localizer's news at step k and
     jumps[k] an offset (x, y, yaw) the pose takes before step k (a shove, or a corrected pose).
@@ -71,7 +71,7 @@ def run(nav, steps, planner=straight_planner, controller=holonomic_controller, e
         pose = pose + jumps.get(k, 0.0)
         g, c = events.get(k, (None, None))
         act = nav.step(k * DT, NavInputs(pose=pose, plan=plan, control=control, goal=g, cancel=c,
-                                         beam_fit=beam_fit(k)))
+                                         beam_fit=beam_fit(k), odometry_doubt=odometry_doubt(k)))
         log.append(act)
         plan = planner(act.plan_request) if act.plan_request else None
         if act.controller_plan is not None:
@@ -143,6 +143,23 @@ def test_no_success_on_a_pose_the_localizer_doubts():
     for params, news in ((NavigatorParams(min_pose_beam_fit=0.0), fit), (NavigatorParams(), lambda k: None)):
         assert "succeeded" in current_status(run(Navigator(params), 300, events={0: (goal(2.0, 1.0, 0.0), None)},
                                                  beam_fit=news)[0])
+
+
+def test_no_success_while_the_odometry_fusion_doubts_its_odometry():
+    """Issue 36: wheels, gyro and scans disagree (a push) from step 20 to 300: the goal waits, naming why."""
+    def doubt(k):
+        return None if k < 20 and k % 10 else "" if k < 20 else "wheels vs scans 0.52 m" if k < 300 else \
+            "" if k % 10 == 0 else None
+    log, poses = run(Navigator(), 400, events={0: (goal(2.0, 1.0, 0.0), None)}, odometry_doubt=doubt)
+    statuses = current_status(log)
+    arrived = next(k for k, p in enumerate(poses) if math.hypot(p[0] - 2.0, p[1] - 1.0) <= 0.1)
+    assert arrived < 250 and statuses.index("succeeded") == 300 and set(statuses[:300]) == {"active"}
+    waiting = {a.statuses[-1].reason for a in log[arrived + 5:300]}
+    assert waiting == {f"{WAITING_FOR_TRUSTED_ODOMETRY} (wheels vs scans 0.52 m)"} and not recoveries(log)
+    # a fusion that never doubts, or none at all, lets the goal succeed on arrival
+    for news in (lambda k: "", lambda k: None):
+        first = current_status(run(Navigator(), 300, events={0: (goal(2.0, 1.0, 0.0), None)}, odometry_doubt=news)[0])
+        assert first.index("succeeded") <= arrived + 5
 
 
 def test_a_plan_is_made_afresh_when_the_doubted_pose_is_trusted_again():

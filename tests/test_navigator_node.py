@@ -13,9 +13,9 @@ from conftest import wait_until
 from omninav.schemas import decode
 from omninav.schemas.keys import KeyLayout
 from omninav.schemas.messages import (GOAL_REACHED, CancelGoal, Costmap, Goal, Header, LocalCommand, MapMetaData,
-                                      Odometry, Path, Pose2D, PoseFit, Transform)
+                                      Odometry, OdometryDoubt, Path, Pose2D, PoseFit, Transform)
 from omninav.services.local_planner.node import LocalPlannerNode, LocalPlannerNodeParams
-from omninav.services.navigator.core import WAITING_FOR_CONFIDENT_POSE, State
+from omninav.services.navigator.core import WAITING_FOR_CONFIDENT_POSE, WAITING_FOR_TRUSTED_ODOMETRY, State
 from omninav.services.navigator.node import NavigatorNode, NavigatorNodeParams
 from omninav.services.runtime.inprocess import InProcessRunner
 from omninav.services.runtime.merge import StampMerger
@@ -49,7 +49,7 @@ class ToyRobot(Node):
         self.step, self.pose, self.cmd, self.path = 0, np.zeros(3), np.zeros(3), None
         self.odom_pub = self.publisher("odom")
         self.cmd_pub = self.publisher("local_cmd") if self.local_planner else None
-        self.event_pubs = {"goal": self.publisher("goal"), "cancel": self.publisher("cancel")}
+        self.event_pubs = {topic: self.publisher(topic) for topic in ("goal", "cancel", "odom_doubt")}
         self.subscribe("cmd_vel_nav", self.on_cmd, synced=False)
         self.subscribe("follow_path", self.on_path, synced=False)
 
@@ -258,6 +258,20 @@ def test_a_pose_corrected_off_the_goal_after_arrival_is_approached_again_by_the_
     assert math.hypot(x - 0.5, y) <= 0.03
     assert {s.status for s in published["nav_status"]} == {"active"} and not navigator.counters["recoveries/clear_costmaps"]
     assert published["local_cmd"][-1].reason == GOAL_REACHED
+
+
+def test_no_success_while_the_odometry_fusion_doubts_and_success_once_it_trusts_again():
+    """odom_doubt (services/ekf's verdict) holds the goal active at the goal, with the fusion's reason."""
+    doubt = OdometryDoubt(Header(frame_id="odom"), doubtful=True, reason="wheels vs scans 0.61 m", mahalanobis=40.0)
+    trust = OdometryDoubt(Header(frame_id="odom"))
+    navigator, robot, out = navigate({2: [("goal", goal(1.0, 0.0)), ("odom_doubt", doubt)], 150: [("odom_doubt", trust)]},
+                                     200)
+    said = statuses(out)
+    waiting = [reason for _, status, reason in said if status == "active" and reason]
+    assert waiting and set(waiting) == {f"{WAITING_FOR_TRUSTED_ODOMETRY} (wheels vs scans 0.61 m)"}
+    ended = out["nav_status"][-1]
+    assert ended.status == "succeeded" and ended.header.stamp_ns > ns(150 * DT)
+    assert math.hypot(robot.pose[0] - 1.0, robot.pose[1]) <= 0.1
 
 
 def test_before_any_goal_the_status_query_says_so_and_nothing_is_commanded():

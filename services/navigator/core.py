@@ -53,7 +53,9 @@ min_pose_beam_fit, arrival waits with the reason WAITING_FOR_CONFIDENT_POSE and 
 active (control, oscillation and recovery go on as before). When the fit comes back while
 controlling, the plan is made afresh from the pose the localizer has found (the local planner may
 have stopped at the old plan's end, where the doubted pose put the goal). Without any beam fit (a
-pose from SLAM or the simulator's truth) nothing is doubted.
+pose from SLAM or the simulator's truth) nothing is doubted. The same holds while the odometry
+fusion (services/ekf) doubts its odometry — the wheels, the gyro and the scans disagree: a slip, a
+push — with the reason WAITING_FOR_TRUSTED_ODOMETRY; without a fusion nothing is doubted.
 """
 from __future__ import annotations
 
@@ -71,6 +73,7 @@ from .recovery import ZERO, Behaviour, Twist3, behaviour
 
 GOAL_FRAMES = ("", "map")
 WAITING_FOR_CONFIDENT_POSE = "at the goal, waiting for a pose the scans agree with (beam fit below min_pose_beam_fit)"
+WAITING_FOR_TRUSTED_ODOMETRY = "at the goal, waiting for odometry the wheels, gyro and scans agree on"
 
 
 class State(enum.Enum):
@@ -129,6 +132,7 @@ class NavInputs:
     pose: tuple[float, float, float] | np.ndarray | None = None   # robot pose, map frame
     velocity: tuple[float, float, float] | np.ndarray | None = None   # body twist (odometry); None: unknown
     beam_fit: float | None = None           # the localizer's latest beam fit; None: no news
+    odometry_doubt: str | None = None       # the fusion's latest verdict: why it doubts, "" it does not; None: no news
     plan: PlanResult | None = None
     control: ControlResult | None = None   # the local planner's answer for this control cycle
     goal: Goal | None = None
@@ -156,6 +160,7 @@ class Navigator:
         self.pose: np.ndarray | None = None
         self.velocity: np.ndarray | None = None
         self.beam_fit: float | None = None    # None: no localizer says how well its scans fit
+        self.odometry_doubt = ""              # why the odometry fusion doubts its odometry ("": it does not)
         self.path: np.ndarray | None = None
         self._latch = GoalLatch(self.params.xy_goal_tolerance, self.params.latch_xy_goal_tolerance)
         self._now: float | None = None
@@ -186,10 +191,11 @@ class Navigator:
             self.pose = np.asarray(inputs.pose, dtype=float).reshape(3)
         if inputs.velocity is not None:
             self.velocity = np.asarray(inputs.velocity, dtype=float).reshape(3)
-        if inputs.beam_fit is not None:
-            was_doubted = self._pose_doubted()
-            self.beam_fit = float(inputs.beam_fit)
-            if was_doubted and not self._pose_doubted() and self.state is State.CONTROLLING:
+        if inputs.beam_fit is not None or inputs.odometry_doubt is not None:
+            was_doubted = self._pose_doubted() or bool(self.odometry_doubt)
+            self.beam_fit = self.beam_fit if inputs.beam_fit is None else float(inputs.beam_fit)
+            self.odometry_doubt = self.odometry_doubt if inputs.odometry_doubt is None else inputs.odometry_doubt
+            if was_doubted and not (self._pose_doubted() or self.odometry_doubt) and self.state is State.CONTROLLING:
                 self._want_plan = True   # the pose the plan started from was wrong: plan from the found one
         if inputs.cancel is not None and self._cancel(inputs.cancel, out) and inputs.goal is not None:
             out.statuses.append(self.status())
@@ -281,6 +287,8 @@ class Navigator:
             if self._stopped():
                 if self._pose_doubted():
                     self.reason = WAITING_FOR_CONFIDENT_POSE
+                elif self.odometry_doubt:
+                    self.reason = f"{WAITING_FOR_TRUSTED_ODOMETRY} ({self.odometry_doubt})"
                 else:
                     self._finish(State.SUCCEEDED, "", out)
             return

@@ -22,7 +22,8 @@ and with the robot's pose (below). Then it carries out the actions:
   before the first goal it answers an error saying there is none yet.
 
 Inputs, in merge order: local_cmd, odom (synced); then tf/map_odom, pose, plan, goal, cancel,
-pose_fit (sporadic; the localizer's beam fit, which the goal check needs high enough). local_cmd goes first so that a tick waits for nothing but the odometry stamped at
+pose_fit (sporadic; the localizer's beam fit, which the goal check needs high enough), odom_doubt
+(sporadic; the odometry fusion's verdict: no goal succeeds while it doubts). local_cmd goes first so that a tick waits for nothing but the odometry stamped at
 it: the tick at t uses the odometry stamped before t (the odometry at t sorts after the tick),
 one odometry period older than the local planner's; ordered the other way, every tick would wait
 for the next odometry, delaying every command by an odometry period. A sporadic message stamped
@@ -59,7 +60,7 @@ from .core import ACTIVE, ControlResult, Navigator, NavActions, NavInputs, PlanR
 from .params import NavigatorParams
 from .recovery import ZERO
 
-MAP_ODOM, POSE, PLAN, GOAL, CANCEL, POSE_FIT = range(6)   # sporadic inputs, in input order (the order of equal stamps)
+MAP_ODOM, POSE, PLAN, GOAL, CANCEL, POSE_FIT, ODOM_DOUBT = range(7)   # sporadic inputs, in input order (the order of equal stamps)
 REQUEST_SEPARATOR = "#"                        # plan_request goal_id: "<goal_id>#<request_id>"
 FOLLOWING = (State.PLANNING, State.CONTROLLING)   # states in which the local planner keeps its plan
 
@@ -128,7 +129,7 @@ class NavigatorNode(Node):
         for kind, topic, check in ((MAP_ODOM, "tf/map_odom", self.frames.transform_problem),
                                    (POSE, "pose", self._check_map_frame), (PLAN, "plan", self._check_map_frame),
                                    (GOAL, "goal", None), (CANCEL, "cancel", None),
-                                   (POSE_FIT, "pose_fit", self._check_map_frame)):
+                                   (POSE_FIT, "pose_fit", self._check_map_frame), (ODOM_DOUBT, "odom_doubt", None)):
             self.subscribe_deferred(topic, self.pending, kind, check)
         self.queryable("nav_status", self.answer_status)
 
@@ -175,10 +176,11 @@ class NavigatorNode(Node):
         self.frames.set_odom(msg)
         self.velocity = (msg.twist.linear_x, msg.twist.linear_y, msg.twist.angular_z)
 
-    def _due(self, now_ns: int) -> tuple[list[Goal | CancelGoal], Path | None, float | None]:
+    def _due(self, now_ns: int) -> tuple[list[Goal | CancelGoal], Path | None, float | None, str | None]:
         """Put into effect the sporadic inputs stamped before now − request_delay_s, in stamp order;
-        returns the goals and cancels among them, the newest plan and the newest beam fit."""
-        events, plan, beam_fit = [], None, None
+        returns the goals and cancels among them, the newest plan, the newest beam fit and the
+        newest odometry doubt ("" none)."""
+        events, plan, beam_fit, doubt = [], None, None, None
         for kind, msg in self.pending.due(now_ns):
             if kind == MAP_ODOM:
                 self.frames.set_map_odom(msg)
@@ -186,17 +188,19 @@ class NavigatorNode(Node):
                 self.pose = msg
             elif kind == POSE_FIT:
                 beam_fit = msg.beam_fit
+            elif kind == ODOM_DOUBT:
+                doubt = (msg.reason or "doubtful") if msg.doubtful else ""
             elif kind == PLAN:
                 plan = msg
             else:
                 events.append(msg)
-        return events, plan, beam_fit
+        return events, plan, beam_fit, doubt
 
     # ------------------------------------------------------------ the tick
 
     def on_local_cmd(self, msg: LocalCommand) -> None:
         now_s = self.now_ns / NS_PER_S
-        events, plan, beam_fit = self._due(self.now_ns)
+        events, plan, beam_fit, doubt = self._due(self.now_ns)
         if self.resumed is not None:
             events.insert(0, self.resumed)
             self.resumed = None
@@ -209,7 +213,7 @@ class NavigatorNode(Node):
             self._carry_out(self.core.step(now_s, NavInputs(pose=robot, goal=event if is_goal else None,
                                                             cancel=None if is_goal else event)), final=False)
         inputs = NavInputs(pose=robot, velocity=self.velocity, plan=self._plan_result(plan), control=self._control(msg),
-                           beam_fit=beam_fit)
+                           beam_fit=beam_fit, odometry_doubt=doubt)
         self._carry_out(self.core.step(now_s, inputs), final=True)
         self._save_goal()
 
