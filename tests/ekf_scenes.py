@@ -83,4 +83,6 @@ def run_core(fusion, s: Scene, delay_s: float = 0.25, on_step=None):
         verdicts.append(fusion.step(wheels, [imu]))
         if on_step is not None:
             on_step(k, fusion)
+    for laser in pending:       # those still held at the end (a node would fuse them at its next step)
+        fusion.laser(laser)
     return verdicts

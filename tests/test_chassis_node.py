@@ -210,6 +210,24 @@ def test_odom_source_decides_whether_odom_sees_a_push(source):
     assert (tf.transform.x, tf.transform.y, tf.transform.theta) == (odom.pose.x, odom.pose.y, odom.pose.theta)
 
 
+@pytest.mark.parametrize("source", ["wheels", "followers"])
+def test_fused_odometry_puts_the_odometry_on_odom_wheel_and_leaves_tf_to_the_fusion(source):
+    states, _ = drive(ChassisNodeParams(), [((0.4, 0.1, 0.3), 0.5)])
+    outputs = {}
+    for fused in (False, True):
+        node = ChassisNode(ChassisNodeParams(odom_source=source, fused_odometry=fused))
+        out = capture(node)
+        in_stamp_order(node, states)
+        outputs[fused] = out
+    alone, beside = ({key for key, _ in outputs[f]} for f in (False, True))
+    assert alone - beside == {"omninav/r1/odom", "omninav/r1/tf/odom_base"} and beside - alone == {"omninav/r1/odom_wheel"}
+    # the same odometry, on the other key; the wheel commands the same
+    assert [p for k, p in outputs[True] if k == "omninav/r1/odom_wheel"] == [p for k, p in outputs[False] if k == "omninav/r1/odom"]
+    assert \
+        [p for k, p in outputs[True] if k.endswith("wheel_cmd")] == [p for k, p in outputs[False] if k.endswith("wheel_cmd")]
+    assert "omninav/r1/odom_wheel" in node.queryables and "omninav/r1/odom" not in node.queryables
+
+
 def test_parameters_are_validated():
     with pytest.raises(ParamError, match="cmd_vel_delay_s"):
         load_params(ChassisNodeParams, {"cmd_vel_delay_s": 1.0, "cmd_vel_timeout_s": 0.5})

@@ -43,6 +43,9 @@ class ChassisNodeParams(ChassisParams):
     # what odom and tf/odom_base carry: the driven wheels' encoders, or the follower wheels and gyro,
     # which roll with the ground and so also measure slip and a robot pushed by someone
     odom_source: str = param("wheels", choices=("wheels", "followers"))
+    # true beside an odometry fusion (services/ekf): odom goes out as odom_wheel and no tf/odom_base,
+    # the fusion publishes both (as diff_drive_controller's enable_odom_tf: false beside robot_localization)
+    fused_odometry: bool = False
     odom_file: str = ""                          # where save_odom_rate keeps the odometry's state; "": nowhere
     save_odom_rate: float = param(10.0, ge=0)    # Hz of sim time
 
@@ -72,8 +75,8 @@ class ChassisNode(Node):
         self.kinematics = Kinematics(p)
         self.wheel_odom = wheel_odometry(p)
         self.follower_odom = follower_odometry(p) if p.follower_odometry else None
-        self.odom_pub = self.publisher("odom")
-        self.tf_pub = self.publisher("tf/odom_base")
+        self.odom_pub = self.publisher("odom_wheel" if p.fused_odometry else "odom")
+        self.tf_pub = None if p.fused_odometry else self.publisher("tf/odom_base")
         self.follower_pub = self.publisher("odom_follower") if p.follower_odometry else None
         self.wheel_cmd_pub = self.publisher("wheel_cmd")
         self.wheel_state_key = self.keys.resolve("wheel_state")
@@ -81,7 +84,7 @@ class ChassisNode(Node):
         self.pending = Deferred(p.cmd_vel_delay_s)             # cmd_vel not yet in effect
         self.subscribe("wheel_state", self.on_wheel_state)
         self.subscribe_deferred("cmd_vel", self.pending)
-        self.queryable("odom", lambda _params: self.last_odom)
+        self.queryable("odom_wheel" if p.fused_odometry else "odom", lambda _params: self.last_odom)
         self.last_odom: Odometry | None = None
         self.command: tuple[int, np.ndarray] | None = None     # (stamp, twist) in effect
         self.previous = np.zeros(3)                            # the twist last commanded
@@ -137,9 +140,10 @@ class ChassisNode(Node):
             followers = self._odometry(self.follower_odom.update(t, msg.follower_positions, msg.gyro_z))
         self.last_odom = followers if self.params.odom_source == "followers" else wheels
         self.odom_pub.publish(self.last_odom)
-        self.tf_pub.publish(Transform(header=Header(stamp_ns=t, frame_id=self.params.odom_frame_id),
-                                      child_frame_id=self.params.base_frame_id,
-                                      transform=self.last_odom.pose))
+        if self.tf_pub is not None:
+            self.tf_pub.publish(Transform(header=Header(stamp_ns=t, frame_id=self.params.odom_frame_id),
+                                          child_frame_id=self.params.base_frame_id,
+                                          transform=self.last_odom.pose))
         if followers is not None:
             self.follower_pub.publish(followers)
         self._save(t)

@@ -176,7 +176,10 @@ class Ekf:
         h[np.arange(len(indices)), indices] = 1.0
         ph = self.p[:, indices]
         s = ph[indices] + r
-        s_inv = np.linalg.inv(s)
+        try:
+            s_inv = np.linalg.inv(s)
+        except np.linalg.LinAlgError:
+            return False, math.inf
         d2 = float(innovation @ s_inv @ innovation)
         if d2 >= threshold * threshold:
             return False, d2
@@ -253,7 +256,7 @@ class OdometryFusion:
         return verdict
 
     def estimate(self) -> Estimate:
-        x, p = self.ekf.x, self.ekf.p
+        x, p = self.ekf.x, (self.ekf.p + self.ekf.p.T) / 2
         pose_idx, twist_idx = [X, Y, YAW], [VX, VY, VYAW]
         return Estimate(self.ekf.stamp_ns or 0, x[pose_idx].copy(), x[twist_idx].copy(),
                         p[np.ix_(pose_idx, pose_idx)].copy(), p[np.ix_(twist_idx, twist_idx)].copy())
@@ -272,6 +275,9 @@ class OdometryFusion:
         if not self.params.smooth_lagged_data:
             self.counters[f"lagged/{source}"] += 1
             self._apply(entry)          # at the filter's time, as robot_localization does without smoothing
+            return
+        if any(e.key == entry.key for e in history):
+            self.counters[f"duplicates/{source}"] += 1       # the same source, stamp and seq again
             return
         place = next(i for i, e in enumerate(history) if e.key > entry.key)
         if place == 0:
@@ -305,11 +311,17 @@ class OdometryFusion:
     # ------------------------------------------------------------ measurements
 
     def _apply(self, entry: _Entry) -> None:
+        before = entry.before or self._state()
         self.ekf.predict(entry.key[0])
         if entry.source == "imu0":
             self._imu(entry.msg)
         else:
             self._odometry(entry.source, entry.msg, entry.held_out)
+        if not (np.isfinite(self.ekf.x).all() and np.isfinite(self.ekf.p).all()):
+            # values no filter survives (a stamp decades away, an absurd reading): as if it never came
+            self._restore(before)
+            if not self._replaying:
+                self.counters[f"non_finite/{entry.source}"] += 1
 
     def _update(self, source: str, indices: list[int], z, r, threshold: float) -> None:
         if not indices:

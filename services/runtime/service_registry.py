@@ -28,6 +28,7 @@ SERVICES: dict[str, str] = {
     "view": "omninav.services.view.node:ViewNode",
     "tracker": "omninav.services.tracker.node:TrackerNode",
     "ros2_bridge": "omninav.services.ros2_bridge.node:Ros2BridgeNode",
+    "ekf": "omninav.services.ekf.node:EkfNode",
 }
 
 
