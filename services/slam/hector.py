@@ -93,20 +93,69 @@ class HectorMapper:
     def step(self, points: np.ndarray, guess=None) -> np.ndarray:
         """Match a scan (end points (N, 2) in the robot frame; `guess` a pose from odometry, or None)
         and update the grids when the robot has moved enough."""
+        points = self.in_range(points)
+        if self._updated_at is not None:
+            self.place(self.best_match(points, guess), points)
+        if self.moved():
+            self.integrate(points)
+        return self.pose
+
+    def in_range(self, points: np.ndarray) -> np.ndarray:
+        """The end points (N, 2, robot frame) between laser_min_dist and laser_max_dist of the robot."""
         p = self.params
         points = np.asarray(points, np.float64).reshape(-1, 2)
         reach = np.hypot(points[:, 0], points[:, 1])
-        points = points[(reach >= p.laser_min_dist) & (reach <= p.laser_max_dist)]
-        if self._updated_at is not None:
-            levels = self.probabilities()
-            weights = (p.guess_weight_xy, p.guess_weight_xy, p.guess_weight_yaw)
-            matches = [match(levels, points, start, prior=guess, prior_weights=weights) for start in self._starts(guess)]
-            self._previous, self.pose = self.pose, min(matches, key=lambda pose: mismatch(*levels[0], points, pose))
-            self._matched = points
-        if self._updated_at is None or self._moved():
-            self._update(points)
-            self._updated_at = self.pose.copy()
-        return self.pose
+        return points[(reach >= p.laser_min_dist) & (reach <= p.laser_max_dist)]
+
+    def best_match(self, points: np.ndarray, guess=None) -> np.ndarray:
+        """The pose of the lowest cost among the matches from each start (`_starts`) of end points
+        already in range; changes nothing."""
+        p = self.params
+        levels = self.probabilities()
+        weights = (p.guess_weight_xy, p.guess_weight_xy, p.guess_weight_yaw)
+        matches = [match(levels, points, start, prior=guess, prior_weights=weights) for start in self._starts(guess)]
+        return min(matches, key=lambda pose: mismatch(*levels[0], points, pose))
+
+    def place(self, pose, matched: np.ndarray | None = None) -> None:
+        """The robot is at `pose` now: the match of the end points `matched`, or None when it was
+        not matched (then covariance() is zeros until the next match)."""
+        self._previous, self.pose = self.pose, np.asarray(pose, np.float64)[:3].copy()
+        self._matched = matched
+
+    def integrate(self, points: np.ndarray) -> None:
+        """The end points (in range) into the grids, from the current pose."""
+        self._update(points)
+        self._updated_at = self.pose.copy()
+
+    def moved(self) -> bool:
+        """Whether the robot has moved map_update_distance_thresh or turned map_update_angle_thresh
+        since the grids last took a scan (True before any)."""
+        p, last = self.params, self._updated_at
+        if last is None:
+            return True
+        return (math.hypot(*(self.pose[:2] - last[:2])) > p.map_update_distance_thresh
+                or abs(float(wrap_angle(self.pose[2] - last[2]))) > p.map_update_angle_thresh)
+
+    def recentre(self, x: float, y: float) -> bool:
+        """Roll the grids, a window that follows the robot: shift them by whole cells of the coarsest
+        grid (so every level stays aligned with the others) until (x, y) lies where map_start_x /
+        map_start_y put the start. What leaves the window is forgotten, what enters is unknown.
+        False when (x, y) is already within a coarsest cell of that place."""
+        p, coarsest = self.params, self.infos[-1]
+        shift = [round((x - coarsest.origin.x) / coarsest.resolution - p.map_start_x * coarsest.width),
+                 round((y - coarsest.origin.y) / coarsest.resolution - p.map_start_y * coarsest.height)]
+        if shift == [0, 0]:
+            return False
+        for level, info in enumerate(self.infos):
+            cells = 2 ** (len(self.infos) - 1 - level)
+            cols, rows = shift[0] * cells, shift[1] * cells
+            self.log_odds[level] = _shifted(self.log_odds[level], rows, cols, 0.0)
+            self._probability[level] = _shifted(self._probability[level], rows, cols, 0.5)
+            self._marks[level] = _shifted(self._marks[level], rows, cols, 0)
+            origin = Pose2D(info.origin.x + cols * info.resolution, info.origin.y + rows * info.resolution, 0.0)
+            self.infos[level] = MapMetaData(resolution=info.resolution, width=info.width, height=info.height,
+                                            origin=origin)
+        return True
 
     def occupancy_grid(self, occ_thresh: float) -> OccupancyGrid:
         """The finest grid, cropped to the cells beams have reached (OccupancyGrid values as the
@@ -137,11 +186,6 @@ class HectorMapper:
             starts.append(np.asarray(guess, np.float64)[:3])
         return starts
 
-    def _moved(self) -> bool:
-        p, last = self.params, self._updated_at
-        return (math.hypot(*(self.pose[:2] - last[:2])) > p.map_update_distance_thresh
-                or abs(float(wrap_angle(self.pose[2] - last[2]))) > p.map_update_angle_thresh)
-
     def _update(self, points: np.ndarray) -> None:
         x, y, th = self.pose
         c, s = math.cos(th), math.sin(th)
@@ -154,6 +198,16 @@ class HectorMapper:
             _integrate(log_odds, probability, marks, 2 * self._scans_integrated, float(u0), float(v0),
                        np.ascontiguousarray(us), np.ascontiguousarray(vs), self._free, self._occupied,
                        np.empty(longest, np.int64), np.empty(longest, np.int64))
+
+
+def _shifted(grid: np.ndarray, rows: int, cols: int, fill) -> np.ndarray:
+    """The grid moved so that new[r, c] = old[r + rows, c + cols], `fill` where old has no cell."""
+    out = np.full_like(grid, fill)
+    height, width = grid.shape
+    if abs(rows) < height and abs(cols) < width:
+        out[max(-rows, 0):height - max(rows, 0), max(-cols, 0):width - max(cols, 0)] = \
+            grid[max(rows, 0):height - max(-rows, 0), max(cols, 0):width - max(-cols, 0)]
+    return out
 
 
 @njit(cache=True, _nrt=False)

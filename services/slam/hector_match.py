@@ -142,15 +142,24 @@ def mismatch(probability: np.ndarray, info: MapMetaData, points: np.ndarray, pos
                      float(pose[0]), float(pose[1]), float(pose[2]))
 
 
+def hessian(probability: np.ndarray, info: MapMetaData, points: np.ndarray, pose) -> np.ndarray:
+    """Gauss-Newton's H = Σ (∇M ∂S_i/∂ξ)ᵀ (∇M ∂S_i/∂ξ) of end points (N, 2, robot frame) at `pose`:
+    the information the scan holds about each direction of the pose (per m², m², rad²; units of
+    the cost's)."""
+    information, gradient = np.empty((3, 3)), np.empty(3)
+    points = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 2))
+    _normal_equations(probability, _origin(info), points, float(pose[0]), float(pose[1]), float(pose[2]),
+                      information, gradient)
+    return information
+
+
 def pose_covariance(probability: np.ndarray, info: MapMetaData, points: np.ndarray, pose) -> np.ndarray:
     """Gauss-Newton's covariance of a matched pose: the cost per end point times H⁻¹ (zeros where H
     is singular)."""
-    hessian, gradient = np.empty((3, 3)), np.empty(3)
-    points = np.ascontiguousarray(np.asarray(points, np.float64).reshape(-1, 2))
-    _normal_equations(probability, _origin(info), points, float(pose[0]), float(pose[1]), float(pose[2]), hessian, gradient)
-    if abs(np.linalg.det(hessian)) < SINGULAR:
+    information = hessian(probability, info, points, pose)
+    if abs(np.linalg.det(information)) < SINGULAR:
         return np.zeros((3, 3))
-    return mismatch(probability, info, points, pose) * np.linalg.inv(hessian)
+    return mismatch(probability, info, points, pose) * np.linalg.inv(information)
 
 
 def coarser(probability: np.ndarray, info: MapMetaData) -> tuple[np.ndarray, MapMetaData]:
