@@ -41,6 +41,7 @@ ROOMS: dict[str, set[str]] = {
     "services/collision_monitor": SERVICE_BASE,
     "services/explore": SERVICE_BASE | {"services/costmap", "services/global_planner"},   # inflation, A*
     "services/ros2_bridge": SERVICE_BASE | {"services/importers"},    # the ROS → omninav conversions of rosbag.py
+    "services/laser_odometry": SERVICE_BASE | {"services/slam"},      # hector's grids and matcher, in a local window
     "cli": LIBRARY | {"experiments", "bench"},              # the command reaches everything
     "experiments": LIBRARY | {"cli"},                       # harnesses run what `omninav navigate` composes
     "bench": LIBRARY | {"cli", "experiments"},

@@ -9,7 +9,8 @@ from typing import Callable
 
 KERNEL_MODULES = ("omninav.sim.lidar", "omninav.sim.people.social_force", "omninav.services.costmap.layers", "omninav.services.global_planner.astar",
                   "omninav.services.local_planner.dwa", "omninav.services.local_planner.eband",
-                  "omninav.services.localizer.filter", "omninav.services.tracker.tracker")
+                  "omninav.services.localizer.filter", "omninav.services.tracker.tracker",
+                  "omninav.services.laser_odometry.laser_odometry")
 
 
 def warm_all(report: Callable[[str, float], None] | None = None) -> None:

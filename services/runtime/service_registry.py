@@ -17,6 +17,7 @@ SERVICES: dict[str, str] = {
     "map_server": "omninav.services.map_server.node:MapServerNode",
     "costmap": "omninav.services.costmap.node:CostmapNode",
     "slam": "omninav.services.slam.node:SlamNode",
+    "laser_odometry": "omninav.services.laser_odometry.node:LaserOdometryNode",
     "explore": "omninav.services.explore.node:ExploreNode",
     "global_planner": "omninav.services.global_planner.node:PlannerNode",
     "local_planner": "omninav.services.local_planner.node:LocalPlannerNode",
