@@ -40,3 +40,32 @@ class OdomHistory:
         f = (stamp_ns - t0) / (t1 - t0)
         return np.array([a[0] + f * (b[0] - a[0]), a[1] + f * (b[1] - a[1]),
                          float(wrap_angle(a[2] + f * float(wrap_angle(b[2] - a[2]))))])
+
+
+class WaitingForOdometry:
+    """Inputs (a scan's data) stamped t held until odometry stamped ≥ t has come (rule 2 of the
+    determinism rules), then handed out in stamp order with the odometry pose at t (None when t is
+    before the history). At most `limit` wait; beyond, the oldest is dropped."""
+
+    def __init__(self, history: OdomHistory, limit: int = 100):
+        self.history, self.limit = history, limit
+        self.items: list[tuple[int, object]] = []
+
+    @property
+    def newest(self) -> int | None:
+        return self.items[-1][0] if self.items else None
+
+    def add(self, stamp_ns: int, item) -> bool:
+        """Hold an input; False when that dropped the oldest one waiting."""
+        self.items.append((stamp_ns, item))
+        if len(self.items) > self.limit:
+            self.items.pop(0)
+            return False
+        return True
+
+    def ready(self):
+        """(stamp, item, odometry pose at stamp or None) of each input odometry has passed, in order."""
+        latest = self.history.latest
+        while self.items and latest is not None and self.items[0][0] <= latest:
+            stamp, item = self.items.pop(0)
+            yield stamp, item, self.history.at(stamp)

@@ -22,16 +22,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from ...geometry.frames import LASER_MOUNT, scan_points
-from ...geometry.odometry_history import OdomHistory
+from ...geometry.odometry_history import OdomHistory, WaitingForOdometry
 from ...geometry.se2 import relative
 from ...parameters.declare import param
 from ...schemas import MessageError
 from ...schemas.messages import Header, LaserScan, Odometry, Pose2D, Twist
 from ..runtime.node import NS_PER_S, Node
 from .laser_odometry import FIRST_SCAN, LaserOdometry, LaserOdometryParams, warm_up
-
-MAX_PENDING_SCANS = 100     # scans waiting for odometry; beyond this the oldest are dropped
-
 
 @dataclass(frozen=True)
 class LaserOdometryNodeParams(LaserOdometryParams):
@@ -54,7 +51,7 @@ class LaserOdometryNode(Node):
         self.core = LaserOdometry(p)
         self.laser = np.array([p.laser_x, p.laser_y, p.laser_yaw])
         self.odom = OdomHistory(round(p.odom_history_s * NS_PER_S))
-        self.scans: list[tuple[int, np.ndarray]] = []       # (stamp, end points in the robot frame) waiting for odometry
+        self.scans = WaitingForOdometry(self.odom)          # each scan's end points in the robot frame
         self.last: tuple[int, np.ndarray, np.ndarray] | None = None   # stamp, pose, covariance published last
         self.keys_in = {name: self.keys.resolve(name) for name in (p.odom_topic, "scan")}
         self.odom_pub = self.publisher("odom_laser")
@@ -72,13 +69,11 @@ class LaserOdometryNode(Node):
 
     def on_scan(self, msg: LaserScan) -> None:
         stamp = msg.header.stamp_ns
-        newest = self.scans[-1][0] if self.scans else self.last[0] if self.last is not None else None
+        newest = self.scans.newest if self.scans.newest is not None else self.last[0] if self.last is not None else None
         if newest is not None and stamp <= newest:
             self._reject("scan", f"stamp {stamp} ns is not after the previous scan's, {newest} ns", "LaserScan")
             return
-        self.scans.append((stamp, scan_points(msg, self.laser, inf_is_valid=False)))
-        if len(self.scans) > MAX_PENDING_SCANS:
-            self.scans.pop(0)
+        if not self.scans.add(stamp, scan_points(msg, self.laser, inf_is_valid=False)):
             self.counters["scans_dropped_waiting_for_odometry"] += 1
         self._process_waiting_scans()   # odometry at the scan's stamp may have come first
 
@@ -87,10 +82,7 @@ class LaserOdometryNode(Node):
         self.reject(key, MessageError(problem, type_name=type_name, key=key))
 
     def _process_waiting_scans(self) -> None:
-        latest = self.odom.latest
-        while self.scans and latest is not None and self.scans[0][0] <= latest:
-            stamp, points = self.scans.pop(0)
-            odom = self.odom.at(stamp)
+        for stamp, points, odom in self.scans.ready():
             if odom is None:
                 self.counters["scans_before_odometry"] += 1
             else:

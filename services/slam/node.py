@@ -30,15 +30,12 @@ import numpy as np
 
 from ...schemas import MessageError
 from ...schemas.messages import Header, LaserScan, OccupancyGrid, Odometry, Pose2D, PoseWithCovariance, Transform
-from ...geometry.odometry_history import OdomHistory
+from ...geometry.odometry_history import OdomHistory, WaitingForOdometry
 from ..runtime.node import NS_PER_S, Node
 from .hector import HectorParams, HectorSlam
 from .params import SlamParams
 from .rbpf import Rbpf
 from ...parameters.declare import param
-
-MAX_PENDING_SCANS = 100     # scans waiting for odometry; beyond this the oldest are dropped
-
 
 METHODS = ("rbpf", "hector")
 
@@ -67,7 +64,7 @@ class SlamNode(Node):
         self.uses_odometry = p.method == "rbpf" or p.use_tf_pose_start_estimate
         self.n_beams = 0
         self.odom = OdomHistory(round(p.odom_history_s * NS_PER_S))
-        self.scans: list[tuple[int, np.ndarray]] = []           # waiting for odometry past their stamp
+        self.scans = WaitingForOdometry(self.odom)               # ranges waiting for odometry past their stamp
         self.last_pose: PoseWithCovariance | None = None
         self._map: tuple[int, OccupancyGrid] | None = None      # (filter updates, map) of the last map made
         self.map_pub = self.publisher("map")
@@ -108,9 +105,7 @@ class SlamNode(Node):
         if not self.uses_odometry:
             self._update(msg.header.stamp_ns, None, np.asarray(msg.ranges, np.float64))
             return
-        self.scans.append((msg.header.stamp_ns, np.asarray(msg.ranges, np.float64)))
-        if len(self.scans) > MAX_PENDING_SCANS:
-            self.scans.pop(0)
+        if not self.scans.add(msg.header.stamp_ns, np.asarray(msg.ranges, np.float64)):
             self.counters["scans_dropped_waiting_for_odometry"] += 1
         self._process_waiting_scans()   # odometry at the scan's stamp may have come first
 
@@ -128,10 +123,7 @@ class SlamNode(Node):
         self.reject(key, MessageError(problem, type_name=type_name, key=key))
 
     def _process_waiting_scans(self) -> None:
-        latest = self.odom.latest
-        while self.scans and latest is not None and self.scans[0][0] <= latest:
-            stamp, ranges = self.scans.pop(0)
-            odom = self.odom.at(stamp)
+        for stamp, ranges, odom in self.scans.ready():
             if odom is None:
                 self.counters["scans_before_odometry"] += 1
             else:
