@@ -27,6 +27,7 @@ BENCHES: dict[str, str] = {
     "cpu": "omninav.bench.service_cpu",
     "lockstep": "omninav.bench.determinism",
     "people": "omninav.bench.people",
+    "shove": "omninav.bench.shove",
 }
 
 

@@ -69,6 +69,11 @@ PARAMS = REPO / "compose" / "params"
 SHIPPED_MAPS = {"room": REPO / "compose" / "maps" / "room.yaml"}   # shipped world name -> its map file
 MAP_RESOLUTION = 0.05
 LOCALIZATIONS = ("amcl", "slam", "truth", "odom")
+# the odometry the stack runs on: the chassis's own (its wheels, or follower wheels and gyro), or
+# wheels, gyro and laser odometry fused (services/ekf, services/laser_odometry: a push or a slip the
+# wheels miss is seen); auto fuses where nothing else would see one - without a map, or on a robot
+# without follower wheels (issue 36)
+ODOMETRIES = ("auto", "chassis", "fused")
 # the navigator's arrival check, tighter than move_base's 0.10 m / 0.05 rad: the local planner's
 # final approach stops within 0.02 m / 0.02 rad, and a mission aims for 5 cm and 2°; success only
 # once nearly stopped, so the commands still on their way (about 0.1–0.3 s) cannot carry it past;
@@ -260,18 +265,26 @@ def robot_params(profile: Profile | None) -> dict[str, dict]:
     return out
 
 
+def fuses_odometry(odometry: str, localization: str, followers: bool) -> bool:
+    """Whether a mission runs on fused odometry (ODOMETRIES); the simulator's truth needs none."""
+    return odometry == "fused" or (odometry == "auto" and localization != "truth"
+                                   and (localization == "odom" or not followers))
+
+
 def compose_for(world: World, world_file: Path, map_file: Path, drive: str, localization: str, recording: Path,
                 seed: int, rate: float, robot: str, profile: Profile | None = None,
-                sim_dt: float | None = None, state_dir: Path | None = None, controller: str | None = None) -> dict:
+                sim_dt: float | None = None, state_dir: Path | None = None, controller: str | None = None,
+                odometry: str = "auto") -> dict:
     """The compose mapping of a mission (absolute paths: `up` may run anywhere). `profile`: the
     robot (cli/profile.py), else the world's robot with the sample parameters. With localization
     `odom` there is no map: no map_server, no localizer, and a global costmap of the robot's own
     scans (map→odom stays the start pose). `sim_dt`: the simulator's step (default its own).
     `state_dir`: where the localizer, chassis and navigator keep what they resume from after a restart.
-    `controller`: the local planner's (default its own, DWA)."""
+    `controller`: the local planner's (default its own, DWA). `odometry`: ODOMETRIES."""
     x, y, yaw = (float(v) for v in world.robot.start)
     start = {"initial_pose_x": x, "initial_pose_y": y, "initial_pose_a": yaw}
     followers = profile is None        # the world's robot has follower wheels; a profile's says what it has
+    fused = fuses_odometry(odometry, localization, followers)
     common = profile.costmap_common_params if profile is not None else PARAMS / "costmap_common_params.yaml"
     own_files = {"global": PARAMS / ("costmap_global_mapless_params.yaml" if localization == "odom" else
                                      "costmap_global_movers_params.yaml"),
@@ -284,9 +297,11 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "sim", "service": "sim", "params": {"world": str(world_file), "drive": drive, "seed": seed,
                                                      "rate": rate, **({"dt": sim_dt} if sim_dt else {})}},
         {"name": "chassis", "service": "chassis",
-         "params": {"drive": drive, **(FOLLOWER_ODOMETRY if followers else {})}},
+         "params": {"drive": drive, **(FOLLOWER_ODOMETRY if followers else {}), "fused_odometry": fused}},
         {"name": "lidar", "service": "lidar", "params": {"world": str(world_file)}},
     ]
+    if fused:
+        services += [{"name": "laser_odometry", "service": "laser_odometry"}, {"name": "ekf", "service": "ekf"}]
     if localization in ("amcl", "truth"):      # slam serves its own map; odom has none
         services.append({"name": "map_server", "service": "map_server",
                          "params": {"yaml_filename": str(map_file), "publish_period_s": 1.0}})
@@ -342,6 +357,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                              "odom (no map: odometry alone, costmaps from the robot's own scans)")
     parser.add_argument("--profile", help="a robot profile: a shipped one's name (jackal) or a profile file "
                                           "(default: the world's robot)")
+    parser.add_argument("--odometry", choices=ODOMETRIES, default="auto",
+                        help="chassis (its wheels, or follower wheels and gyro), fused (wheels, gyro and laser "
+                             "odometry in an EKF, which sees pushes and slips), or auto (default: fused without a "
+                             "map or without follower wheels)")
     parser.add_argument("--controller", choices=CONTROLLERS,
                         help="the local planner's controller (default its own: dwa; teb plans among the tracked people)")
     parser.add_argument("--record", metavar="FILE", help="the recording (default OUT/run.mcap)")
@@ -625,7 +644,7 @@ def main(args: argparse.Namespace) -> int:
     rate = args.rate if args.rate is not None else 0.0 if args.lockstep or args.in_process else 1.0
     compose = compose_for(world, world_file, map_file, drive, args.localization, recording, args.seed,
                           rate, args.robot, profile, sim_dt=args.sim_dt, state_dir=state_dir,
-                          controller=args.controller)
+                          controller=args.controller, odometry=args.odometry)
     if args.composed:
         compose["services"] = in_containers(compose["services"], args.composed)
     compose_file = out / "compose.yaml"

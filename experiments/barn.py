@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..cli.navigate import compose_for
+from ..cli.navigate import ODOMETRIES, compose_for
 from ..cli.profile import load_profile
 from ..schemas.codec import decode
 from ..schemas.keys import KeyLayout, type_for_key
@@ -139,31 +139,32 @@ class WorldResult(Verdict):
     world: int
 
 
-def barn_mission(world: World, seed: int, controller: str | None = None) -> list[dict]:
+def barn_mission(world: World, seed: int, controller: str | None = None, odometry: str = "auto") -> list[dict]:
     """The services of a BARN run: the Jackal, no map, goal from the rules; `controller` the local
-    planner's (default its own)."""
+    planner's (default its own), `odometry` navigate's ODOMETRIES."""
     profile = load_profile(PROFILE)
     world_file = Path(world.source).resolve()
     return compose_for(world, world_file, None, profile.drive, "odom", None, seed, 1.0, ROBOT, profile,
-                       sim_dt=SIM_DT, controller=controller)["services"]
+                       sim_dt=SIM_DT, controller=controller, odometry=odometry)["services"]
 
 
-def drive_to_goal(world: World, seed: int, start, goal, controller: str | None = None) -> tuple[ArrivalWatch, LockstepRun]:
+def drive_to_goal(world: World, seed: int, start, goal, controller: str | None = None,
+                  odometry: str = "auto") -> tuple[ArrivalWatch, LockstepRun]:
     """One run as the challenge runs it: the Jackal's stack driven in lockstep from start to goal,
     ended once the robot is within SUCCESS_RADIUS of the goal or out of time; the watch knows when
     it moved and when it arrived."""
     watch = ArrivalWatch(start, goal, ROBOT)
-    run = run_mission(barn_mission(world, seed, controller), world, np.array([goal]),
+    run = run_mission(barn_mission(world, seed, controller, odometry), world, np.array([goal]),
                       timeout_s=TIME_LIMIT_S + START_WAIT_S,
                       robot=ROBOT, max_sim_s=START_S + TIME_LIMIT_S + START_WAIT_S, watch=watch.see,
                       until=lambda: watch.done)
     return watch, run
 
 
-def run_world(world_file: Path, path_file: Path, seed: int) -> WorldResult:
+def run_world(world_file: Path, path_file: Path, seed: int, odometry: str = "auto") -> WorldResult:
     """One BARN run in lockstep, in this process."""
     world = load_world(world_file)
-    watch, run = drive_to_goal(world, seed, START, GOAL)
+    watch, run = drive_to_goal(world, seed, START, GOAL, odometry=odometry)
     collision = bool(run.summary.collisions) or run.summary.min_clearance_m <= 0.0
     verdict = judge(watch, collision, optimal_time(np.load(path_file)), run.summary.false_successes > 0)
     return WorldResult(world=world_number(world_file), **asdict(verdict))
@@ -197,9 +198,9 @@ def world_number(path: Path) -> int:
 
 # ---------------------------------------------------------------- many worlds
 
-def _run_one(job: tuple[str, str, int]) -> WorldResult:
-    world_file, path_file, seed = job
-    return run_world(Path(world_file), Path(path_file), seed)
+def _run_one(job: tuple[str, str, int, str]) -> WorldResult:
+    world_file, path_file, seed, odometry = job
+    return run_world(Path(world_file), Path(path_file), seed, odometry)
 
 
 def parse_range(text: str) -> range:
@@ -248,6 +249,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--real-time", action="store_true",
                         help="also run every world on the wall clock, every service its own process, one "
                              "world at a time, and report it beside the lockstep figure")
+    parser.add_argument("--odometry", choices=ODOMETRIES, default="auto",
+                        help="navigate's --odometry for the lockstep runs (default auto: fused, BARN has no map)")
 
 
 def say_result(say, result: WorldResult, how: str = "") -> None:
@@ -263,13 +266,13 @@ def halves(results: list[WorldResult]) -> dict:
             "odd": tally([r for r in results if r.world % 2 == 1])}
 
 
-def run_real_time(jobs: list[tuple[str, str, int]], say) -> tuple[list[WorldResult], bool]:
+def run_real_time(jobs: list[tuple[str, str, int, str]], say) -> tuple[list[WorldResult], bool]:
     """The runs on the wall clock, one at a time (each has the machine to itself, as a Gazebo run
     with its stack has), in a fresh folder under out/; (results, interrupted)."""
     out = REPO / "out" / time.strftime("barn-real-time-%Y%m%d-%H%M%S")
     results = []
     try:
-        for world_file, path_file, seed in jobs:
+        for world_file, path_file, seed, _ in jobs:
             number = world_number(Path(world_file))
             results.append(run_world_live(Path(world_file), Path(path_file), seed, out / f"world_{number}-{seed}"))
             say_result(say, results[-1], "real time ")
@@ -293,7 +296,7 @@ def main(args: argparse.Namespace) -> int:
     if args.runs < 1 or args.workers < 1:
         raise BarnError("--runs and --workers must be at least 1")
     numbers = [n for n in parse_range(args.range) if args.only == "all" or n % 2 == (args.only == "odd")]
-    jobs = jobs_for(args.worlds, numbers, args.runs)
+    jobs = [(*job, args.odometry) for job in jobs_for(args.worlds, numbers, args.runs)]
     say = (lambda text: print(text, file=sys.stderr, flush=True)) if args.json else print
     results: list[WorldResult] = []
     context = multiprocessing.get_context("spawn")      # numba and the runtime start clean in each worker
@@ -307,7 +310,7 @@ def main(args: argparse.Namespace) -> int:
             interrupted = True
             pool.terminate()
     figures = {"interrupted": interrupted, **halves(results), "reference": REFERENCE,
-               "range": args.range, "only": args.only, "runs_per_world": args.runs,
+               "range": args.range, "only": args.only, "runs_per_world": args.runs, "odometry": args.odometry,
                "worlds": [asdict(r) for r in results]}
     if args.real_time and not interrupted:
         live, interrupted = run_real_time(jobs, say)

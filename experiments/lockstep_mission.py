@@ -108,14 +108,16 @@ def run_mission(services: list[dict], world: World, goals: np.ndarray, *, timeou
                 recording: Path | None = None, max_sim_s: float | None = None,
                 watch: Callable[[str, bytes, int], None] | None = None,
                 progress: Callable[[str], None] | None = None, until: Callable[[], bool] | None = None,
-                meter: CpuMeter | None = None) -> LockstepRun:
+                meter: CpuMeter | None = None,
+                after_step: Callable[[dict[str, Node]], None] | None = None) -> LockstepRun:
     """Drive the goals through the stack in lockstep and score the mission against the truth.
 
     max_sim_s bounds the whole run (default: every goal's timeout, the cancels and the settling);
     `watch` sees every published (key, payload, stamp_ns), as InProcessRunner.tap does; `progress`
     hears of each service as it starts; `until` ends the run early once it turns true (a benchmark
     that judges arrival itself); `meter` is charged with the CPU time of each service's work
-    (InProcessRunner: `omninav bench cpu`).
+    (InProcessRunner: `omninav bench cpu`); `after_step` is handed the mission's nodes by name after
+    every step (a test that shoves the simulated robot).
     """
     nodes = mission_nodes(services, robot, progress)
     sequencer = GoalSequencer(goals, timeout_s, robot=robot)
@@ -130,7 +132,10 @@ def run_mission(services: list[dict], world: World, goals: np.ndarray, *, timeou
     sim = nodes["sim"]
     limit_s = max_sim_s or START_S + len(goals) * (timeout_s + CANCEL_WAIT_S) + SETTLE_S
     try:
-        done = (lambda: sequencer.finished) if until is None else (lambda: sequencer.finished or until())
+        def done() -> bool:
+            if after_step is not None:
+                after_step(nodes)
+            return sequencer.finished or (until is not None and until())
         runner.run_until(done, math.ceil(limit_s / sim.params.dt))
         runner.close()
     finally:

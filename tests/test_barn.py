@@ -96,7 +96,9 @@ def test_the_jackal_profile_sets_the_robot_of_every_service(tmp_path):
     assert services["local_planner"]["params"]["max_vel_x"] == 2.0
     sim = SimNodeParams(**services["sim"]["params"])
     wheels = sim.chassis_params()
-    assert {**sim.chassis, "drive": profile.drive} == services["chassis"]["params"]   # the same wheels
+    # the same wheels; without a map the chassis's odometry goes to the fusion (issue 36)
+    assert {**sim.chassis, "drive": profile.drive, "fused_odometry": True} == services["chassis"]["params"]
+    assert {"laser_odometry", "ekf"} <= set(services)
     monitor = services["collision_monitor"]["params"]                     # and the monitor knows how they follow
     assert (monitor["acc_lim_x"], monitor["acc_lim_theta"]) == (sim.chassis["acc_lim_x"], sim.chassis["acc_lim_theta"])
     assert wheels.wheel_radius * wheels.max_wheel_speed >= 2.0             # the simulated wheels reach 2 m/s
