@@ -202,7 +202,8 @@ def wheels(stamp_ns, x=0.0):
 def test_the_node_publishes_odom_laser_at_each_scans_stamp_once_odometry_has_passed_it(topic):
     """Scans at 10 Hz, wheel odometry at 20 Hz saying the robot stands at x = 1 while it is pushed
     0.1 m a scan along x: each scan comes out once odometry stamped at or after it has come, stamped
-    with the scan, in the odom frame, the first at the wheels' pose, the others pushed on."""
+    with the scan, in the odom frame, pushed on from the wheels' pose at the first (which starts the
+    map and, matched against nothing, is not published)."""
     node = LaserOdometryNode(LaserOdometryNodeParams(odom_topic=topic))
     out = []
     node.odom_pub.sink = lambda pub, payload, stamp: out.append(decode(payload, Odometry))
@@ -212,15 +213,47 @@ def test_the_node_publishes_odom_laser_at_each_scans_stamp_once_odometry_has_pas
     for k in range(5):
         stamp = (k + 1) * SCAN_NS
         feed(node, "scan", scan_at(ROOM, start + [0.1 * k, 0.0, 0.0], rng, stamp))
-        assert len(out) == k          # waits for odometry past the scan's stamp ...
+        assert len(out) == max(k - 1, 0)      # waits for odometry past the scan's stamp ...
         feed(node, topic, wheels(stamp + SCAN_NS // 2, 1.0))
-        assert len(out) == k + 1      # ... then publishes it
-    assert [m.header.stamp_ns for m in out] == [(k + 1) * SCAN_NS for k in range(5)]
+        assert len(out) == k                  # ... then publishes it (but the first)
+    assert [m.header.stamp_ns for m in out] == [(k + 1) * SCAN_NS for k in range(1, 5)]
     assert all((m.header.frame_id, m.child_frame_id) == ("odom", "base_link") for m in out)
-    assert out[0].pose.x == 1.0 and out[0].pose.y == 0.0
+    assert out[0].pose.x == pytest.approx(1.1, abs=0.02) and out[0].pose.y == pytest.approx(0.0, abs=0.02)
     assert out[-1].pose.x == pytest.approx(1.4, abs=0.02)
     assert out[-1].twist.linear_x == pytest.approx(1.0, abs=0.2)          # 0.1 m a scan, 10 Hz
-    assert out[-1].pose_covariance[0, 0] < 1e-3 < out[0].pose_covariance[0, 0]
+    assert out[-1].pose_covariance[0, 0] < 1e-3
     assert node.counters["matches"] == 4 and node.counters["failed_matches"] == 0
     feed(node, "scan", scan_at(ROOM, start, rng, 2 * SCAN_NS))          # back in time: refused, counted
     assert node.counters[f"malformed/{node.keys.resolve('scan')}"] == 1
+
+
+def test_end_points_beyond_the_window_are_not_counted_against_a_match():
+    """A hall larger than the local map (walls 14-30 m off, a 25.6 m window): the far walls fall off
+    the grid at every pose alike; the near ones still match, and no scan is refused for the far ones."""
+    hall = world_from_mapping({"bounds": [60.0, 40.0], "robot": {"start": [30.0, 20.0, 0.0]},
+                               "circles": [{"center": [32.0 + 2.0 * i, 18.0 + (i % 2) * 4.0], "radius": 0.3}
+                                           for i in range(4)]}, "hall.yaml")
+    lidar = LidarParams(range_max=40.0)
+    core, rng, start = LaserOdometry(), np.random.default_rng(0), np.array([30.0, 20.0, 0.0])
+    results = []
+    for k in range(12):
+        truth = start + [0.1 * k, 0.0, 0.0]
+        points = scan_points(make_scan(lidar, cast(hall, truth, None, lidar, rng), 0), (0.0, 0.0, 0.0), False)
+        results.append(core.step(k * SCAN_NS, points, [0.1 * k, 0.0, 0.0]))
+    assert results[0].failure == FIRST_SCAN and all(r.ok for r in results[1:]), [r.failure for r in results]
+    assert all(r.cost < 0.1 for r in results[1:])
+
+
+def test_a_map_that_no_longer_fits_the_world_starts_afresh_after_refusals_in_a_row():
+    """The room's walls and furniture moved (another world): every match is refused until, after
+    restart_after_refusals of them, the map starts again from the wheels' guess and matches again."""
+    params = LaserOdometryParams(restart_after_refusals=3)
+    moved = world_from_mapping({"bounds": [11.0, 9.0], "origin": [-2.0, -1.5], "robot": {"start": [2.0, 2.0, 0.0]},
+                                "boxes": [{"center": [3.0, 4.0], "size": [2.0, 0.4]}, {"center": [6.0, 2.0], "size": [0.4, 2.0]}],
+                                "circles": [{"center": [5.0, 1.0], "radius": 0.4}]}, "moved.yaml")
+    core, rng, pose = LaserOdometry(params), np.random.default_rng(0), np.array([3.0, 2.0, 0.0])
+    steps = [core.step(k * SCAN_NS, scan_points(scan_at(ROOM if k < 2 else moved, pose, rng), (0.0, 0.0, 0.0), False),
+                       np.zeros(3)) for k in range(9)]
+    failures = [r.failure for r in steps]
+    assert failures[:2] == [FIRST_SCAN, ""] and set(failures[2:5]) <= {COST_TOO_HIGH, DIVERGED}
+    assert failures[5] == FIRST_SCAN and all(r.ok for r in steps[6:]) and core.restarts == 1

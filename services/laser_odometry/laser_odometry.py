@@ -8,12 +8,17 @@ laser pose carried by the wheels' motion since the last scan (so ordinary drivin
 also from the last laser pose and from the last laser motion repeated (hector's starts: a push the
 wheels did not see, and one that goes on); the match of the lowest cost is kept.
 
-A match is refused — flagged, the pose carried by the wheels' motion, the map left alone — when the
-scan has fewer than min_scan_points end points in range, when its cost per end point (the mean of
-(1 − M)², 0 on certainly occupied cells) exceeds max_mismatch, or when it moved the pose more than
-max_correction_xy / max_correction_yaw away from the wheels' guess (diverged: wheels are not that
-wrong within one scan). A refused match still gives a pose, with the covariance of knowing nothing
-from the scan (unmatched_std_*), so that a fusion keeps a message per scan and weighs it at nothing.
+Only end points that fall inside the local map's window (at the wheels' guess, a cell in from its
+edge) are matched: off the grid a point reads "free" and would count against every pose alike (in
+an open arena the far walls lie beyond the window). A match is refused — flagged, the pose carried
+by the wheels' motion, the map left alone — when the scan has fewer than min_scan_points such end
+points, when its cost per end point (the mean of (1 − M)², 0 on certainly occupied cells) exceeds
+max_mismatch, or when it moved the pose more than max_correction_xy / max_correction_yaw away from
+the wheels' guess (diverged: wheels are not that wrong within one scan). A refused match says
+nothing of where the robot is (the node publishes nothing for it: the wheels' pose again, however
+large its covariance, would be fused at every scan and pull a fusion back to the wheels it doubts).
+After restart_after_refusals refusals in a row the map no longer describes the world around the
+robot (obstacles that moved, a robot carried off): it starts afresh at the wheels' guess.
 
 The covariance is Gauss-Newton's, of the match against the local map: hector's H with each end
 point's map gradient replaced by the ideal one of the surface under it (its normal from its
@@ -73,6 +78,7 @@ class LaserOdometryParams(Parameters):
     max_mismatch: float = param(0.2, gt=0)                   # cost per end point (0 perfect, 1 every point on free space)
     max_correction_xy: float = param(0.6, gt=0)              # m from the wheels' guess
     max_correction_yaw: float = param(0.5, gt=0)             # rad from the wheels' guess
+    restart_after_refusals: int = param(10, ge=1)            # refused matches in a row before the map starts afresh
     # the covariance
     covariance_scale: float = param(20.0, gt=0)              # × Gauss-Newton's cost · H⁻¹ (end points are not independent)
     normal_neighbour_dist: float = param(0.5, gt=0)          # m: end points this near lie on one surface
@@ -118,6 +124,8 @@ class LaserOdometry:
         self.params = params
         self.mapper: HectorMapper | None = None
         self.pose: np.ndarray | None = None
+        self.refusals = 0                                # refused matches in a row
+        self.restarts = 0                                # maps started afresh after refusals
         self._odometry: np.ndarray | None = None         # the wheels' pose at the last scan
         self._prior = np.diag([params.unmatched_std_xy ** -2, params.unmatched_std_xy ** -2, params.unmatched_std_yaw ** -2])
         self.unmatched = np.diag([params.unmatched_std_xy ** 2, params.unmatched_std_xy ** 2, params.unmatched_std_yaw ** 2])
@@ -125,15 +133,13 @@ class LaserOdometry:
     def step(self, stamp_ns: int, points: np.ndarray, odometry_pose) -> LaserOdometryResult:
         """One scan (`stamp_ns` unused: the core keeps no time; the node's twist does)."""
         odometry = np.asarray(odometry_pose, np.float64)[:3].copy()
-        if self.mapper is None:
-            self.mapper = HectorMapper(self.params.hector_params(), start=odometry)
-        mapper = self.mapper
-        points = mapper.in_range(points)
-        if self._odometry is None:
-            guess = odometry
-        else:
-            guess = compose(self.pose, relative(self._odometry, odometry))
+        guess = odometry if self._odometry is None else compose(self.pose, relative(self._odometry, odometry))
         self._odometry = odometry
+        if self.mapper is None or self.refusals >= self.params.restart_after_refusals:
+            self.restarts += self.mapper is not None
+            self.mapper, self.refusals = HectorMapper(self.params.hector_params(), start=guess), 0
+        mapper = self.mapper
+        points = self.in_window(mapper.in_range(points), guess)
         if len(points) < self.params.min_scan_points:
             return self._refuse(guess, TOO_FEW_POINTS, len(points))
         if mapper.updates == 0:                          # the first scan with enough points starts the map
@@ -153,6 +159,16 @@ class LaserOdometry:
         correction[2] = math.remainder(correction[2], math.tau)
         pose = guess + self.constrained(information) @ correction
         return self._accept(pose, points, (covariance + covariance.T) / 2, cost)
+
+    def in_window(self, points: np.ndarray, pose) -> np.ndarray:
+        """The end points (robot frame) that fall inside the finest grid, a cell in from its edge,
+        with the robot at `pose`."""
+        info = self.mapper.infos[0]
+        x, y, yaw = (float(v) for v in pose)
+        c, s = math.cos(yaw), math.sin(yaw)
+        u = (x + c * points[:, 0] - s * points[:, 1] - info.origin.x) / info.resolution
+        v = (y + s * points[:, 0] + c * points[:, 1] - info.origin.y) / info.resolution
+        return points[(u >= 1) & (v >= 1) & (u < info.width - 1) & (v < info.height - 1)]
 
     def constrained(self, information: np.ndarray) -> np.ndarray:
         """The projection onto the directions of the pose the match fixes better than degenerate_std
@@ -185,7 +201,7 @@ class LaserOdometry:
         return rows.T @ rows / (p.map_resolution ** 2 * p.covariance_scale * max(cost, 1e-6))
 
     def _accept(self, pose, points, covariance, cost) -> LaserOdometryResult:
-        mapper = self.mapper
+        mapper, self.refusals = self.mapper, 0
         mapper.place(pose, points)
         if mapper.moved():
             mapper.integrate(filled(points, self.params.normal_neighbour_dist, self.params.map_resolution / 2))
@@ -195,6 +211,7 @@ class LaserOdometry:
         return LaserOdometryResult(self.pose.copy(), covariance, True, "", float(cost), len(points), recentred)
 
     def _refuse(self, guess, failure: str, points: int, cost: float = 0.0) -> LaserOdometryResult:
+        self.refusals += 1
         self.mapper.place(guess)
         self.pose = self.mapper.pose.copy()
         return LaserOdometryResult(self.pose.copy(), self.unmatched.copy(), False, failure, float(cost), points)

@@ -7,12 +7,13 @@ odometry stamped ≥ t has come (rule 2 of the determinism rules), with the odom
 interpolated between the two messages around it (OdomHistory, as slam and the localizer do); its
 end points are placed on the robot by the laser's mount (laser_x, laser_y, laser_yaw).
 
-Output, for every scan processed: `odom_laser` (Odometry stamped with the scan, frame_id odom_frame,
+Output, for every scan matched: `odom_laser` (Odometry stamped with the scan, frame_id odom_frame,
 child base_frame): the pose in the odometry frame (the wheel odometry's pose at the first scan),
-pose_covariance (the match's; for a refused match or the first scan, unmatched_std_* squared — the
-message still comes, so a fusion synced on it never waits, and weighs it at about nothing), and the
-twist from the previous published pose (base_link, with their covariances summed over dt²).
-Counters: matches, failed_matches and failed_matches/<why>, map_recentres.
+pose_covariance (the match's), and the twist from the previous published pose (base_link, with
+their covariances summed over dt²). The first scan and a refused match publish nothing: a fusion
+takes laser odometry as it comes (services/ekf holds it as sporadic), and the wheels' pose
+republished at every scan would pull it back to the wheels, however large its covariance.
+Counters: matches, failed_matches and failed_matches/<why>, map_recentres, map_restarts.
 """
 from __future__ import annotations
 
@@ -96,6 +97,9 @@ class LaserOdometryNode(Node):
             self.counters["failed_matches"] += 1
             self.counters[f"failed_matches/{result.failure}"] += 1
         self.counters["map_recentres"] += int(result.recentred)
+        self.counters["map_restarts"] = self.core.restarts
+        if not result.ok:
+            return      # the wheels' pose again says nothing a fusion may take (laser_odometry.py)
         twist, twist_covariance = np.zeros(3), result.covariance.copy()
         if self.last is not None:
             dt = (stamp - self.last[0]) / NS_PER_S
