@@ -321,7 +321,8 @@ def compose_for(world: World, world_file: Path, map_file: Path, drive: str, loca
         {"name": "collision_monitor", "service": "collision_monitor",
          "params": {"chassis_period_s": sim_dt} if sim_dt else {}},
         {"name": "navigator", "service": "navigator",
-         "params": {**start, **NAVIGATOR, **(MAPLESS_NAVIGATOR if localization == "odom" else {})}},
+         "params": {**start, **NAVIGATOR, **(MAPLESS_NAVIGATOR if localization == "odom" else {}),
+                    "use_odometry_doubt": localization == "odom"}},
     ]
     overrides, resume = robot_params(profile), state_files(state_dir)
     for service in services:

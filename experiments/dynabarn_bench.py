@@ -18,6 +18,7 @@ import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from ..cli.navigate import ODOMETRIES
 from ..services.local_planner.control import CONTROLLERS, DEFAULT_CONTROLLER
 from ..services.runtime.errors import exits_2_on_user_error
 from ..sim.world import load_world
@@ -39,15 +40,16 @@ class DynaBarnResult(Verdict):
     controller: str = DEFAULT_CONTROLLER
 
 
-def run_seed(job: tuple[str, int, str, str]) -> DynaBarnResult:
-    """One world: draw it, write it into the folder, drive it with the controller, judge it."""
-    difficulty, seed, folder, controller = job
+def run_seed(job: tuple) -> DynaBarnResult:
+    """One world (difficulty, seed, folder, controller[, odometry]): draw it, write it into the
+    folder, drive it with the controller on that odometry (navigate's ODOMETRIES), judge it."""
+    difficulty, seed, folder, controller, *odometry = job
     # a file of its own per controller: the same world's runs go at once on two workers
     own = "" if controller == DEFAULT_CONTROLLER else f"-{controller}"
     world_file = Path(folder) / f"{KIND}-{difficulty}-{seed}{own}.yaml"
     world_file.write_text(world_text(generate_world(KIND, seed, difficulty)))
     world = load_world(world_file)
-    watch, run = drive_to_goal(world, seed, world.robot.start, world.goals[0], controller)
+    watch, run = drive_to_goal(world, seed, world.robot.start, world.goals[0], controller, *odometry)
     sim = run.nodes["sim"].sim
     verdict = judge(watch, sim.collisions > 0, OT_S, run.summary.false_successes > 0)
     return DynaBarnResult(**asdict(verdict), difficulty=difficulty, seed=seed,
@@ -93,6 +95,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--real-time", action="store_true",
                         help="also run every world on the wall clock, every service its own process, one world "
                              "at a time, and report it beside the lockstep figure")
+    parser.add_argument("--odometry", choices=ODOMETRIES, default="auto",
+                        help="navigate's --odometry for the lockstep runs (default auto: fused, there is no map)")
     parser.add_argument("--controller", nargs="+", choices=CONTROLLERS, default=[DEFAULT_CONTROLLER],
                         help="the local planner's controller(s): each world is driven with each, reported side by "
                              "side (default dwa; real time runs the default only)")
@@ -109,11 +113,11 @@ def main(args: argparse.Namespace) -> int:
     controllers = list(dict.fromkeys(args.controller))
     with tempfile.TemporaryDirectory(prefix="dynabarn-") as scratch:
         folder = str(args.out or scratch)
-        jobs = [(d, seed, folder, c) for d in difficulties for seed in range(args.seed, args.seed + args.count)
-                for c in controllers]
+        jobs = [(d, seed, folder, c, args.odometry) for d in difficulties
+                for seed in range(args.seed, args.seed + args.count) for c in controllers]
         results = run_in_workers(run_seed, jobs, args.workers, None if args.json else lambda r: print(run_line(r), flush=True))
         live = []
-        for difficulty, seed, _, controller in jobs if args.real_time else ():
+        for difficulty, seed, _, controller, _ in jobs if args.real_time else ():
             if controller == DEFAULT_CONTROLLER:
                 live.append(run_seed_live(difficulty, seed, Path(folder)))
                 if not args.json:
@@ -124,6 +128,7 @@ def main(args: argparse.Namespace) -> int:
     live_by_difficulty = {d: figures([r for r in live if r.difficulty == d]) for d in difficulties} if live else None
     if args.json:
         print(json.dumps({"seeds": [args.seed, args.seed + args.count - 1], "ot_s": OT_S, "controller": controllers[0],
+                          "odometry": args.odometry,
                           "difficulties": by_difficulty, "by_controller": by_controller,
                           "runs": [asdict(r) for r in results],
                           **({"real_time": {"difficulties": live_by_difficulty, "runs": [asdict(r) for r in live]}}

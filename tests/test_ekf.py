@@ -65,6 +65,25 @@ def test_a_push_while_standing_is_doubted_and_followed(distance):
     assert not verdicts[-1].doubtful        # the sources agree again for longer than doubt_clear_time
 
 
+def test_only_the_scans_clear_a_doubt_and_not_once_their_track_broke():
+    """The wheels, gyro and IMU agree again as soon as a shove is over; only laser odometry measures
+    what it did. Without laser poses after the shove the doubt stays; with a laser track broken
+    (matches refused for 0.5 s) during the doubt it stays for good; unbroken, it clears."""
+    s = scene(SHOVE_START + 4.0, shove(1.0), lambda t, v: np.zeros(3))
+    until = round((SHOVE_START + 0.2) * 1e9)
+    outcomes = {}
+    for name, lasers in (("all", s.lasers), ("none after", [m for m in s.lasers if m.header.stamp_ns < until]),
+                         ("gap", [m for m in s.lasers if not until <= m.header.stamp_ns < until + 500_000_000])):
+        verdicts = run_core(OdometryFusion(EkfParams()), Scene(s.wheels, s.imus, lasers, s.truth, s.wheel_poses))
+        outcomes[name] = (any(v.doubtful for v in verdicts), verdicts[-1].doubtful, verdicts[-1].reason)
+    assert outcomes["all"][:2] == (True, False)
+    assert outcomes["none after"][:2] == (True, True)
+    assert outcomes["gap"][:2] == (True, True) and "the scans lost track since" in outcomes["gap"][2]
+    # without laser odometry fused, the other sources' agreement clears it, as before
+    no_laser = EkfParams(odom1_config=config())
+    assert not run_core(OdometryFusion(no_laser), Scene(s.wheels, s.imus, [], s.truth, s.wheel_poses))[-1].doubtful
+
+
 def test_wheel_slip_on_a_turn_is_corrected_by_the_gyro_and_the_scans():
     true = np.array([0.3, 0.0, 0.5])
     s = scene(6.0, lambda t: true, lambda t, v: v * np.array([1.0, 1.0, 1.6]))    # a skid steer overstates the turn

@@ -272,6 +272,10 @@ def test_no_success_while_the_odometry_fusion_doubts_and_success_once_it_trusts_
     ended = out["nav_status"][-1]
     assert ended.status == "succeeded" and ended.header.stamp_ns > ns(150 * DT)
     assert math.hypot(robot.pose[0] - 1.0, robot.pose[1]) <= 0.1
+    # a pose from a localizer on a map (use_odometry_doubt false): the doubt is not its to heed
+    navigator, _, out = navigate({2: [("goal", goal(1.0, 0.0)), ("odom_doubt", doubt)]}, 200,
+                                 NavigatorNodeParams(use_odometry_doubt=False))
+    assert out["nav_status"][-1].status == "succeeded" and out["nav_status"][-1].header.stamp_ns < ns(150 * DT)
 
 
 def test_before_any_goal_the_status_query_says_so_and_nothing_is_commanded():

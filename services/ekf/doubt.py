@@ -17,7 +17,13 @@ sources' own noise and a tolerance for what no sensor model holds (a floor's sma
 
 Any comparison beyond `doubt_threshold` sigmas makes the estimate doubtful, with a reason naming
 the sources and the size; the doubt clears after `doubt_clear_time` of sim time in which no
-comparison disagreed. Each change from agreeing to doubtful is one slip event. While a comparison
+comparison disagreed. Each change from agreeing to doubtful is one slip event. Where laser odometry
+is fused, agreement alone does not clear a doubt: the wheels, gyro and IMU agree again as soon as
+the push is over, while the pose it left wrong is put right only by the scans. So the doubt clears
+only once a laser interval judged after the last disagreement agreed, and never while the laser
+track that began before the doubt has broken since (two consecutive laser poses more than
+`doubt_laser_gap` apart: matches refused, a local map started afresh at the wheels' guess) — then
+nothing has measured what the push did, and the pose stays doubtful (a navigator claims no goal on it). While a comparison
 disagrees, the wheels' share of the state it tested is held out of the filter (`held_out`): the
 yaw rate for the gyro, the velocities for the IMU, the whole twist for the laser (until a laser
 interval agrees again), so the filter follows the gyro and the scans.
@@ -49,6 +55,7 @@ class DoubtParams(Parameters):
     doubt_acceleration_bias: float = param(0.05, ge=0)   # m/s²: the accelerometer's bias the IMU's change of speed allows
     doubt_travel_tolerance: float = param(0.02, ge=0)   # m (and rad) per laser interval, plus ...
     doubt_travel_fraction: float = param(0.1, ge=0)     # ... this share of the wheels' travel (and turn) in it
+    doubt_laser_gap: float = param(0.3, gt=0)           # s between laser poses beyond which the laser track is broken
 
 
 @dataclass(frozen=True)
@@ -72,8 +79,9 @@ class Doubt:
 
     wheel_vx, wheel_vy, wheel_vyaw = 0, 1, 2       # positions in `held_out`
 
-    def __init__(self, params: DoubtParams, history_s: float):
+    def __init__(self, params: DoubtParams, history_s: float, laser: bool = False):
         self.params = params
+        self.expects_laser = laser                      # laser odometry is fused: only it clears a doubt
         self.threshold2 = params.doubt_threshold ** 2
         self.window_ns = round(params.doubt_window / NS)
         self.history_ns = round(max(history_s, params.doubt_window) / NS) + self.window_ns
@@ -90,6 +98,8 @@ class Doubt:
         self.last_disagreement_ns: int | None = None
         self.slip_events = 0
         self.now_ns = 0
+        self.laser_agreed_ns: int | None = None    # when a laser interval last agreed
+        self.track_broken = False                  # the laser track broke during this doubt
 
     # ------------------------------------------------------------ inputs
 
@@ -113,6 +123,8 @@ class Doubt:
         against the laser's."""
         pose, covariance = np.asarray(pose, float), np.asarray(covariance, float)
         previous, self._laser = self._laser, (stamp_ns, pose, covariance)
+        if self.doubtful and (previous is None or (stamp_ns - previous[0]) * NS > self.params.doubt_laser_gap):
+            self.track_broken = True
         if previous is not None and previous[0] < stamp_ns:
             start, end = self.wheel_pose_at(previous[0]), self.wheel_pose_at(stamp_ns)
             if start is not None and end is not None:
@@ -219,6 +231,8 @@ class Doubt:
         d2 = float(error @ np.linalg.solve(s, error))
         self.travel = _Check(d2, f"wheels vs laser odometry: {math.hypot(error[0], error[1]):.2f} m, "
                                  f"{abs(error[2]):.2f} rad apart over {span_ns * NS:.2f} s", d2 > self.threshold2)
+        if not self.travel.disagrees:
+            self.laser_agreed_ns = self.now_ns
 
     def _verdict(self, now_ns: int) -> Verdict:
         disagreeing = [c for c in (self.yaw, self.speed, self.travel) if c.disagrees]
@@ -227,11 +241,20 @@ class Doubt:
             self.reason = f"{worst.reason} ({math.sqrt(worst.distance2):.1f} sigma)"
             self.last_disagreement_ns = now_ns
             if not self.doubtful:
-                self.doubtful = True
+                self.doubtful, self.track_broken = True, False
                 self.slip_events += 1
-        elif self.doubtful and now_ns - self.last_disagreement_ns >= round(self.params.doubt_clear_time / NS):
+        elif self.doubtful and now_ns - self.last_disagreement_ns >= round(self.params.doubt_clear_time / NS) \
+                and self._confirmed_by_the_scans():
             self.doubtful = False
+        if self.doubtful and self.track_broken and "scans lost track" not in self.reason:
+            self.reason += "; the scans lost track since, nothing has measured what it did"
         return self.verdict()
+
+    def _confirmed_by_the_scans(self) -> bool:
+        if not self.expects_laser:
+            return True
+        return (not self.track_broken and self.laser_agreed_ns is not None
+                and self.laser_agreed_ns > self.last_disagreement_ns)
 
 
 def _compose_fraction(pose: np.ndarray, step: np.ndarray, f: float) -> np.ndarray:

@@ -218,7 +218,7 @@ class OdometryFusion:
     def __init__(self, params: EkfParams):
         self.params = params
         self.ekf = Ekf(plane_matrix(params.process_noise_covariance), plane_matrix(params.initial_estimate_covariance))
-        self.doubt = Doubt(group(params, DoubtParams), params.history_length)
+        self.doubt = Doubt(group(params, DoubtParams), params.history_length, laser=params.uses("odom1"))
         self.counters: Counter[str] = Counter()
         self.history: list[_Entry] = []
         self.history_ns = round(params.history_length / NS)

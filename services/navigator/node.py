@@ -130,7 +130,8 @@ class NavigatorNode(Node):
                                    (POSE, "pose", self._check_map_frame), (PLAN, "plan", self._check_map_frame),
                                    (GOAL, "goal", None), (CANCEL, "cancel", None),
                                    (POSE_FIT, "pose_fit", self._check_map_frame), (ODOM_DOUBT, "odom_doubt", None)):
-            self.subscribe_deferred(topic, self.pending, kind, check)
+            if kind != ODOM_DOUBT or p.use_odometry_doubt:
+                self.subscribe_deferred(topic, self.pending, kind, check)
         self.queryable("nav_status", self.answer_status)
 
     def _resume(self) -> Goal | None:

@@ -56,6 +56,9 @@ class NavigatorParams(Parameters):
     trans_stopped_vel: float = param(0.1, ge=0)            # m/s: at the final pose, success only below this (dwa_local_planner)
     rot_stopped_vel: float = param(0.1, ge=0)              # rad/s: likewise
     min_pose_beam_fit: float = param(0.5, ge=0)            # success only while the localizer's latest beam fit is at least this; 0 = off
+    # success only while the odometry fusion trusts its odometry (odom_doubt): for a pose from odometry
+    # alone; a localizer on a map judges its own pose (min_pose_beam_fit) and puts a push right
+    use_odometry_doubt: bool = True
     escape_vel: float = param(-0.1, finite=True)           # m/s along x while backing up (negative: backwards)
     rotate_angle: float = param(2 * math.pi, finite=True)  # rad: rotate_recovery turns a full circle
     max_rotational_vel: float = param(1.0, gt=0)           # rad/s for rotate
