@@ -243,3 +243,14 @@ def test_the_node_without_imu_or_laser_takes_the_wheels_alone():
         node.process(0, wheels)
     assert of(out, "tf/odom_base") == []
     assert np.hypot(of(out, "odom")[-1].pose.x - s.wheel_poses[-1][0], of(out, "odom")[-1].pose.y - s.wheel_poses[-1][1]) < 0.02
+
+
+def test_a_fusion_started_mid_mission_starts_where_the_wheel_odometry_stands():
+    """A restarted ekf (its process died) goes on from the chassis's resumed odometry, not the origin."""
+    s = scene(1.0, lambda t: np.array([0.5, 0.0, 0.0]))
+    later = s.wheels[50:]
+    fusion = OdometryFusion(EkfParams(odom1_config=config()))
+    for wheels, imu in zip(later, s.imus[50:]):
+        fusion.step(wheels, [imu])
+    assert np.hypot(*(fusion.estimate().pose[:2] - s.wheel_poses[-1][:2])) < 0.01
+    assert s.wheel_poses[50][0] > 0.2

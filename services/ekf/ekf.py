@@ -230,6 +230,10 @@ class OdometryFusion:
 
     def step(self, wheels: Odometry, imus: list[Imu] = ()) -> Verdict:
         """The IMU readings up to a wheel odometry step, then the step; the doubt's verdict after it."""
+        if self.ekf.stamp_ns is None and not self.history:
+            # start where the wheel odometry stands: at the origin with the robot, or, for a fusion
+            # restarted mid-mission, where the chassis resumed it (its state file), not back at the origin
+            self.ekf.x[[X, Y, YAW]] = (wheels.pose.x, wheels.pose.y, wheels.pose.theta)
         for imu in imus:
             if self.params.uses("imu0"):
                 self.doubt.imu(imu.header.stamp_ns, imu.angular_velocity_z, imu.linear_acceleration_x,
