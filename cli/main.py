@@ -8,6 +8,8 @@ import os
 import signal
 import sys
 
+from ..services.runtime.stop_signals import interrupt_on_stop_signals
+
 # name -> (module with add_arguments(parser) and main(args) -> int, one-line help)
 COMMANDS: dict[str, tuple[str, str]] = {
     "run": ("omninav.services.runtime.run", "run one service as a process on the bus"),
@@ -48,6 +50,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    if argv is None:        # the program itself (not a caller in-process, nor a service `up` forked)
+        interrupt_on_stop_signals()
     argv = list(sys.argv[1:] if argv is None else argv)
     if not argv or argv[0] in ("-h", "--help") or argv[0] not in COMMANDS:
         build_parser().parse_args(argv or ["--help"])

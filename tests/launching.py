@@ -1,5 +1,9 @@
-"""Shared by the tests of `omninav up`: processes seen through /proc, a compose text, echo counting."""
+"""Shared by the tests that start processes (`omninav up`, `navigate`): processes seen through
+/proc, a compose text, echo counting, waiting on a process's log."""
 import os
+import re
+import subprocess
+import time
 from pathlib import Path
 
 from omninav.schemas import decode
@@ -88,3 +92,21 @@ def command_chain(processes) -> list:
     """The gates between teleop and the chassis as processes: teleop puts cmd_vel_teleop, the mux
     passes it to the smoother, and only the collision monitor puts cmd_vel."""
     return [processes.omninav("run", name) for name in ("cmd_vel_mux", "velocity_smoother", "collision_monitor")]
+
+
+def router_of(log: Path) -> str | None:
+    """The endpoint `up` said its router listens on, in a services.log, once it has said so."""
+    found = re.search(r"router listening on (\S+)", log.read_text(errors="replace")) if log.exists() else None
+    return found.group(1) if found else None
+
+
+def wait_for(condition, process: subprocess.Popen, what: str, seconds: float = 300.0):
+    """condition()'s first true value; fails if the process ends first (a liveness bound, not a timing)."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        value = condition()
+        if value:
+            return value
+        assert process.poll() is None, f"the process ended (exit {process.returncode}) before {what}"
+        time.sleep(0.2)
+    raise AssertionError(f"no {what} within {seconds:g} s")

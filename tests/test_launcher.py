@@ -4,6 +4,7 @@ import signal
 import textwrap
 import time
 
+import pytest
 from mcap.reader import make_reader
 
 from omninav.services.runtime.zenoh_config import open_client
@@ -121,3 +122,14 @@ def test_a_service_waiting_for_its_router_stops_when_asked(processes_no_router, 
     assert "recorded 0 messages" in processes_no_router.log_of(recorder)
     with open(tmp_path / "early.mcap", "rb") as recording:
         assert make_reader(recording).get_summary() is not None
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGHUP], ids=lambda s: signal.Signals(s).name)
+def test_up_stops_every_service_at_sigterm_and_sighup(up, endpoint, sig):
+    """A CI job's cancel or a closed terminal stops the stack as Ctrl-C does: each service cleanly."""
+    launcher = up(TALKER_LISTENER)
+    pids = wait_until(lambda: (p := service_pids(launcher.pid)).keys() == {"talker", "listener"} and p,
+                      30, what="talker and listener started by up")
+    assert up.procs.stop(launcher, sig) == 0
+    assert not any(alive(pid) for pid in pids.values()) and processes_using(endpoint) == []
+    assert up.procs.log_of(launcher).splitlines()[-1] == "[up] stopped"

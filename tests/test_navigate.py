@@ -10,7 +10,6 @@ import signal
 import subprocess
 import sys
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -41,7 +40,7 @@ from omninav.geometry.se2 import compose
 from omninav.sim.node import SimNode, SimNodeParams
 from omninav.sim.world import load_world, world_path
 
-from launching import children, processes_using, service_pids
+from launching import children, processes_using, router_of, service_pids, wait_for
 
 
 class Driver(Node):
@@ -474,23 +473,6 @@ def test_the_lockstep_processes_give_the_messages_of_the_same_services_in_one_pr
 
 # ---------------------------------------------------------------- a service dying mid-mission
 
-def _router_of(log: Path) -> str | None:
-    found = re.search(r"router listening on (\S+)", log.read_text(errors="replace")) if log.exists() else None
-    return found.group(1) if found else None
-
-
-def _wait_for(condition, process: subprocess.Popen, what: str, seconds: float = 300.0):
-    """condition()'s first true value; fails if the process ends first (a liveness bound, not a timing)."""
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        value = condition()
-        if value:
-            return value
-        assert process.poll() is None, f"navigate ended (exit {process.returncode}) before {what}"
-        time.sleep(0.2)
-    raise AssertionError(f"no {what} within {seconds:g} s")
-
-
 def test_a_mission_survives_a_local_planner_killed_mid_mission(tmp_path):
     """The local planner is sent SIGKILL while it steers towards the goal: `up` restarts it, the
     navigator sends the restarted one its path again, the goal is reached, and the summary says the
@@ -503,13 +485,13 @@ def test_a_mission_survives_a_local_planner_killed_mid_mission(tmp_path):
                                  "--rate", "0.5", "--timeout", "600", "-o", str(out), "--json"],
                                 cwd=REPO, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
     try:
-        router = _wait_for(lambda: _router_of(out / "services.log"), navigate, "router")
+        router = wait_for(lambda: router_of(out / "services.log"), navigate, "router")
         steering = threading.Event()
         with open_client(router, credentials=str(out / "credentials" / TOOL)) as session:    # the ACL is on
             local_cmd = session.declare_subscriber(
                 KeyLayout().resolve("local_cmd"),
                 lambda sample: decode(sample.payload.to_bytes()).goal_id == "g1" and steering.set())
-            _wait_for(steering.is_set, navigate, "local planner command for the goal")
+            wait_for(steering.is_set, navigate, "local planner command for the goal")
             local_cmd.undeclare()
         killed = next(pids["local_planner"] for pids in map(service_pids, children(navigate.pid))
                       if "local_planner" in pids)

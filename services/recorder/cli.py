@@ -10,7 +10,7 @@ from ...parameters.from_mapping import load_params
 from ..runtime.run import configure_logging
 from ..runtime.zenoh_config import router_endpoint
 from .node import RecorderNode, RecorderParams
-from ..runtime.stop_signals import stop_event
+from ..runtime.stop_signals import on_parent_exit, stop_event
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -42,5 +42,6 @@ def main(args: argparse.Namespace) -> int:
         logging.getLogger("omninav.record").error("%s", exc)
         return 2
     stop = stop_event()
+    on_parent_exit(stop.set)        # its starter gone: the recording is closed, not left open
     node.run_live(router, stop)
     return 1 if node.failed else 0

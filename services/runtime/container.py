@@ -41,7 +41,7 @@ from ...parameters.declare import ParamError
 from .service_registry import UnknownService
 from .run import build_node
 from .zenoh_config import open_client
-from .stop_signals import on_stop_signals
+from .stop_signals import on_parent_exit, on_stop_signals
 
 STOP_TIMEOUT_S = 10.0       # per service: its thread finishing after its stop
 READY_TIMEOUT_S = 60.0      # for the others' tokens before the sources start anyway
@@ -241,6 +241,7 @@ def main(args: argparse.Namespace) -> int:
         return 2
     container = Container(nodes, args.router)
     on_stop_signals(container.stop)
+    on_parent_exit(container.stop)
     log.info("started %s (robot %s)", ", ".join(n.name for n in nodes), compose.robot)
     container.run()
     if container.failed:

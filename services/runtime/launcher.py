@@ -48,7 +48,7 @@ from .live import LISTENERS_ENV, tokens_present
 from .lockstep import LOCKSTEP_ENV, Lockstep, service_names
 from .run import build_node
 from .zenoh_config import ROUTER_ENV, open_router, router_endpoint
-from .stop_signals import stop_event
+from .stop_signals import on_parent_exit, stop_event
 
 DEFAULT_COMPOSE = "compose/demo.yaml"
 BACKOFF_FIRST_S = 0.5
@@ -360,6 +360,7 @@ def main(args: argparse.Namespace) -> int:
 def _launch(args: argparse.Namespace, out: Output, child: Answers, loaded: Loaded, endpoint: str, users: list[str]) -> int:
     compose = loaded.compose
     stop = stop_event()
+    on_parent_exit(stop.set)        # `navigate` killed outright: the stack it started stops all the same
     with tempfile.TemporaryDirectory(prefix="omninav-up-") as params_dir:
         credentials = Path(args.credentials or Path(params_dir) / "credentials")
         try:

@@ -10,7 +10,7 @@ from .lockstep import Lockstep, service_names
 from ...parameters.declare import ParamError
 from .params import load_node_params, parse_overrides, read_params_mapping
 from .service_registry import UnknownService, node_class
-from .stop_signals import on_stop_signals
+from .stop_signals import on_parent_exit, on_stop_signals
 
 
 def build_node(service: str, params_file: str | None = None, overrides: dict | None = None,
@@ -78,6 +78,7 @@ def main(args: argparse.Namespace) -> int:
         log.error("%s", exc)
         return 2
     on_stop_signals(runner.stop)
+    on_parent_exit(runner.stop)     # its `up` (or shell) gone: nobody is left to stop it
     log.info("started (robot %s)", args.robot)
     if hasattr(node, "run_live"):
         node.run_live(args.router, runner.stop_event)
