@@ -134,16 +134,16 @@ def write_passwords(folder: Path, users: list[str]) -> Path:
     lines = []
     for user in users:
         line = f"{user}:{secrets.token_urlsafe(24)}\n"
-        _write_private(folder / user, line)
+        write_private(folder / user, line)
         lines.append(line)
     dictionary = folder / DICTIONARY
-    _write_private(dictionary, "".join(lines))
+    write_private(dictionary, "".join(lines))
     return dictionary
 
 
 def write_puts(folder: Path, identities: dict[str, Grants]) -> None:
     """What each identity may put, for replay (publishers_of)."""
-    _write_private(folder / PUTS, json.dumps({user: list(g.put) for user, g in identities.items()}, indent=1))
+    write_private(folder / PUTS, json.dumps({user: list(g.put) for user, g in identities.items()}, indent=1))
 
 
 def publishers_of(folder: Path, keys: set[str]) -> dict[str, Path]:
@@ -161,7 +161,7 @@ def publishers_of(folder: Path, keys: set[str]) -> dict[str, Path]:
     return {key: folder / owners[key] for key in keys}
 
 
-def _write_private(path: Path, text: str) -> None:
+def write_private(path: Path, text: str) -> None:
     """Written beside it, then renamed: whoever waits for the file to exist (navigate, bench kills)
     never reads it half written."""
     part = path.with_name(f".{path.name}.part")

@@ -8,7 +8,8 @@ Restart policy and start-failure rules: docs/compose.md.
 Every run gets fresh identities (acl.py): one per service, plus the tool, teleop and operator ones
 for processes started by hand, written to a folder only this user can read; each service finds
 its own through $OMNINAV_CREDENTIALS, and the router admits only those users and lets each do
-only what its Node declares.
+only what its Node declares. While the router is open the tool identity is also this user's
+entry for its endpoint (joining.py), so `view`, `topics`, `echo`, `hz`, `get` and `record` just join.
 
 The compose file is loaded and every Node built (to read what it declares) in a child process
 (`prepare`, child.py), which hands over plain data and ends: its imports — numba, scipy, pymunk —
@@ -40,6 +41,7 @@ from .acl import (CREDENTIALS_ENV, TOOL, Grants, access_control, client_grants, 
                   write_puts)
 from .child import Answers, Child, ChildDied
 from .forked import ForkedProcess
+from .joining import published
 from .compose import Compose, ComposeError, ProcessSpec, load_compose
 from ...parameters.declare import ParamError
 from .service_registry import UnknownService
@@ -384,9 +386,11 @@ def _launch(args: argparse.Namespace, out: Output, child: Answers, loaded: Loade
             for service in reversed(services):
                 service.stop()
             return _not_started(exc, credentials, endpoint, out)
-        with router:
+        # the entry only once the router holds the endpoint: a run that could not open it leaves another's alone
+        with router, published(endpoint, credentials / TOOL, out.say) as entry:
             out.say(f"router listening on {endpoint}")
-            out.say(f"identities in {credentials} (tools: {CREDENTIALS_ENV}={credentials / TOOL})")
+            out.say(f"identities in {credentials}; this user's tools log in with {entry or credentials / TOOL} "
+                    f"(the run's read-only identity; {CREDENTIALS_ENV} names another)")
             return _run(services, stop, args.duration, out, router)
 
 

@@ -5,6 +5,7 @@ import argparse
 import logging
 import sys
 
+from .joining import LoginRefused
 from .live import LiveRunner
 from .lockstep import Lockstep, service_names
 from ...parameters.declare import ParamError
@@ -80,9 +81,13 @@ def main(args: argparse.Namespace) -> int:
     on_stop_signals(runner.stop)
     on_parent_exit(runner.stop)     # its `up` (or shell) gone: nobody is left to stop it
     log.info("started (robot %s)", args.robot)
-    if hasattr(node, "run_live"):
-        node.run_live(args.router, runner.stop_event)
-    else:
-        runner.run()
+    try:
+        if hasattr(node, "run_live"):
+            node.run_live(args.router, runner.stop_event)
+        else:
+            runner.run()
+    except LoginRefused as exc:
+        log.error("%s", exc)
+        return 1
     log.info("stopped")
     return 0

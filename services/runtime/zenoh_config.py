@@ -14,7 +14,8 @@ from typing import Callable
 
 import zenoh
 
-from .acl import CREDENTIALS_ENV, auth_json, read_credentials
+from .acl import auth_json
+from .joining import Identity, listening, login_identity, refusal
 
 DEFAULT_ROUTER = "tcp/127.0.0.1:7447"
 ROUTER_ENV = "OMNINAV_ROUTER"
@@ -26,6 +27,7 @@ SHM_ENV = "OMNINAV_SHM"
 MAX_MESSAGE_SIZE = "transport/link/rx/max_message_size"
 CONNECT_RETRY = {"period_init_ms": 50, "period_max_ms": 100, "period_increase_factor": 2}
 OPEN_ATTEMPT_S = 1.0     # how long one attempt to reach the router waits; open_client makes as many as it takes
+REFUSED_AFTER = 3        # failed attempts (1 + 2 + 4 s) with a router listening: its login was refused
 _SWITCH = {"on": True, "1": True, "true": True, "off": False, "0": False, "false": False}
 
 
@@ -86,10 +88,15 @@ def router_config(listen: str, dictionary: Path | None = None, access_control: d
 def client_config(router: str | None = None, credentials: str | None = None) -> zenoh.Config:
     """A client that connects to the router and waits for it (start order does not matter); it
     authenticates with the credentials file given, else $OMNINAV_CREDENTIALS's, if any."""
-    conf = foreign_client_config(router_endpoint(router))
-    credentials = credentials or os.environ.get(CREDENTIALS_ENV)
-    if credentials:
-        conf.insert_json5("transport/auth/usrpwd", auth_json(*read_credentials(credentials)))
+    endpoint = router_endpoint(router)
+    return logging_in(endpoint, login_identity(endpoint, credentials))
+
+
+def logging_in(endpoint: str, identity: Identity) -> zenoh.Config:
+    """A client of endpoint that logs in as identity (if it is one)."""
+    conf = foreign_client_config(endpoint)
+    if identity.user is not None:
+        conf.insert_json5("transport/auth/usrpwd", auth_json(identity.user, identity.password))
     return conf
 
 
@@ -109,14 +116,37 @@ def foreign_client_config(endpoint: str) -> zenoh.Config:
 
 
 def open_client(router: str | None = None, credentials: str | None = None,
-                stopped: Callable[[], bool] = lambda: False) -> zenoh.Session | None:
+                stopped: Callable[[], bool] = lambda: False, as_tool: bool = False,
+                warn: Callable[[str], None] | None = None) -> zenoh.Session | None:
     """A client session once the router answers; None if stopped() turns true before it does.
     zenoh.open's own wait for a router cannot be interrupted (a signal handler runs only once it
     returns: `omninav run` started before `up` could not be stopped), so the wait is made of
-    attempts of OPEN_ATTEMPT_S each, with stopped() asked, and Ctrl-C taken, between them."""
-    conf = client_config(router, credentials)
-    conf.insert_json5("connect/timeout_ms", json.dumps(round(OPEN_ATTEMPT_S * 1000)))
-    return open_in_attempts(conf, stopped)
+    attempts of OPEN_ATTEMPT_S each, with stopped() asked, and Ctrl-C taken, between them.
+    It logs in as joining.login_identity says (a tool also through the run's entry), asked again at
+    every attempt (`up` writes the entry once its router is open); joining.LoginRefused once a
+    router listens there but did not let it in REFUSED_AFTER times, each attempt twice as long as the
+    last (zenoh says the same for a refused login as for no router; a slow handshake is not a refusal)."""
+    endpoint, refusals, told = router_endpoint(router), 0, set()
+
+    def once(text: str) -> None:
+        if warn and text not in told:
+            told.add(text)
+            warn(text)
+
+    while not stopped():
+        identity = login_identity(endpoint, credentials, as_tool, once)
+        conf = logging_in(endpoint, identity)
+        conf.insert_json5("connect/timeout_ms", json.dumps(round(OPEN_ATTEMPT_S * 2 ** refusals * 1000)))
+        try:
+            return zenoh.open(conf)
+        except zenoh.ZError:
+            if not listening(endpoint):
+                refusals = 0        # no router there (yet): wait for it
+                continue
+            refusals += 1
+            if refusals >= REFUSED_AFTER:
+                raise refusal(endpoint, identity) from None
+    return None
 
 
 def open_in_attempts(conf: zenoh.Config, stopped: Callable[[], bool]) -> zenoh.Session | None:
