@@ -22,6 +22,7 @@ from ..schemas.attachment import unpack_attachment
 from ..schemas.keys import ALL
 from ..schemas.readable import to_plain, to_text
 from ..services.runtime.selector import join_selector, split_selector
+from ..services.runtime.joining import LoginRefused, listening, login_identity, refusal
 from ..services.runtime.zenoh_config import open_client, router_endpoint
 from ..services.runtime.stop_signals import stop_event
 
@@ -51,7 +52,8 @@ def reports_errors(run: Callable[[argparse.Namespace], int]) -> Callable[[argpar
 # ---------------------------------------------------------------- the bus
 
 def connect(router: str | None, give_up_s: float | None = None) -> zenoh.Session:
-    """A client session; says so on stderr when the router is not there yet (clients wait for it)."""
+    """A client session, logged in as a tool (joining.py: $OMNINAV_CREDENTIALS, else the run's
+    entry); says so on stderr when the router is not there yet (clients wait for it)."""
     try:
         endpoint = router_endpoint(router)
     except ValueError as exc:
@@ -60,18 +62,27 @@ def connect(router: str | None, give_up_s: float | None = None) -> zenoh.Session
 
     def stopped() -> bool:
         waited = time.monotonic() - started
-        if waited >= _NOTICE_S and not told and (give_up_s is None or give_up_s > _NOTICE_S):
+        if (waited >= _NOTICE_S and not told and (give_up_s is None or give_up_s > _NOTICE_S)
+                and not listening(endpoint)):       # a router there that has not let us in yet: not waiting for one
             told.append(True)
             print(f"waiting for the router at {endpoint} (start one with `omninav up` or `omninav router`)",
                   file=sys.stderr, flush=True)
         return give_up_s is not None and waited >= give_up_s
 
+    def warn(text: str) -> None:
+        print(text, file=sys.stderr, flush=True)
+
     try:
-        session = open_client(endpoint, stopped=stopped)
+        session = open_client(endpoint, stopped=stopped, as_tool=True, warn=warn)
+    except LoginRefused as exc:
+        raise CommandError(str(exc)) from None
     except Exception as exc:  # zenoh raises its own error types; the user gets the text
         raise CommandError(f"cannot connect to {endpoint}: {exc}") from None
     if session is None:
-        raise CommandError(f"no router reachable at {endpoint} within {give_up_s:g} s")
+        if listening(endpoint):     # gave up before the verdict: a router is there, but we are not in
+            raise CommandError(str(refusal(endpoint, login_identity(endpoint, as_tool=True))))
+        raise CommandError(f"no router listening at {endpoint} (waited {give_up_s:g} s; start one with "
+                           f"`omninav up` or `omninav router`)")
     return session
 
 

@@ -7,6 +7,7 @@ import logging
 from ...schemas.keys import ALL
 from ...parameters.declare import ParamError
 from ...parameters.from_mapping import load_params
+from ..runtime.joining import LoginRefused
 from ..runtime.run import configure_logging
 from ..runtime.zenoh_config import router_endpoint
 from .node import RecorderNode, RecorderParams
@@ -43,5 +44,9 @@ def main(args: argparse.Namespace) -> int:
         return 2
     stop = stop_event()
     on_parent_exit(stop.set)        # its starter gone: the recording is closed, not left open
-    node.run_live(router, stop)
+    try:
+        node.run_live(router, stop)
+    except LoginRefused as exc:
+        logging.getLogger("omninav.record").error("%s", exc)
+        return 1
     return 1 if node.failed else 0

@@ -28,6 +28,7 @@ from ...schemas.attachment import unpack_attachment
 from ...schemas.codec import peek_type
 from ...schemas.keys import ALL, is_lockstep_key
 from ..runtime.node import Node
+from ..runtime.joining import LoginRefused
 from ..runtime.zenoh_config import open_client
 from .mcap_io import RecordingWriter
 from .tally import SequenceTally
@@ -178,7 +179,11 @@ class RecorderNode(Node):
         if session is not None:
             self._record_on(session, stop_event, zenoh.Locality.REMOTE)
             return
-        own = open_client(router, stopped=stop_event.is_set)
+        try:    # as a tool where $OMNINAV_CREDENTIALS names no identity (under `up` it names the recorder's)
+            own = open_client(router, stopped=stop_event.is_set, as_tool=True, warn=self.log.warning)
+        except LoginRefused:
+            self.close()
+            raise
         if own is None:     # stopped while waiting for the router: the files are empty, but whole
             self.close()
             return

@@ -17,6 +17,7 @@ from foxglove.websocket import Capability, ChannelView, Client, ClientChannel, S
 
 from ..runtime.live import LiveRunner
 from ..runtime.node import Node
+from ..runtime.zenoh_config import open_client
 from .channels import ChannelSet
 from .convert import Converter, ROUTES, Route, RouteTable, ViewParams, goal_from_client
 from ...parameters.declare import param
@@ -106,7 +107,11 @@ class ViewNode(Node):
         except RuntimeError as exc:     # the SDK's FoxgloveError, e.g. the port is taken
             raise SystemExit(f"view: cannot serve on {LOOPBACK}:{self.params.port}: {exc}") from None
         try:
-            runner.run()
+            # as a tool: the run's read-only identity where $OMNINAV_CREDENTIALS names none (joining.py)
+            session = open_client(router, stopped=stop_event.is_set, as_tool=True, warn=self.log.warning)
+            if session is not None:     # else stopped while waiting for the router
+                with session:
+                    runner.run(session)
         finally:
             self.close()
 
