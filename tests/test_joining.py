@@ -103,6 +103,9 @@ def test_no_router_and_a_refused_login_each_say_one_line(processes_no_router, ru
             f"that started it still going? else set {CREDENTIALS_ENV}=<run>/credentials/tool"]
         stale.unlink()
         no_identity = procs.omninav("topics", "--router", endpoint)      # it waits for a router, not for this
+        recorder = procs.omninav("record", "-o", str(tmp_path / "refused.mcap"), "--router", endpoint)
+        code, lines = _finished(procs, recorder)    # not taken for a disk failing
+        assert code == 1 and f"ERROR [record] the router {endpoint} refused a login with no identity" in lines[-1], lines
         code, lines = _finished(procs, no_identity)
         assert code == 1 and lines == [
             f"omninav topics: the router {endpoint} refused a login with no identity (no {CREDENTIALS_ENV}, "

@@ -36,7 +36,7 @@ class FolderRefused(RuntimeError):
     """The runtime folder exists but is not this user's alone: nothing is read from it or written to it."""
 
 
-class LoginRefused(ConnectionError):
+class LoginRefused(RuntimeError):      # not an OSError: the recorder reads those as a disk failing
     """A router listens on the endpoint but does not let this client log in."""
 
 
