@@ -243,8 +243,9 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--for", dest="duration", type=float, metavar="SECONDS",
                         help="stop everything after this many seconds (default: run until Ctrl-C)")
     parser.add_argument("--credentials", metavar="FOLDER",
-                        help="write this run's identities here (made readable by you only); tools use "
-                             f"{CREDENTIALS_ENV}=FOLDER/{TOOL} (default: a temporary folder, printed)")
+                        help="write this run's identities here (made readable by you only; default: a "
+                             f"temporary folder, printed); your tools find FOLDER/{TOOL} without "
+                             f"{CREDENTIALS_ENV} (services/runtime/joining.py)")
     parser.add_argument("--lockstep", nargs="?", const="", metavar="ALSO",
                         help="run in lockstep with the simulator (services/runtime/lockstep.py): the same "
                              "messages at any machine load, as fast as the services compute; the sim waits "
