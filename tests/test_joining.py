@@ -136,3 +136,15 @@ def test_a_folder_others_may_use_or_another_user_owns_is_refused(runtime, tmp_pa
     os.chmod(runtime.parent, 0o755)
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
     assert runtime_folder() == tmp_path / f"omninav-{os.getuid()}"
+
+
+def test_a_service_refused_by_its_router_says_so_once_and_goes_on_trying_until_stopped(up, endpoint, runtime, tmp_path):
+    """A service is no tool: three slow handshakes on a loaded machine are no proof of a refused login,
+    so it does not give up; it says once why it does not come up, and stops when asked."""
+    up(TALKER_LISTENER)
+    (forged := tmp_path / "forged").write_text("talker:not-its-password\n")
+    procs = up.procs
+    talker = procs.omninav("run", "talker", "--name", "talker2", "--router", endpoint, env={CREDENTIALS_ENV: str(forged)})
+    wait_until(lambda: "refused the login" in procs.log_of(talker), 60, what="the service saying its login was refused")
+    assert talker.poll() is None
+    assert procs.stop(talker) == 0 and procs.log_of(talker).count("refused the login") == 1

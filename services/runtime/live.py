@@ -214,7 +214,7 @@ class LiveRunner:
         """Process until stop_event is set; then drain what is buffered and undeclare. On its own
         session (closed at the end), or on a container's shared one."""
         if session is None:
-            own = open_client(self.router, stopped=self.stop_event.is_set)
+            own = open_client(self.router, stopped=self.stop_event.is_set, warn=self.node.log.warning)
             if own is not None:     # else stopped while waiting for the router
                 with own:
                     self.run(own)

@@ -123,9 +123,10 @@ def open_client(router: str | None = None, credentials: str | None = None,
     returns: `omninav run` started before `up` could not be stopped), so the wait is made of
     attempts of OPEN_ATTEMPT_S each, with stopped() asked, and Ctrl-C taken, between them.
     It logs in as joining.login_identity says (a tool also through the run's entry), asked again at
-    every attempt (`up` writes the entry once its router is open); joining.LoginRefused once a
-    router listens there but did not let it in REFUSED_AFTER times, each attempt twice as long as the
-    last (zenoh says the same for a refused login as for no router; a slow handshake is not a refusal)."""
+    every attempt (`up` writes the entry once its router is open); a tool gets joining.LoginRefused
+    once a router listens there but did not let it in REFUSED_AFTER times, each attempt twice as long
+    as the last (zenoh says the same for a refused login as for no router; a slow handshake is not a
+    refusal); a service is told (`warn`) and goes on trying."""
     endpoint, refusals, told = router_endpoint(router), 0, set()
 
     def once(text: str) -> None:
@@ -143,9 +144,13 @@ def open_client(router: str | None = None, credentials: str | None = None,
             if not listening(endpoint):
                 refusals = 0        # no router there (yet): wait for it
                 continue
-            refusals += 1
+            refusals = min(refusals + 1, REFUSED_AFTER)
             if refusals >= REFUSED_AFTER:
-                raise refusal(endpoint, identity) from None
+                if as_tool:
+                    raise refusal(endpoint, identity) from None
+                # a service under `up` keeps trying: three slow handshakes on a loaded machine are no
+                # proof of a refused login, and its supervisor sees a service that never comes up
+                once(f"{refusal(endpoint, identity)}; still trying")
     return None
 
 
