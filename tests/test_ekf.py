@@ -268,3 +268,13 @@ def test_a_long_doubt_while_spinning_fast_stays_bounded():
     assert max(v.mahalanobis for v in verdicts) < 1e8
     # the filter too: its body velocity turns with the body (a first-order turn reached 3630 m/s here)
     assert max(speeds) < 1.0 and np.hypot(*(fusion.estimate().pose[:2] - s.truth[-1][:2])) < 0.1
+
+
+def test_a_step_that_would_leave_the_filter_beyond_any_robot_is_undone_and_counted():
+    """A reading no robot gives (an accelerometer claiming 1e5 m/s²) would send the velocity past any
+    robot's: the step is undone, counted, and the estimate stays what it was."""
+    s = scene(1.0, lambda t: np.zeros(3))
+    s.imus[50].linear_acceleration_x = 1e5
+    fusion = OdometryFusion(EkfParams())
+    run_core(fusion, s)
+    assert fusion.counters["beyond_bounds/imu0"] == 1 and np.abs(fusion.estimate().twist).max() < 0.1

@@ -49,6 +49,9 @@ RL_NAMES = ("x", "y", "z", "roll", "pitch", "yaw", "vx", "vy", "vz", "vroll", "v
 RL_INDEX = (0, 1, 5, 6, 7, 11, 12, 13)
 NEVER = sys.float_info.max       # robot_localization's default threshold: std::numeric_limits<double>::max()
 MIN_VARIANCE = 1e-9              # a measured variance below this is raised to it (a singular innovation otherwise)
+MAX_SPEED = 50.0                 # m/s: a body velocity beyond this is a filter gone wrong, not a robot
+MAX_ACCELERATION = 500.0         # m/s²: likewise (a hard hit is tens)
+MAX_VARIANCE = 1e8               # of any state variable: likewise
 
 # robot_localization's defaults (ekf_template.yaml), the 15 diagonal values
 PROCESS_NOISE = (0.05, 0.05, 0.06, 0.03, 0.03, 0.06, 0.025, 0.025, 0.04, 0.01, 0.01, 0.02, 0.01, 0.01, 0.015)
@@ -337,6 +340,12 @@ class OdometryFusion:
             self._restore(before)
             if not self._replaying:
                 self.counters[f"non_finite/{entry.source}"] += 1
+        elif (np.abs(self.ekf.x[[VX, VY]]).max() > MAX_SPEED or np.abs(self.ekf.x[[AX, AY]]).max() > MAX_ACCELERATION
+              or np.diag(self.ekf.p).max() > MAX_VARIANCE):
+            # finite but no robot's: a filter gone unstable must not hand the stack an absurd pose
+            self._restore(before)
+            if not self._replaying:
+                self.counters[f"beyond_bounds/{entry.source}"] += 1
 
     def _update(self, source: str, indices: list[int], z, r, threshold: float) -> None:
         if not indices:
