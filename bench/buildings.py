@@ -163,7 +163,7 @@ def main(args: argparse.Namespace) -> int:
     if not args.json:
         print(f"{args.count} buildings for each of {', '.join(args.robot)}, {args.workers} workers; in {out}", flush=True)
     say = None if args.json else (lambda r: print(f"{r['robot']:8} {row_line(r)} shortest {r['shortest_s']:6.1f} s ideal {r['ideal_s']:6.1f} s", flush=True))
-    rows = run_in_workers(drive_building, jobs, args.workers, say)
+    rows = run_in_workers(drive_building, jobs, args.workers, say, unit="buildings", quiet=args.json)
     per_robot = {robot: robot_figures([r for r in rows if r["robot"] == robot]) for robot in args.robot}
     if args.json:
         print(json.dumps({"seeds": [args.seed, args.seed + args.count - 1], "robots": per_robot, "rows": rows}))

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from ..experiments.progress import progress
 from ..experiments.mapping import build_map, compare_with_truth, explored_share, slam_params_for
 from ..sim.world import load_world
 from ..experiments.scenarios import KINDS
@@ -97,10 +98,13 @@ def main(args: argparse.Namespace) -> int:
         raise SystemExit("--count and --workers must be at least 1, --max-time positive")
     jobs = [(args.kind, args.seed + i, args.max_time, args.particles) for i in range(args.count)]
     rows = []
-    with multiprocessing.get_context("spawn").Pool(min(args.workers, len(jobs))) as pool:
+    with multiprocessing.get_context("spawn").Pool(min(args.workers, len(jobs))) as pool, \
+            progress(len(jobs), "worlds", args.json) as bar:
         for row in pool.imap(_explore_row, jobs):
             rows.append(row)
-            print(row_text(row), file=sys.stderr if args.json else sys.stdout, flush=True)   # progress
+            with bar.printing():
+                print(row_text(row), file=sys.stderr if args.json else sys.stdout, flush=True)
+            bar.advance()
     figures = summary(rows)
     if args.json:
         print(json.dumps({"kind": args.kind, "seed": args.seed, "max_sim_s": args.max_time,

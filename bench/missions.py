@@ -122,7 +122,8 @@ def main(args: argparse.Namespace) -> int:
         print(table([])[0], flush=True)
     jobs = [(world, drive, args, str(out)) for world in args.worlds for drive in args.drives]
     rows = run_in_workers(drive_mission, jobs, args.workers,
-                          None if args.json else lambda row: print(table([row])[-1], flush=True))
+                          None if args.json else lambda row: print(table([row])[-1], flush=True),
+                          unit="missions", quiet=args.json)
     figures = {"rows": rows, **tallies(rows), "localization": args.localization}
     if args.real_time:
         if not args.json:

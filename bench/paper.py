@@ -115,7 +115,7 @@ def main(args: argparse.Namespace) -> int:
     began = time.monotonic()
     jobs = [(seed, args, str(out)) for seed in range(args.runs)]
     rows = run_in_workers(one_run, jobs, args.workers if in_process(args) else 1,
-                          on_result=None if args.json else print_row)
+                          on_result=None if args.json else print_row, unit="runs", quiet=args.json)
     result = summarize(rows, args.localization)
     result["wall_s"] = round(time.monotonic() - began, 1)
     if args.json:

@@ -129,7 +129,7 @@ def main(args: argparse.Namespace) -> int:
         if not args.json:
             print(f"{row['name']:26} {_show(row):46} {compare(row, before.get(row['name']))}", flush=True)
 
-    rows = run_in_workers(run_case, jobs, args.workers, say)
+    rows = run_in_workers(run_case, jobs, args.workers, say, unit="missions", quiet=args.json)
     changes = {row["name"]: compare(row, before.get(row["name"])) for row in rows}
     figures = {"commit": _commit(), "date": time.strftime("%Y-%m-%d"), "stored_commit": stored().get("commit"),
                "cases": len(rows), "successes": sum(r["success"] for r in rows), "skipped": skipped,

@@ -148,7 +148,8 @@ def main(args: argparse.Namespace) -> int:
         print(f"{args.count} {args.kind} worlds, {args.localization} localization, controller "
               f"{' and '.join(controllers)}, {args.workers} workers; in {out}")
         print(HEADER, flush=True)
-    rows = run_in_workers(drive_world, jobs, args.workers, None if args.json else lambda r: print(row_line(r), flush=True))
+    rows = run_in_workers(drive_world, jobs, args.workers, None if args.json else lambda r: print(row_line(r), flush=True),
+                          unit="worlds", quiet=args.json)
     by_controller = {c: overall([r for r in rows if r["controller"] == c]) for c in controllers}
     figures = {"kind": args.kind, "seeds": [args.seed, args.seed + args.count - 1], "drive": args.drive or "world's",
                "localization": args.localization, "controller": controllers[0], **by_controller[controllers[0]],

@@ -35,6 +35,7 @@ from ..sim.barn_world import GOAL, START
 from ..sim.world import World, load_world, shared_data_dir
 from ..services.recorder.mcap_io import read_records
 from .lockstep_mission import START_S, LockstepRun, run_mission
+from .progress import progress
 from .realtime import run_live
 
 REPO = Path(__file__).resolve().parents[1]
@@ -301,11 +302,13 @@ def main(args: argparse.Namespace) -> int:
     results: list[WorldResult] = []
     context = multiprocessing.get_context("spawn")      # numba and the runtime start clean in each worker
     interrupted = False
-    with context.Pool(min(args.workers, len(jobs))) as pool:
+    with context.Pool(min(args.workers, len(jobs))) as pool, progress(len(jobs), "worlds", args.json) as bar:
         try:
             for result in pool.imap(_run_one, jobs):
                 results.append(result)
-                say_result(say, result, "lockstep " if args.real_time else "")
+                with bar.printing():
+                    say_result(say, result, "lockstep " if args.real_time else "")
+                bar.advance()
         except KeyboardInterrupt:       # Ctrl-C: the figures of the worlds run so far, marked as such
             interrupted = True
             pool.terminate()

@@ -115,7 +115,8 @@ def main(args: argparse.Namespace) -> int:
         folder = str(args.out or scratch)
         jobs = [(d, seed, folder, c, args.odometry) for d in difficulties
                 for seed in range(args.seed, args.seed + args.count) for c in controllers]
-        results = run_in_workers(run_seed, jobs, args.workers, None if args.json else lambda r: print(run_line(r), flush=True))
+        results = run_in_workers(run_seed, jobs, args.workers, None if args.json else lambda r: print(run_line(r), flush=True),
+                                 unit="worlds", quiet=args.json)
         live = []
         for difficulty, seed, _, controller, _ in jobs if args.real_time else ():
             if controller == DEFAULT_CONTROLLER:
