@@ -163,3 +163,14 @@ def test_teb_is_a_local_planner_controller():
         LocalControl(LocalControlParams(controller="teb", teb={"selection_cost_hysteresis": 0}), 0.05)
     with pytest.raises(ValueError, match="no_such_name"):
         LocalControl(LocalControlParams(controller="teb", teb={"no_such_name": 1}), 0.05)
+
+
+def test_a_detour_names_its_via_point_whatever_the_span_keeps_either_side():
+    """An obstacle near the span's start: far fewer points are kept before the via point than after
+    it, so the detour's middle is nowhere near the via point; the via point's own legs are what is
+    checked open (they were the middle three points before: the span's far end, not the detour)."""
+    from omninav.services.local_planner.teb import _detour
+    span = np.column_stack([np.arange(0.0, 10.01, 0.1), np.zeros(101), np.zeros(101)])
+    detour, via = _detour(span, Obstacle(np.array([1.5, 0.1]), 0.2), 1.0, 0.4)
+    assert detour[via, :2] == pytest.approx([1.5, 0.1 + 0.6]) and via < len(detour) // 2 - 10
+    assert detour[via - 1, 0] < 1.5 - 0.6 and detour[via + 1, 0] > 1.5 + 0.6      # the span's points beside it

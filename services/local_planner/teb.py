@@ -180,9 +180,9 @@ class TebPlanner:
         clearance = self.band.reach + p.min_obstacle_dist + VIA_MARGIN
         for obstacle in obstacles:
             for side in (1.0, -1.0):
-                detour = _detour(span, obstacle, side, clearance)
-                if detour is not None and _open(detour[len(detour) // 2 - 1:len(detour) // 2 + 2], costs, info):
-                    starts.append(_Candidate(*initial_band(detour, pose, goal, p)))
+                found = _detour(span, obstacle, side, clearance)
+                if found is not None and _open(found[0][found[1] - 1:found[1] + 2], costs, info):
+                    starts.append(_Candidate(*initial_band(found[0], pose, goal, p)))
         interaction, distinct = self._interaction(), {}
         for start in starts:
             start.signature = signature(start.poses, start.dts, obstacles, movers, interaction)
@@ -302,10 +302,11 @@ def _open(polyline: np.ndarray, costs: np.ndarray, info: MapMetaData) -> bool:
     return bool((costs[rows[on], cols[on]] < INSCRIBED_INFLATED_OBSTACLE).all())
 
 
-def _detour(span: np.ndarray, obstacle: Obstacle, side: float, clearance: float) -> np.ndarray | None:
+def _detour(span: np.ndarray, obstacle: Obstacle, side: float, clearance: float) -> tuple[np.ndarray, int] | None:
     """The span through a via point beside the obstacle (side +1: on the span's left), the span's
-    points within that reach of the via point's station left out; None when the obstacle is nearest
-    the span's ends (nothing to pass)."""
+    points within that reach of the via point's station left out, and the via point's index (its
+    legs are the points either side of it); None when the obstacle is nearest the span's ends
+    (nothing to pass)."""
     distance = np.hypot(*(span[:, :2] - obstacle.centre).T)
     k = int(np.argmin(distance))
     if k == 0 or k == len(span) - 1:
@@ -320,5 +321,5 @@ def _detour(span: np.ndarray, obstacle: Obstacle, side: float, clearance: float)
     keep[0] = keep[-1] = True
     before, after = span[keep & (along < along[k])], span[keep & (along > along[k])]
     heading = math.atan2(direction[1], direction[0])
-    return np.vstack([before, [[via[0], via[1], heading]], after])
+    return np.vstack([before, [[via[0], via[1], heading]], after]), len(before)
 
