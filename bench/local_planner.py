@@ -35,6 +35,7 @@ from dataclasses import fields
 
 import numpy as np
 
+from ..geometry.polygons import arc_lengths
 from ..schemas.messages import MapMetaData, Pose2D
 from ..services.costmap import layers as costmap_layers
 from ..services.global_planner import astar
@@ -103,7 +104,7 @@ def main(args: argparse.Namespace) -> int:
     if not plan.ok:
         print(f"omninav bench local: no global path on {path}: {plan.message}", file=sys.stderr)
         return 1
-    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(plan.poses[:, :2], axis=0).T))])
+    along = arc_lengths(plan.poses)
     picks = np.searchsorted(along, np.arange(CYCLES) * SPACING_M).clip(0, len(along) - 1)
 
     # the robot at each pose, moving along the path, in its local window

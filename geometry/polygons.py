@@ -52,6 +52,11 @@ def polygon_area(polygon: np.ndarray) -> float:
     return 0.5 * float(np.dot(x, np.roll(y, -1)) - np.dot(np.roll(x, -1), y))
 
 
+def arc_lengths(points: np.ndarray) -> np.ndarray:
+    """(N,) distance along a polyline (N, 2 or more: its first two columns are x, y) to each vertex."""
+    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points[:, :2], axis=0).T))])
+
+
 def densify(points: np.ndarray, spacing: float) -> np.ndarray:
     """(K, 2) points along the polyline, at most `spacing` apart, ends included."""
     xy = points[:, :2]

@@ -24,10 +24,9 @@ from scipy.spatial import ConvexHull, QhullError
 from ..configuration_space import reach
 from ..mission_score import movers_clearance
 from ..reachability import ReachabilityParams, mission_problems
-from ...geometry.polygons import point_segment_distance, points_in_polygons
+from ...geometry.polygons import arc_lengths, point_segment_distance, points_in_polygons
 from ...sim.people.plans import ROW_GAP
 from ...sim.world import World
-from .route import polyline_length
 
 RESOLUTION = 0.05       # m, as `navigate` rasterises a world into its map
 CLEARANCE_M = 0.1       # m, as the shipped worlds keep the footprint from everything at the start
@@ -36,7 +35,7 @@ CSPACE_MARGIN_M = 0.05  # m a building's robot keeps from everything on some way
 
 
 def _loop_points(loop: np.ndarray) -> np.ndarray:
-    arcs = polyline_length(loop)
+    arcs = arc_lengths(loop)
     samples = np.arange(0.0, arcs[-1], SAMPLE_M)
     return np.column_stack([np.interp(samples, arcs, loop[:, 0]), np.interp(samples, arcs, loop[:, 1])])
 

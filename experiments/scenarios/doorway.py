@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .route import arrival_s, furniture, lane, person, polyline_length, timed_walker, uniform, world_mapping
+from ...geometry.polygons import arc_lengths
+from .route import arrival_s, furniture, lane, person, timed_walker, uniform, world_mapping
 
 APPROACH_M = 0.8        # the person walks straight through the door from this far either side
 
@@ -23,7 +24,7 @@ def generate(rng: np.random.Generator) -> dict:
     back = [(wall_x - APPROACH_M, door_y), (wall_x - uniform(rng, (2.5, 4.0)), uniform(rng, (1.0, height - 1.0)))]
     walk = np.array(there + back)                       # from the far side through the door and back
     loop = np.vstack([walk, walk[-2:0:-1]])
-    ends = polyline_length(np.vstack([loop, loop[:1]]))
+    ends = arc_lengths(np.vstack([loop, loop[:1]]))
     towards_robot, robot_way = ends[1] + APPROACH_M, ends[4] + APPROACH_M    # at the door, each way
     arc = towards_robot if rng.random() < 0.6 else robot_way
     walking = timed_walker(loop, arc, arrival_s(route, (wall_x, door_y)) + uniform(rng, (-1.0, 1.0)), who)

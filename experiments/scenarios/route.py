@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ...geometry.polygons import point_segment_distance, segment_distance
+from ...geometry.polygons import arc_lengths, point_segment_distance, segment_distance
 from ...sim.people.plans import RADIUS_RANGE, SPEED_RANGE, draw_speeds
 
 
@@ -52,11 +52,6 @@ def across_hall(rng: np.random.Generator, width: float, height: float):
     return start, goal, np.array([start[:2], goal[:2]])
 
 
-def polyline_length(points: np.ndarray) -> np.ndarray:
-    """Arc length (N,) at each vertex of a polyline (N, 2)."""
-    return np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points, axis=0).T))])
-
-
 def arrival_s(route: np.ndarray, point, timing: Timing = TIMING) -> float:
     """When the robot, driving its route (N, 2) as expected, is nearest to `point`."""
     a, b = route[:-1], route[1:]
@@ -65,14 +60,14 @@ def arrival_s(route: np.ndarray, point, timing: Timing = TIMING) -> float:
     t = np.clip(np.sum((np.asarray(point) - a) * step, axis=1) / length2, 0.0, 1.0)
     distance = np.hypot(*(a + t[:, None] * step - point).T)
     i = int(np.argmin(distance))
-    along = polyline_length(route)[i] + t[i] * math.sqrt(length2[i])
+    along = arc_lengths(route)[i] + t[i] * math.sqrt(length2[i])
     return timing.start_delay_s + along / timing.expected_speed
 
 
 def point_on_loop(loop: np.ndarray, arc: float) -> tuple[np.ndarray, int]:
     """The point at `arc` around a closed loop of vertices (N, 2), and the segment it lies on."""
     closed = np.vstack([loop, loop[:1]])
-    ends = polyline_length(closed)
+    ends = arc_lengths(closed)
     arc %= ends[-1]
     i = min(int(np.searchsorted(ends, arc, side="right")) - 1, len(loop) - 1)
     f = (arc - ends[i]) / max(ends[i + 1] - ends[i], 1e-12)
@@ -82,7 +77,7 @@ def point_on_loop(loop: np.ndarray, arc: float) -> tuple[np.ndarray, int]:
 def loop_crossings(loop: np.ndarray, route: np.ndarray) -> list[tuple[float, np.ndarray]]:
     """(arc around the loop, point) wherever the closed loop (N, 2) crosses the route (M, 2)."""
     closed = np.vstack([loop, loop[:1]])
-    ends = polyline_length(closed)
+    ends = arc_lengths(closed)
     found = []
     for i in range(len(loop)):
         p, r = closed[i], closed[i + 1] - closed[i]
@@ -103,7 +98,7 @@ def route_crossing(loop: np.ndarray, route: np.ndarray, rng: np.random.Generator
     crossings = loop_crossings(loop, route)
     if crossings:
         return crossings[int(rng.integers(len(crossings)))]
-    arcs = np.linspace(0.0, polyline_length(np.vstack([loop, loop[:1]]))[-1], 400, endpoint=False)
+    arcs = np.linspace(0.0, arc_lengths(np.vstack([loop, loop[:1]]))[-1], 400, endpoint=False)
     points = np.array([point_on_loop(loop, arc)[0] for arc in arcs])
     nearest = int(np.argmin(point_segment_distance(points[:, None], route[None, :-1], route[None, 1:]).min(axis=1)))
     return float(arcs[nearest]), points[nearest]

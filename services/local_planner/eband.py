@@ -54,7 +54,7 @@ from ..costmap.layers import LETHAL_OBSTACLE
 from ...geometry.distance import distances_to
 from ...geometry.se2 import wrap_angle
 from ...geometry.movers import Movers
-from ...geometry.polygons import densify
+from ...geometry.polygons import arc_lengths, densify
 from .dwa import local_path
 from .dynamic import first_contact, slack
 from .footprint_check import FootprintCheck
@@ -521,7 +521,7 @@ def span_path(path: np.ndarray, pose, info: MapMetaData, lookahead: float) -> tu
     if len(local) > 1 and np.dot(np.asarray(pose[:2]) - local[0, :2], local[1, :2] - local[0, :2]) > 0:
         local = local[1:]
     points = np.vstack([np.array([[pose[0], pose[1], pose[2]]], np.float64), local])
-    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(points[:, :2], axis=0).T))])
+    along = arc_lengths(points)
     if along[-1] <= lookahead:
         return points, whole
     cut = int(np.searchsorted(along, lookahead))
@@ -543,7 +543,7 @@ def initial_band(span: np.ndarray, start, goal, params: ElasticBandParams) -> tu
     """(poses (K, 3), time intervals (K-1,)) along the span, about dt_ref·max_vel_x apart."""
     spacing = params.dt_ref * params.max_vel_x
     dense = densify(span, spacing / 4)
-    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(dense, axis=0).T))])
+    along = arc_lengths(dense)
     count = max(params.min_samples, min(params.max_samples, int(math.ceil(along[-1] / spacing)) + 1))
     stations = np.linspace(0.0, along[-1], count)
     xy = np.column_stack([np.interp(stations, along, dense[:, 0]), np.interp(stations, along, dense[:, 1])])

@@ -3,9 +3,11 @@ from __future__ import annotations
 
 import numpy as np
 
+from ...geometry.polygons import arc_lengths
+
 
 def ahead_of(path: np.ndarray, pose) -> tuple[np.ndarray, np.ndarray]:
     """(M, 3) the path from its point nearest `pose` on, and (M,) the length along it to each point."""
     nearest = int(np.argmin(np.hypot(path[:, 0] - pose[0], path[:, 1] - pose[1])))
     ahead = path[nearest:]
-    return ahead, np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(ahead[:, :2], axis=0).T))])
+    return ahead, arc_lengths(ahead)

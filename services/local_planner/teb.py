@@ -37,7 +37,7 @@ from scipy import ndimage
 
 from ...geometry.footprint import radii
 from ...geometry.grid import cell_to_world, in_grid, world_to_cell
-from ...geometry.polygons import densify
+from ...geometry.polygons import arc_lengths, densify
 from ...geometry.movers import Movers
 from ...parameters.declare import param
 from ...schemas.messages import MapMetaData
@@ -261,7 +261,7 @@ def _blobs(span, costs, info: MapMetaData, max_extent: float, reach: float) -> l
     """(distance along the span, obstacle) of each 8-connected blob of lethal cells no longer than
     max_extent whose edge comes within `reach` of the span, beyond the span's first point."""
     labels, count = ndimage.label(costs >= LETHAL_OBSTACLE, structure=np.ones((3, 3)))
-    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(span[:, :2], axis=0).T))])
+    along = arc_lengths(span)
     found = []
     for index, (rows, cols) in enumerate(ndimage.find_objects(labels)):
         if max(rows.stop - rows.start, cols.stop - cols.start) * info.resolution > max_extent:
@@ -281,7 +281,7 @@ def _blobs(span, costs, info: MapMetaData, max_extent: float, reach: float) -> l
 def _movers_met(span, movers: Movers, speed: float, reach: float) -> list[tuple[float, Obstacle]]:
     """(distance along the span, obstacle) of each mover that comes within `reach` of the robot driving
     the span at `speed`: the mover where it is when the robot is nearest it."""
-    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(span[:, :2], axis=0).T))])
+    along = arc_lengths(span)
     times = along / speed
     found = []
     for m in range(len(movers)):
@@ -316,7 +316,7 @@ def _detour(span: np.ndarray, obstacle: Obstacle, side: float, clearance: float)
     normal = np.array([-direction[1], direction[0]])
     # from the obstacle's centre, past its far edge on that side
     via = obstacle.centre + side * normal * (obstacle.extent + clearance)
-    along = np.concatenate([[0.0], np.cumsum(np.hypot(*np.diff(span[:, :2], axis=0).T))])
+    along = arc_lengths(span)
     keep = np.abs(along - along[k]) > obstacle.extent + clearance
     keep[0] = keep[-1] = True
     before, after = span[keep & (along < along[k])], span[keep & (along > along[k])]
