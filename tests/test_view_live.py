@@ -4,6 +4,7 @@ import asyncio
 import base64
 import json
 import math
+import re
 import socket
 import struct
 import threading
@@ -18,7 +19,7 @@ from omninav.schemas.keys import KeyLayout
 from omninav.services.runtime.compose import ComposeError, load_compose
 from omninav.services.runtime.zenoh_config import open_client
 
-from conftest import free_port
+from conftest import free_port, wait_until
 from view_fixtures import S, VIEW_CHANNELS, decode_with_schema, stack_messages
 
 # the SDK's current subprotocol and the one older Foxglove servers speak; the app offers both
@@ -87,15 +88,15 @@ def from_foxglove(goals: list) -> list:
     return [g for g in goals if g.goal_id.startswith("foxglove-")]
 
 
-async def watch_and_send_goals(port: int, heard: dict) -> FoxgloveClient:
-    for _ in range(200):        # the process takes a while to import and bind
-        try:
-            ws = await websockets.connect(f"ws://127.0.0.1:{port}", subprotocols=SUBPROTOCOLS, max_size=None)
-            break
-        except OSError:
-            await asyncio.sleep(0.2)
-    else:
-        raise AssertionError(f"no Foxglove server on 127.0.0.1:{port}")
+def goal_url(processes, view) -> str:
+    """The URL with the run's token that `view --allow-goals` prints once it serves."""
+    found = re.search(r"goals are accepted from a connection to (\S+)", wait_until(
+        lambda: "?token=" in processes.log_of(view) and processes.log_of(view), 120, what="the view's goal URL"))
+    return found.group(1)
+
+
+async def watch_and_send_goals(url: str, heard: dict) -> FoxgloveClient:
+    ws = await websockets.connect(url, subprotocols=SUBPROTOCOLS, max_size=None)
     async with ws:
         assert ws.subprotocol in SUBPROTOCOLS
         client = FoxgloveClient(ws)
@@ -109,7 +110,9 @@ async def watch_and_send_goals(port: int, heard: dict) -> FoxgloveClient:
 
 def test_the_view_serves_every_channel_and_forwards_goals_only_to_the_goal_key(processes, router_endpoint):
     port = free_port()
-    view = processes.omninav("view", "--port", str(port), "--router", router_endpoint)
+    view = processes.omninav("view", "--port", str(port), "--router", router_endpoint, "--allow-goals")
+    url = goal_url(processes, view)
+    assert url.startswith(f"ws://127.0.0.1:{port}/?token=")
     heard = {"goal": [], "cmd_vel": []}
     stop = threading.Event()
     with open_client(router_endpoint) as session:
@@ -129,7 +132,7 @@ def test_the_view_serves_every_channel_and_forwards_goals_only_to_the_goal_key(p
         publisher = threading.Thread(target=publish_stack)
         publisher.start()
         try:
-            client = asyncio.run(watch_and_send_goals(port, heard))
+            client = asyncio.run(watch_and_send_goals(url, heard))
         finally:
             stop.set()
             publisher.join()
