@@ -5,7 +5,10 @@ ros2_bridge service; no simulator, chassis or lidar) with what differs per robot
 command line: the robot's domain and router, the map, the laser's mounting and the start pose.
 Without --laser the mounting is found on the robot before the stack starts: the chain of transforms
 from its scans' frame to base_link on /tf and /tf_static (robot_state_publisher's), read as the
-ros2_bridge reads them. README "Drive a ROS 2 robot" walks through the robot's side.
+ros2_bridge reads them. The robot's router may ask for a login, as rmw_zenoh's security does: --zenoh-config
+(usrpwd or TLS, checked: zenoh_config.checked_login_config) or --user/--password-file; a refused login
+ends the command with one line, exit 2, before the stack starts. README "Drive a ROS 2 robot" walks
+through the robot's side.
 """
 from __future__ import annotations
 
@@ -21,12 +24,12 @@ import yaml
 import zenoh
 
 from ..services.ros2_bridge.translate import INPUTS, Mounting, Ros2BridgeParams, laser_mounting, typestore
-from ..services.ros2_bridge.node import declare_ros_subscription, ros_session_config
+from ..services.ros2_bridge.node import LoginRefused, declare_ros_subscription, open_ros_session, ros_endpoints, ros_login
 from ..services.ros2_bridge.rmw import NodeIdentity
 from ..services.runtime import launcher
 from ..services.runtime.params import read_yaml
 from ..parameters.declare import ParamError
-from ..services.runtime.zenoh_config import check_loopback, open_in_attempts
+from ..services.runtime.zenoh_config import check_loopback, login_endpoints, login_refused
 
 COMPOSE = Path(__file__).resolve().parents[1] / "compose" / "ros2_robot.yaml"
 BRIDGE = "ros2_bridge"
@@ -52,6 +55,14 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--for", dest="duration", type=float, metavar="SECONDS",
                         help="stop everything after this many seconds (default: run until Ctrl-C)")
     parser.add_argument("--credentials", metavar="FOLDER", help="as `omninav up --credentials`")
+    parser.add_argument("--zenoh-config", metavar="FILE",
+                        help="log in to the robot's router as this Zenoh JSON5 config says, e.g. the one "
+                             "zenoh_security_tools makes for rmw_zenoh (transport/auth/usrpwd, transport/link/tls; "
+                             "its connect/endpoints, if any, name the router); refused if it listens off loopback, "
+                             "scouts or loads plugins (default: none, no credentials)")
+    parser.add_argument("--user", help="log in to the robot's router with Zenoh's usrpwd as this user (with "
+                                       "--password-file; default: none)")
+    parser.add_argument("--password-file", metavar="FILE", help="the file holding --user's password alone")
 
 
 def stack(args: argparse.Namespace) -> dict:
@@ -72,6 +83,14 @@ def stack(args: argparse.Namespace) -> dict:
         bridge["domain"] = args.domain
     if args.router is not None:
         bridge["ros_router"] = check_loopback(args.router)
+    login = {"ros_zenoh_config": args.zenoh_config, "ros_password_file": args.password_file}
+    bridge.update({name: str(Path(value).resolve()) for name, value in login.items() if value})
+    if args.user:
+        bridge["ros_user"] = args.user
+    given = ros_login(bridge_params(data))      # ValueError naming the key that is refused
+    if given is not None and login_endpoints(given) and args.router is not None:
+        raise ValueError(f"--router {args.router} and connect/endpoints of --zenoh-config {args.zenoh_config}: "
+                         f"give the robot's router once")
     if args.map is not None:
         map_file = Path(args.map).resolve()
         if not map_file.is_file():
@@ -98,12 +117,14 @@ def set_params(services: dict[str, dict], names: tuple[str, ...], values) -> Non
 def mount_laser_from_tf(data: dict, timeout_s: float) -> str:
     """Find the laser's mounting on the robot (find_laser) and set it where --laser would; what was found,
     as a line to print (LookupError naming what is missing)."""
-    services = _services(data)
-    given = services[BRIDGE].get("params") or {}
-    params = Ros2BridgeParams(**{f.name: given[f.name] for f in dataclasses.fields(Ros2BridgeParams) if f.name in given})
-    (x, y, yaw), how = find_laser(params, timeout_s)
-    set_params(services, LASER, (x, y, yaw))
+    (x, y, yaw), how = find_laser(bridge_params(data), timeout_s)
+    set_params(_services(data), LASER, (x, y, yaw))
     return f"laser mounting from {how} x={x:.4f} y={y:.4f} yaw={yaw:.4f}"
+
+
+def bridge_params(data: dict) -> Ros2BridgeParams:
+    given = _services(data)[BRIDGE].get("params") or {}
+    return Ros2BridgeParams(**{f.name: given[f.name] for f in dataclasses.fields(Ros2BridgeParams) if f.name in given})
 
 
 def find_laser(params: Ros2BridgeParams, timeout_s: float) -> tuple[tuple[float, float, float], str]:
@@ -114,7 +135,7 @@ def find_laser(params: Ros2BridgeParams, timeout_s: float) -> tuple[tuple[float,
     store, inbox = typestore(), queue.SimpleQueue()
     scan_frame, mounting = None, Mounting()
     deadline = time.monotonic() + timeout_s
-    ros = _open_robot_session(params.ros_router, deadline)
+    ros = _open_robot_session(params, deadline)
     with ros:
         me = NodeIdentity(params.domain, str(ros.info.zid()), f"{params.node_name}_setup", params.namespace)
         handles = [ros.liveliness().declare_token(me.node_token())]
@@ -146,12 +167,21 @@ def find_laser(params: Ros2BridgeParams, timeout_s: float) -> tuple[tuple[float,
                 handle.undeclare()
 
 
-def _open_robot_session(router: str, deadline: float) -> zenoh.Session:
-    """A session with the robot's router, tried until the deadline (LookupError if it never answers)."""
-    session = open_in_attempts(ros_session_config(router), lambda: time.monotonic() >= deadline)
+def _open_robot_session(params: Ros2BridgeParams, deadline: float) -> zenoh.Session:
+    """A session with the robot's router, tried until the deadline (LookupError if it never answers,
+    LoginRefused if it refuses the login)."""
+    session = open_ros_session(params, lambda: time.monotonic() >= deadline)
     if session is None:
-        raise LookupError(f"the robot's router at {router} does not answer (is rmw_zenohd running?)")
+        raise LookupError(f"the robot's router at {', '.join(ros_endpoints(params))} does not answer "
+                          "(is rmw_zenohd running?)")
     return session
+
+
+def check_login(params: Ros2BridgeParams, timeout_s: float) -> None:
+    """With --laser nothing joins the robot before the stack: if its router is there now, log in once
+    (LoginRefused if it refuses); if not, the bridge waits for it (and refuses then, alone)."""
+    if login_refused(ros_endpoints(params)):
+        _open_robot_session(params, time.monotonic() + timeout_s).close()
 
 
 def main(args: argparse.Namespace) -> int:
@@ -162,16 +192,18 @@ def main(args: argparse.Namespace) -> int:
     except (ValueError, ParamError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    if args.laser is None:
-        try:
+    try:
+        if args.laser is not None:
+            check_login(bridge_params(data), args.tf_timeout)
+        else:
             print(mount_laser_from_tf(data, args.tf_timeout), flush=True)
-        except ValueError as exc:       # the compose file's ros_router off loopback
-            print(f"error: {exc}", file=sys.stderr)
-            return 2
-        except LookupError as exc:
-            print(f"error: {exc} within {args.tf_timeout:g} s; give the laser's mounting by hand: --laser X Y YAW",
-                  file=sys.stderr)
-            return 2
+    except (LoginRefused, ValueError) as exc:      # a refused login; the compose file's ros_router off loopback
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except LookupError as exc:
+        print(f"error: {exc} within {args.tf_timeout:g} s" + ("" if args.laser else
+              "; give the laser's mounting by hand: --laser X Y YAW"), file=sys.stderr)
+        return 2
     with tempfile.TemporaryDirectory(prefix="omninav-bridge-") as folder:
         compose = Path(folder) / "ros2_robot.yaml"
         compose.write_text(yaml.safe_dump(data, sort_keys=False))

@@ -23,7 +23,7 @@ import zenoh
 from rosbags.highlevel import AnyReader
 from zenoh.ext import CacheConfig, declare_advanced_publisher
 
-from omninav.services.ros2_bridge.translate import typestore
+from omninav.services.ros2_bridge.translate import Ros2BridgeParams, typestore
 from omninav.services.ros2_bridge.node import ros_session_config
 from omninav.services.ros2_bridge.rmw import (PUBLISHER, TRANSIENT_LOCAL, NodeIdentity, Qos, entity_gid,
                                               pack_attachment, topic_key)
@@ -35,7 +35,7 @@ STAND_PERIOD_NS = 50_000_000
 def main(router: str, bag: str, goal: tuple[float, float, float], tf_static: bool) -> None:
     store = typestore()
     t = store.types
-    with zenoh.open(ros_session_config(router)) as session:
+    with zenoh.open(ros_session_config(Ros2BridgeParams(ros_router=router))) as session:
         me = NodeIdentity(0, str(session.info.zid()), "fake_robot")
         publishers, tokens = {}, []
         for number, (topic, msgtype) in enumerate((("/scan", "sensor_msgs/msg/LaserScan"),

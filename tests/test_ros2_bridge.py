@@ -326,7 +326,7 @@ def test_the_node_refuses_a_robot_router_off_loopback():
 def stack_args(**values):
     defaults = dict(middleware="ros2", domain=None, router=None, map=None, laser=None, initial_pose=None,
                     tf_timeout=10.0, compose=str(REPO / "compose" / "ros2_robot.yaml"), duration=None,
-                    credentials=None)
+                    credentials=None, zenoh_config=None, user=None, password_file=None)
     return argparse.Namespace(**{**defaults, **values})
 
 

@@ -24,7 +24,8 @@ from zenoh.ext import CacheConfig, HistoryConfig, declare_advanced_publisher, de
 
 from ..runtime.live import LiveRunner
 from ..runtime.node import Node
-from ..runtime.zenoh_config import check_loopback, foreign_client_config
+from ..runtime.zenoh_config import (check_loopback, checked_login_config, foreign_client_config, login_endpoints,
+                                   login_refused)
 from .translate import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, RosTopic
 from .rmw import (PUBLISHER, SUBSCRIPTION, TRANSIENT_LOCAL, NodeIdentity, entity_gid, pack_attachment, topic_key,
                   unpack_attachment)
@@ -33,14 +34,60 @@ POLL_S = 0.01       # wall s between drains of the ROS inbox (a source's pace: i
 RETRY_S = 1.0       # wall s between attempts to reach the robot's router
 
 
-def ros_session_config(router: str) -> zenoh.Config:
-    """A client of the robot's router that gives up after RETRY_S if it does not answer; samples carry
-    timestamps, as in rmw_zenoh's sessions (Zenoh's advanced publisher, for transient-local topics,
-    orders by them)."""
-    conf = foreign_client_config(router)
+REFUSALS = 3        # attempts in a row that the robot's router accepts over tcp but not in Zenoh: a refused login
+
+
+class LoginRefused(Exception):
+    """The robot's router is there but does not let the bridge in (credentials or certificates)."""
+
+
+def ros_login(p: Ros2BridgeParams) -> zenoh.Config | None:
+    """The login the parameters give (checked_login_config: ValueError naming what is wrong), or None."""
+    if not (p.ros_zenoh_config or p.ros_user or p.ros_password_file):
+        return None
+    return checked_login_config(p.ros_zenoh_config or None, p.ros_user or None, p.ros_password_file or None)
+
+
+def ros_endpoints(p: Ros2BridgeParams) -> list[str]:
+    login = ros_login(p)
+    return (login_endpoints(login) if login is not None else []) or [check_loopback(p.ros_router)]
+
+
+def ros_session_config(p: Ros2BridgeParams) -> zenoh.Config:
+    """A client of the robot's router, logged in as the parameters say, that gives up after RETRY_S if
+    it does not answer; samples carry timestamps, as in rmw_zenoh's sessions (Zenoh's advanced
+    publisher, for transient-local topics, orders by them)."""
+    conf = foreign_client_config(p.ros_router, ros_login(p))
     conf.insert_json5("timestamping/enabled", "true")
     conf.insert_json5("connect/timeout_ms", json.dumps(round(RETRY_S * 1000)))    # give up, to be retried
     return conf
+
+
+def who(p: Ros2BridgeParams) -> str:
+    if p.ros_zenoh_config:
+        return f"with {p.ros_zenoh_config}" + (f" as user {p.ros_user}" if p.ros_user else "")
+    return f"as user {p.ros_user}" if p.ros_user else "without credentials"
+
+
+def open_ros_session(p: Ros2BridgeParams, stopped: Callable[[], bool],
+                     waiting: Callable[[], None] = lambda: None) -> zenoh.Session | None:
+    """A session with the robot's router, tried until it opens (None once stopped() is true; waiting()
+    after each attempt that found no router). LoginRefused, one line, when the router accepts the
+    connection but refuses the session REFUSALS times in a row."""
+    conf, endpoints, refusals = ros_session_config(p), ros_endpoints(p), 0
+    while not stopped():
+        try:
+            return zenoh.open(conf)
+        except zenoh.ZError:
+            if not login_refused(endpoints):
+                refusals = 0
+                waiting()
+                continue
+            refusals += 1
+            if refusals >= REFUSALS:
+                raise LoginRefused(f"the robot's router at {', '.join(endpoints)} refused the bridge's login "
+                                   f"({who(p)})") from None
+    return None
 
 
 def _bytes(attachment: zenoh.ZBytes | None) -> bytes:
@@ -71,6 +118,8 @@ class Ros2BridgeNode(Node):
     def setup(self) -> None:
         p = self.params
         check_loopback(p.ros_router)
+        ros_login(p)        # refuses a login config that opens more than loopback, naming the key
+        self.refused: str | None = None
         if p.domain < 0:
             raise ValueError(f"{self.name}: domain must be a ROS domain id ≥ 0, got {p.domain}")
         self.bridge = Bridge(p)
@@ -149,27 +198,33 @@ class Ros2BridgeNode(Node):
         finally:
             finished.set()
             robot.join()
+        if self.refused:
+            raise SystemExit(f"{self.name}: {self.refused}")
 
     def _join_robot(self, stop: threading.Event, finished: threading.Event) -> None:
-        p, waiting = self.params, False
-        while not stop.is_set():
-            try:
-                ros = zenoh.open(ros_session_config(p.ros_router))
-            except zenoh.ZError:
-                if not waiting:
-                    waiting = True
-                    self.log.warning("waiting for the robot's router at %s (rmw_zenohd)", p.ros_router)
-                stop.wait(RETRY_S)
-                continue
-            with ros:
-                handles = self._declare_ros(ros)
-                self.log.info("on the robot's ROS 2 graph (domain %d, router %s) as node %s", p.domain,
-                              p.ros_router, p.node_name)
-                finished.wait()
-                self.ros_sink = None
-                for handle in handles:
-                    handle.undeclare()
+        p, told = self.params, []
+
+        def waiting() -> None:
+            if not told:
+                told.append(True)
+                self.log.warning("waiting for the robot's router at %s (rmw_zenohd)", ", ".join(ros_endpoints(p)))
+            stop.wait(RETRY_S)
+        try:
+            ros = open_ros_session(p, stop.is_set, waiting)
+        except LoginRefused as exc:     # the omninav side stops too: no /cmd_vel without the robot's consent
+            self.refused = str(exc)
+            stop.set()
             return
+        if ros is None:
+            return
+        with ros:
+            handles = self._declare_ros(ros)
+            self.log.info("on the robot's ROS 2 graph (domain %d, router %s) as node %s", p.domain,
+                          ", ".join(ros_endpoints(p)), p.node_name)
+            finished.wait()
+            self.ros_sink = None
+            for handle in handles:
+                handle.undeclare()
 
     def _declare_ros(self, ros: zenoh.Session) -> list:
         p = self.params

@@ -143,6 +143,10 @@ class Ros2BridgeParams(Parameters):
     mounting the stack's services are configured with."""
     domain: int = 0                     # the robot's ROS_DOMAIN_ID
     ros_router: str = "tcp/127.0.0.1:7447"  # the robot's rmw_zenoh router, reached on loopback
+    # how the bridge logs in to the robot's router, as rmw_zenoh's security does (zenoh_config.checked_login_config)
+    ros_zenoh_config: str = ""          # a Zenoh JSON5 config file (usrpwd, TLS; its connect/endpoints over ros_router)
+    ros_user: str = ""                  # usrpwd user, with ros_password_file (a file holding the password alone)
+    ros_password_file: str = ""
     node_name: str = "omninav_bridge"
     namespace: str = "/"
     base_frame: str = "base_link"

@@ -100,12 +100,19 @@ def logging_in(endpoint: str, identity: Identity) -> zenoh.Config:
     return conf
 
 
-def foreign_client_config(endpoint: str) -> zenoh.Config:
+def foreign_client_config(endpoint: str, login: zenoh.Config | None = None) -> zenoh.Config:
     """A client of the router at endpoint (loopback only) that waits for it, without omninav's
-    credentials: as such it also joins another system's router, e.g. a ROS 2 robot's rmw_zenoh one."""
-    conf = _base("client")
+    credentials: as such it also joins another system's router, e.g. a ROS 2 robot's rmw_zenoh one.
+    With `login` (checked_login_config: another system's config, e.g. with its usrpwd or TLS) it is
+    that config with these rules over it, and connects to the login's connect/endpoints if it has any."""
+    conf = _base("client") if login is None else login
+    if login is not None:
+        conf.insert_json5("mode", '"client"')
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("scouting/gossip/enabled", "false")
+    endpoints = login_endpoints(login) if login is not None else []
     conf.insert_json5("listen/endpoints", "[]")
-    conf.insert_json5("connect/endpoints", json.dumps([check_loopback(endpoint)]))
+    conf.insert_json5("connect/endpoints", json.dumps(endpoints or [check_loopback(endpoint)]))
     conf.insert_json5("connect/timeout_ms", "-1")
     conf.insert_json5("connect/exit_on_failure", "false")
     # zenoh retries a connection 1 s, then 2 s, then every 4 s: a service started before `up` opens
@@ -113,6 +120,106 @@ def foreign_client_config(endpoint: str) -> zenoh.Config:
     # a refused loopback connection costs nothing, so retry every 0.1 s
     conf.insert_json5("connect/retry", json.dumps(CONNECT_RETRY))
     return conf
+
+
+# ---------------------------------------------------------------- another system's config (a robot's rmw_zenoh)
+
+_ZENOH_DEFAULTS = zenoh.Config()
+_TLS_FILES = ("root_ca_certificate", "connect_certificate", "connect_private_key")
+
+
+def _set(conf: zenoh.Config, key: str):
+    """The file's value of key, or None where the file left zenoh's default."""
+    value = json.loads(conf.get_json(key))
+    return None if value == json.loads(_ZENOH_DEFAULTS.get_json(key)) else value
+
+
+def _flat(endpoints) -> list[str]:
+    """A list of endpoints, or zenoh's per-mode mapping of them, as one list."""
+    if isinstance(endpoints, dict):
+        return [e for listed in endpoints.values() for e in listed or []]
+    return list(endpoints or [])
+
+
+def _is_loopback_listen(endpoint: str) -> bool:
+    proto, _, address = endpoint.partition("/")
+    if proto.startswith("unixsock"):
+        return True
+    host = address.partition("#")[0].rpartition(":")[0].strip("[]")
+    if host == "localhost":
+        return True
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
+
+
+def checked_login_config(path: str | Path | None = None, user: str | None = None,
+                         password_file: str | Path | None = None) -> zenoh.Config:
+    """Another system's Zenoh config (JSON5, e.g. zenoh_security_tools' for rmw_zenoh: transport/auth/usrpwd
+    or transport/link/tls), and/or user + password file as its usrpwd, for foreign_client_config.
+    ValueError naming the key when the file would open more than loopback and scouting-free (a listen
+    endpoint off loopback, scouting on, plugins, mode router) or cannot work (a TLS file missing, half a login)."""
+    where = f"--zenoh-config {path}" if path else "--user"
+    if path:
+        try:
+            conf = zenoh.Config.from_file(str(path))
+        except (zenoh.ZError, OSError) as exc:
+            raise ValueError(f"--zenoh-config {path}: not a Zenoh config ({exc})") from None
+    else:
+        conf = zenoh.Config()
+    mode = _set(conf, "mode")
+    if mode not in (None, "client", "peer"):
+        raise ValueError(f"{where}: mode {mode!r}: the bridge is a client of the robot's router, never a router")
+    off_loopback = [e for e in _flat(_set(conf, "listen/endpoints")) if not _is_loopback_listen(e)]
+    if off_loopback:
+        raise ValueError(f"{where}: listen/endpoints {off_loopback} is not loopback: the bridge listens on nothing")
+    for key in ("scouting/multicast/enabled", "scouting/gossip/enabled", "plugins_loading/enabled"):
+        if _set(conf, key):
+            raise ValueError(f"{where}: {key} is true: the bridge only connects to the router (set it false)")
+    if _set(conf, "plugins"):
+        raise ValueError(f"{where}: plugins: the bridge loads none")
+    tls = _set(conf, "transport/link/tls") or {}
+    for name in _TLS_FILES:
+        if tls.get(name) and not os.access(tls[name], os.R_OK):
+            raise ValueError(f"{where}: transport/link/tls/{name} {tls[name]}: cannot read it")
+    if bool(tls.get("connect_certificate")) != bool(tls.get("connect_private_key")):
+        raise ValueError(f"{where}: transport/link/tls: connect_certificate and connect_private_key go together")
+    usrpwd = _set(conf, "transport/auth/usrpwd") or {}     # half a usrpwd: zenoh refuses the file itself
+    if bool(user) != bool(password_file):
+        raise ValueError("--user and --password-file go together")
+    if user:
+        if usrpwd.get("user"):
+            raise ValueError(f"{where}: transport/auth/usrpwd/user is set there and by --user: give one")
+        try:
+            password = Path(password_file).read_text().strip()
+        except OSError as exc:
+            raise ValueError(f"--password-file {password_file}: cannot read it ({exc.strerror})") from None
+        if not password or "\n" in password:
+            raise ValueError(f"--password-file {password_file}: expected the password alone on one line")
+        conf.insert_json5("transport/auth/usrpwd", auth_json(user, password))
+    return conf
+
+
+def login_endpoints(login: zenoh.Config) -> list[str]:
+    """The robot's router endpoints a login config names (connect/endpoints; may be off loopback, e.g. tls/…)."""
+    return _flat(_set(login, "connect/endpoints"))
+
+
+def login_refused(endpoints: list[str]) -> bool:
+    """Whether a router listens (accepts tcp) on one of these tcp/tls endpoints: if so, a session that
+    cannot open was refused (Zenoh says "Timeout" alike for a refused login and for no router)."""
+    for endpoint in endpoints:
+        proto, _, address = endpoint.partition("/")
+        host, _, port = address.partition("#")[0].rpartition(":")
+        if proto not in ("tcp", "tls") or not port.isdigit():
+            continue
+        try:
+            socket.create_connection((host.strip("[]"), int(port)), timeout=OPEN_ATTEMPT_S).close()
+            return True
+        except OSError:
+            continue
+    return False
 
 
 def open_client(router: str | None = None, credentials: str | None = None,
