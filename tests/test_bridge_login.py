@@ -61,7 +61,7 @@ def test_the_bridge_service_refused_by_the_robot_exits_non_zero(robot, processes
     node = processes.omninav("run", "ros2_bridge", "--set", f"ros_router={endpoint}", "--set", "ros_user=robot",
                              "--set", f"ros_password_file={wrong}")
     assert node.wait(120) != 0
-    assert f"refused the bridge's login (as user robot)" in processes.log_of(node)
+    assert "refused the bridge's login (as user robot)" in processes.log_of(node)
 
 
 @pytest.mark.parametrize("text, key", [
