@@ -156,14 +156,18 @@ def refusal(endpoint: str, identity: Identity) -> LoginRefused:
 
 
 def listening(endpoint: str) -> bool:
-    """Whether anything accepts a connection on the (loopback tcp or unix socket) endpoint."""
+    """Whether anything accepts a connection on the endpoint (tcp, tls or a unix socket; other
+    protocols - quic, udp - cannot be probed: False)."""
     proto, _, address = endpoint.partition("/")
+    address = address.partition("#")[0]
     if proto == "unixsock-stream":
         family, target = socket.AF_UNIX, address
-    else:
+    elif proto in ("tcp", "tls") and address.rpartition(":")[2].isdigit():
         host, _, port = address.rpartition(":")
         host = host.strip("[]")
         family, target = (socket.AF_INET6 if ":" in host else socket.AF_INET), (host, int(port))
+    else:
+        return False
     with socket.socket(family, socket.SOCK_STREAM) as probe:
         probe.settimeout(_PROBE_S)
         try:

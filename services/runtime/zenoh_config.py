@@ -207,19 +207,9 @@ def login_endpoints(login: zenoh.Config) -> list[str]:
 
 
 def login_refused(endpoints: list[str]) -> bool:
-    """Whether a router listens (accepts tcp) on one of these tcp/tls endpoints: if so, a session that
-    cannot open was refused (Zenoh says "Timeout" alike for a refused login and for no router)."""
-    for endpoint in endpoints:
-        proto, _, address = endpoint.partition("/")
-        host, _, port = address.partition("#")[0].rpartition(":")
-        if proto not in ("tcp", "tls") or not port.isdigit():
-            continue
-        try:
-            socket.create_connection((host.strip("[]"), int(port)), timeout=OPEN_ATTEMPT_S).close()
-            return True
-        except OSError:
-            continue
-    return False
+    """Whether a router listens on one of these endpoints: if so, a session that cannot open was
+    refused (Zenoh says "Timeout" alike for a refused login and for no router)."""
+    return any(listening(endpoint) for endpoint in endpoints)
 
 
 def open_client(router: str | None = None, credentials: str | None = None,
