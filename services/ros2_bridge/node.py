@@ -189,7 +189,7 @@ class Ros2BridgeNode(Node):
         """omninav's side on this thread; the robot's side joined on another as soon as its router
         answers, and left only after the last omninav input was handled."""
         runner = LiveRunner(self, router)
-        runner.stop_event = stop_event      # `omninav run`'s signal handlers set this one
+        runner.stops_with(stop_event)       # `omninav run`'s signal handlers set this one
         finished = threading.Event()
         robot = threading.Thread(target=self._join_robot, args=(stop_event, finished), name="ros2-session")
         robot.start()

@@ -153,6 +153,15 @@ class LiveRunner:
         self.stop_event.set()
         self._inbox.put(("wake",))
 
+    def stops_with(self, event: threading.Event) -> None:
+        """Stop when `event` is set (a run_live's caller's, which `omninav run`'s signal handlers set),
+        waking this runner's own inbox as stop() does: the caller's handlers wake only theirs, and a
+        get(timeout) a signal interrupted can block until the next put (the ros2 bridge, idle, did
+        not stop at SIGINT within 120 s)."""
+        self.stop_event = event
+        threading.Thread(target=lambda: event.wait() or self._inbox.put(("wake",)), daemon=True,
+                         name="stop-wake").start()
+
     # ------------------------------------------------------------ wiring
 
     def _sink(self, pub: Publisher, payload: bytes, stamp_ns: int) -> None:

@@ -157,7 +157,7 @@ class ViewNode(Node):
     def run_live(self, router: str | None, stop_event: threading.Event) -> None:
         """Serve viewers while the bus is followed; the server lives only as long as the live run."""
         runner = LiveRunner(self, router)
-        runner.stop_event = stop_event
+        runner.stops_with(stop_event)       # `omninav run`'s signal handlers set this one
         try:
             self.start_server()
         except RuntimeError as exc:     # the SDK's FoxgloveError, e.g. the port is taken
