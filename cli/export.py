@@ -5,8 +5,20 @@ from __future__ import annotations
 
 import argparse
 
-from ..services.recorder.mcap_io import RecordingError
+from mcap.exceptions import McapError
+
+from ..experiments.progress import progress
+from ..services.recorder.mcap_io import RecordingError, recording_summary
 from ..services.runtime.errors import UserError, exits_2_on_user_error
+
+
+def recorded_messages(path: str) -> int | None:
+    """How many messages a recording holds (its summary's statistics); None when it cannot say (the
+    export then names what is wrong with it)."""
+    try:
+        return recording_summary(path).statistics.message_count
+    except (McapError, OSError):
+        return None
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
@@ -21,7 +33,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
 def main(args: argparse.Namespace) -> int:
     from ..services.view.mcap_export import export_foxglove     # foxglove-sdk only when exporting
     try:
-        counts = export_foxglove(args.input, args.output, args.robot)
+        with progress(recorded_messages(args.input), "messages") as bar:
+            counts = export_foxglove(args.input, args.output, args.robot, on_record=bar.advance)
     except (RecordingError, FileExistsError) as exc:
         raise UserError(str(exc)) from None
     exported = {topic: n for topic, n in counts.items() if not topic.startswith("malformed/")}

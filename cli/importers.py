@@ -10,6 +10,7 @@ import os
 import sys
 from pathlib import Path
 
+from ..experiments.progress import progress
 from ..schemas.codec import encode
 from ..schemas.keys import KeyLayout
 from ..schemas.registry import type_info
@@ -59,12 +60,14 @@ def _write_recording(path: Path, messages: list[tuple[str, object]]) -> None:
     seqs: dict[str, int] = {}
     try:
         writer = RecordingWriter(tmp, metadata={"source": "omninav import"})
-        for key, msg in messages:
-            seqs[key] = seqs.get(key, -1) + 1
-            msg.header.seq = seqs[key]
-            stamp = msg.header.stamp_ns
-            # log_time = the original stamp, so live replay keeps the log's pacing
-            writer.write(key, type_info(type(msg))[0], encode(msg), seqs[key], stamp, stamp)
+        with progress(len(messages), "messages") as bar:
+            for key, msg in messages:
+                seqs[key] = seqs.get(key, -1) + 1
+                msg.header.seq = seqs[key]
+                stamp = msg.header.stamp_ns
+                # log_time = the original stamp, so live replay keeps the log's pacing
+                writer.write(key, type_info(type(msg))[0], encode(msg), seqs[key], stamp, stamp)
+                bar.advance()
         writer.close()
         os.replace(tmp, path)
     finally:

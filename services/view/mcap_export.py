@@ -7,6 +7,7 @@ from __future__ import annotations
 
 from collections import Counter
 from pathlib import Path
+from typing import Callable
 
 import foxglove
 
@@ -20,10 +21,11 @@ PROFILE = "omninav-foxglove"
 
 
 def export_foxglove(source: str | Path, target: str | Path, robot: str = DEFAULT_ROBOT,
-                    params: ViewParams | None = None) -> Counter[str]:
+                    params: ViewParams | None = None, on_record: Callable[[], None] | None = None) -> Counter[str]:
     """Write target from the recording at source; returns how many messages went to each topic, and
     under 'malformed/<key>' how many recorded payloads did not decode (they are skipped). Raises
-    RecordingError for an unreadable source and FileExistsError when target exists."""
+    RecordingError for an unreadable source and FileExistsError when target exists. on_record() is
+    called after each recorded message is read (a progress bar)."""
     target = Path(target)
     if target.exists():
         raise FileExistsError(f"{target} exists; the export never overwrites a file (choose another output)")
@@ -36,6 +38,8 @@ def export_foxglove(source: str | Path, target: str | Path, robot: str = DEFAULT
                                 writer_options=foxglove.mcap.MCAPWriteOptions(profile=PROFILE))
     try:
         for record in read_records(source):
+            if on_record is not None:
+                on_record()
             route = routes.route_for(record.key)
             if route is None:
                 continue
