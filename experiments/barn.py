@@ -211,8 +211,9 @@ def parse_range(text: str) -> range:
     return range(int(match.group(1)), int(match.group(2)) + 1)
 
 
-def jobs_for(worlds_dir: Path, numbers: list[int], runs: int) -> list[tuple[str, str, int]]:
-    """(world file, path file, seed) per run; BarnError naming a missing file."""
+def jobs_for(worlds_dir: Path, numbers: list[int], runs: int, first_seed: int = 0) -> list[tuple[str, str, int]]:
+    """(world file, path file, seed) per run, seeds first_seed.. first_seed + runs - 1; BarnError
+    naming a missing file."""
     paths_dir = worlds_dir.parent / "path_files"
     jobs = []
     for n in numbers:
@@ -220,7 +221,7 @@ def jobs_for(worlds_dir: Path, numbers: list[int], runs: int) -> list[tuple[str,
         for needed in (world_file, path_file):
             if not needed.is_file():
                 raise BarnError(f"{needed}: no such file (BARN worlds in {worlds_dir}, paths in {paths_dir})")
-        jobs += [(str(world_file), str(path_file), seed) for seed in range(runs)]
+        jobs += [(str(world_file), str(path_file), seed) for seed in range(first_seed, first_seed + runs)]
     return jobs
 
 
@@ -245,7 +246,8 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--range", default="0-149", help="world numbers FIRST-LAST (default 0-149)")
     parser.add_argument("--only", choices=("all", "even", "odd"), default="all",
                         help="run only the even or odd worlds of the range (tune on one half, check on the other)")
-    parser.add_argument("--runs", type=int, default=1, help="runs per world, seeds 0..N-1 (default 1)")
+    parser.add_argument("--runs", type=int, default=1, help="runs per world, seeds SEED..SEED+N-1 (default 1)")
+    parser.add_argument("--seed", type=int, default=0, help="the first run's seed (default 0)")
     parser.add_argument("--workers", type=int, default=2, help="worker processes (default 2)")
     parser.add_argument("--real-time", action="store_true",
                         help="also run every world on the wall clock, every service its own process, one "
@@ -294,10 +296,10 @@ def print_tallies(figures: dict, how: str) -> None:
 def main(args: argparse.Namespace) -> int:
     if args.worlds is None or not args.worlds.is_dir():
         raise BarnError(f"--worlds {args.worlds}: no such folder (the BARN worlds, e.g. ../shared/data/barn/worlds)")
-    if args.runs < 1 or args.workers < 1:
-        raise BarnError("--runs and --workers must be at least 1")
+    if args.runs < 1 or args.workers < 1 or args.seed < 0:
+        raise BarnError("--runs and --workers must be at least 1, --seed at least 0")
     numbers = [n for n in parse_range(args.range) if args.only == "all" or n % 2 == (args.only == "odd")]
-    jobs = [(*job, args.odometry) for job in jobs_for(args.worlds, numbers, args.runs)]
+    jobs = [(*job, args.odometry) for job in jobs_for(args.worlds, numbers, args.runs, args.seed)]
     say = (lambda text: print(text, file=sys.stderr, flush=True)) if args.json else print
     results: list[WorldResult] = []
     context = multiprocessing.get_context("spawn")      # numba and the runtime start clean in each worker
