@@ -94,15 +94,10 @@ class LaserOdometryParams(Parameters):
                   "< half the map's side ({p.map_size} × {p.map_resolution} m / 2)"))
 
     def hector_params(self) -> HectorParams:
-        """The grids' and matcher's parameters (the local map is centred on the robot)."""
-        return HectorParams(map_resolution=self.map_resolution, map_size=self.map_size, map_start_x=0.5, map_start_y=0.5,
-                            map_multi_res_levels=self.map_multi_res_levels, update_factor_free=self.update_factor_free,
-                            update_factor_occupied=self.update_factor_occupied,
-                            map_update_distance_thresh=self.map_update_distance_thresh,
-                            map_update_angle_thresh=self.map_update_angle_thresh, laser_min_dist=self.laser_min_dist,
-                            laser_max_dist=self.laser_max_dist, guess_weight_xy=self.guess_weight_xy,
-                            guess_weight_yaw=self.guess_weight_yaw, predict_motion=True,
-                            search_angle=self.search_angle)
+        """The grids' and matcher's parameters: hector's names this class shares, the local map
+        centred on the robot, each match also started from the last motion repeated."""
+        shared = {f.name: getattr(self, f.name) for f in dataclasses.fields(HectorParams) if hasattr(self, f.name)}
+        return HectorParams(**shared, map_start_x=0.5, map_start_y=0.5, predict_motion=True)
 
 
 @dataclass(frozen=True)
