@@ -59,7 +59,7 @@ def run_case(job: tuple[str, str, tuple, str]) -> dict:
     elif family == "dynabarn":
         folder = Path(out) / name
         folder.mkdir(parents=True, exist_ok=True)
-        r = run_seed((*arguments[:2], str(folder), controller))
+        r = run_seed((*arguments[:2], str(folder), controller, "auto"))
         outcome = (r.success, "timeout" if r.timeout else "arrived" if r.time_s is not None else "contact",
                    r.robot_fault_collisions + r.mover_fault_collisions, r.time_s, None)
     else:

@@ -40,16 +40,16 @@ class DynaBarnResult(Verdict):
     controller: str = DEFAULT_CONTROLLER
 
 
-def run_seed(job: tuple) -> DynaBarnResult:
-    """One world (difficulty, seed, folder, controller[, odometry]): draw it, write it into the
-    folder, drive it with the controller on that odometry (navigate's ODOMETRIES), judge it."""
-    difficulty, seed, folder, controller, *odometry = job
+def run_seed(job: tuple[str, int, str, str, str]) -> DynaBarnResult:
+    """One world (difficulty, seed, folder, controller, odometry): draw it, write it into the folder,
+    drive it with the controller on that odometry (navigate's ODOMETRIES), judge it."""
+    difficulty, seed, folder, controller, odometry = job
     # a file of its own per controller: the same world's runs go at once on two workers
     own = "" if controller == DEFAULT_CONTROLLER else f"-{controller}"
     world_file = Path(folder) / f"{KIND}-{difficulty}-{seed}{own}.yaml"
     world_file.write_text(world_text(generate_world(KIND, seed, difficulty)))
     world = load_world(world_file)
-    watch, run = drive_to_goal(world, seed, world.robot.start, world.goals[0], controller, *odometry)
+    watch, run = drive_to_goal(world, seed, world.robot.start, world.goals[0], controller, odometry)
     sim = run.nodes["sim"].sim
     verdict = judge(watch, sim.collisions > 0, OT_S, run.summary.false_successes > 0)
     return DynaBarnResult(**asdict(verdict), difficulty=difficulty, seed=seed,

@@ -143,7 +143,7 @@ def test_a_run_with_a_contact_is_not_a_success(monkeypatch, tmp_path):
     sim = SimpleNamespace(collisions=1, robot_fault_collisions=0, mover_fault_collisions=1)
     monkeypatch.setattr(bench, "drive_to_goal", lambda *args: (_watch(12.02), SimpleNamespace(
         nodes={"sim": SimpleNamespace(sim=sim)}, summary=SimpleNamespace(false_successes=0))))
-    result = bench.run_seed(("easy", 3, str(tmp_path), "dwa"))
+    result = bench.run_seed(("easy", 3, str(tmp_path), "dwa", "auto"))
     assert (tmp_path / "dynabarn-easy-3.yaml").is_file()
     assert not result.success and result.collision and result.score == 0.0
     assert (result.robot_fault_collisions, result.mover_fault_collisions) == (0, 1)
@@ -175,7 +175,7 @@ def test_the_figures_per_difficulty():
 
 
 def test_one_easy_world_is_driven_and_judged_in_lockstep(tmp_path):
-    result = bench.run_seed(("easy", 0, str(tmp_path), "dwa"))
+    result = bench.run_seed(("easy", 0, str(tmp_path), "dwa", "auto"))
     assert result.collision == (result.robot_fault_collisions + result.mover_fault_collisions > 0)
     arrived = result.time_s is not None and result.time_s <= 100.0
     assert result.success == (arrived and not result.collision), result
