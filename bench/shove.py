@@ -29,6 +29,7 @@ from ..cli.profile import load_profile
 from ..experiments.lockstep_mission import mission_nodes
 from ..geometry.se2 import relative
 from ..schemas.keys import KeyLayout
+from ..services.runtime.errors import UserError, exits_2_on_user_error
 from ..services.runtime.inprocess import InProcessRunner
 from ..services.runtime.node import NS_PER_S
 from ..sim.world import load_world, world_path
@@ -42,6 +43,7 @@ MOVER_RADIUS = 0.3                   # m
 MOVED_M = 0.01                       # m of true motion: the shove has begun
 AIM_M = 0.10                         # m: issue 36's bound on the fused pose 1 s after a shove
 START = (4.0, 3.2, 0.0)              # where the robot stands: open floor, clear of the furniture
+MAX_DISTANCE = 3.0                   # m: farther and the robot would be carried into the bookshelf
 HALF_WIDTH = 0.25                    # m: where the mover meets the robot's side (about; the truth says how far it went)
 
 
@@ -143,8 +145,15 @@ def _fmt(value, spec: str) -> str:
     return "-" if value is None else format(value, spec)
 
 
+@exits_2_on_user_error("bench shove")
 def main(args: argparse.Namespace) -> int:
+    bad = [d for d in args.distance if not 0.0 < d <= MAX_DISTANCE]
+    if bad:
+        raise UserError(f"--distance {' '.join(f'{d:g}' for d in bad)}: each shove must be more than 0 and at most "
+                        f"{MAX_DISTANCE:g} m (the room has no more floor that way)")
     profile = None if args.profile == "world" else args.profile
+    if profile is not None:
+        load_profile(profile)       # a profile that does not exist is named before anything runs
     with tempfile.TemporaryDirectory(prefix="shove-") as scratch:
         results = [shove_once(d, how, Path(scratch), profile) for d in args.distance for how in ("chassis", "fused")]
     aim_met = all(r.within_aim_after_s is not None and r.within_aim_after_s <= 1.0 for r in results

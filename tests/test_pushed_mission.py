@@ -75,3 +75,12 @@ def test_the_shove_bench_measures_the_odometrys_error_against_the_truths_motion(
     assert result.doubt_after_s == pytest.approx(0.1)               # began moving after 1.1 s, in doubt at 1.2 s
     stuck = judge(1.0, "chassis", truth, np.column_stack([stamps, np.zeros((50, 3))]), [])
     assert stuck.within_aim_after_s is None and stuck.final_error_m == pytest.approx(1.0) and stuck.doubt_after_s is None
+
+
+def test_the_shove_bench_refuses_bad_input_in_one_line(capsys):
+    from omninav.cli.main import main as cli_main
+    assert cli_main(["bench", "shove", "--distance", "0", "5"]) == 2
+    assert "--distance 0 5: each shove must be more than 0 and at most 3 m" in capsys.readouterr().err
+    assert cli_main(["bench", "shove", "--profile", "nope"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "profile 'nope': no such file" in err
