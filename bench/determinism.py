@@ -35,10 +35,9 @@ def add_arguments(parser) -> None:
 
 
 def messages_by_key(recording: Path) -> dict[str, list[bytes]]:
-    """Every message but the diagnostics (they count wall-time events), per key in seq order, up to
-    the run's last step: what a service still held for that step (a scan waiting for the next
-    odometry) comes out only when it is stopped, and whether the services downstream are still
-    there to take it depends on the order they are stopped in (in one process they all are)."""
+    """Every message but the diagnostics (they count wall-time events), per key in seq order, before
+    the run's last step: the stop may come while the services still work on that step's messages
+    (what they held for a later step is dropped at the stop: services/runtime/live.py)."""
     last_step = max(rec.stamp_ns for rec in read_records(recording, [CLOCK_KEY]))
     by_key: dict[str, list[tuple[int, bytes]]] = {}
     for rec in read_records(recording):

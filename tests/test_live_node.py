@@ -65,3 +65,34 @@ def test_a_source_started_by_up_waits_for_the_listeners_tokens_before_it_declare
         finally:
             runner.stop()
             thread.join(10)
+
+
+def test_a_lockstep_service_drops_at_its_stop_what_it_held_for_a_step_that_never_came(router_endpoint):
+    """A chatter waits in the listener's merger for its clock to pass it. Stopped live, the listener
+    handles it; stopped in lockstep, where the run has ended at its last step, it does not: what it
+    would publish then races the recorder's own stop (one `costmap/local` more in one of two runs)."""
+    import threading
+
+    from omninav.schemas import encode
+    from omninav.schemas.messages import Header
+    from omninav.services.demo.listener import Listener, ListenerParams
+    from omninav.services.runtime.live import LiveRunner
+    from omninav.services.runtime.lockstep import Lockstep
+
+    handled = {}
+    for how, lockstep in (("live", None), ("lockstep", Lockstep())):
+        listener = Listener(ListenerParams(), robot="r1")
+        runner = LiveRunner(listener, router_endpoint, sync_timeout_s=600.0, lockstep=lockstep)
+        thread = threading.Thread(target=runner.run, daemon=True)
+        thread.start()
+        try:
+            with open_client(router_endpoint) as session:
+                wait_until(lambda: list(session.liveliness().get("omninav/r1/alive/listener", timeout=1.0)), 20,
+                           what="the listener's token")
+                session.put("omninav/r1/chatter", encode(Chatter(header=Header(stamp_ns=2_000_000_000), text="held")))
+                wait_until(lambda: len(runner._merger) == 1, 20, what="the chatter held for the clock")
+        finally:
+            runner.stop()
+            thread.join(20)
+        handled[how] = listener.count
+    assert handled == {"live": 1, "lockstep": 0}

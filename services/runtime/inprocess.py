@@ -174,9 +174,10 @@ class InProcessRunner:
         return max_steps
 
     def close(self) -> None:
+        # the run ends at its last step, as a lockstep run of processes does (live.py): what a node
+        # held for a later step is dropped, not handled in the order the nodes happen to be closed
         for node, merger in zip(self.nodes, self._mergers):
-            for index, msg in merger.drain():
-                node.process(index, msg)
+            node.counters["dropped_at_stop"] += len(merger.drain())
         for node in self.nodes:
             node.close()
             node.diagnostics.publish(node.diagnostic())     # as a live service does when it stops
