@@ -257,3 +257,34 @@ def test_a_map_that_no_longer_fits_the_world_starts_afresh_after_refusals_in_a_r
     failures = [r.failure for r in steps]
     assert failures[:2] == [FIRST_SCAN, ""] and set(failures[2:5]) <= {COST_TOO_HIGH, DIVERGED}
     assert failures[5] == FIRST_SCAN and all(r.ok for r in steps[6:]) and core.restarts == 1
+
+
+def drive_beside_movers(params: LaserOdometryParams) -> float:
+    """Along a 10 m wide hall whose end lies beyond the window (only the side walls hold the pose
+    across; along it, nothing static but a far wall in reach of the 30 m lidar), at 1.5 m/s with
+    exact wheels, among cylinders of 0.5 m walking the robot's way and across it at 0.5-1 m/s, as
+    DynaBARN's do. The largest error of the laser pose over the drive (m)."""
+    hall = world_from_mapping({"bounds": [60.0, 10.0], "robot": {"start": [5.0, 5.0, 0.0]}}, "hall.yaml")
+    lidar = LidarParams(range_max=30.0)
+    rng, start = np.random.default_rng(0), np.array([5.0, 5.0, 0.0])
+    core = LaserOdometry(params)
+    errors = []
+    for k in range(60):                  # 6 s at 10 Hz
+        t = k * 0.1
+        truth = start + [1.5 * t, 0.0, 0.0]
+        movers = np.array([[8.0 + 1.0 * t, 6.5, 0.5],            # ahead, walking away at 1 m/s
+                           [11.0 + 0.5 * t, 3.5, 0.5],           # ahead, walking away at 0.5 m/s
+                           [16.0, 1.0 + 0.8 * t, 0.5]])          # crossing ahead
+        points = scan_points(make_scan(lidar, cast(hall, truth, movers, lidar, rng), 0), (0.0, 0.0, 0.0), False)
+        result = core.step(k * SCAN_NS, points, truth - start)
+        errors.append(math.hypot(*(in_world(start, result)[:2] - truth[:2])))
+    return max(errors)
+
+
+def test_moving_bodies_do_not_drag_the_pose_along():
+    """What a cylinder leaves in the local map is cleared when later beams cross it, and end points
+    on space the map saw empty are not matched: the pose holds. Without either the cylinders walking
+    ahead pull it back (measured: 0.049 m against 0.94 m; the clearing alone 0.61 m, the end points
+    left out alone 0.039 m)."""
+    assert drive_beside_movers(LaserOdometryParams()) < 0.1
+    assert drive_beside_movers(LaserOdometryParams(confirmed_hits=0, moving_free_updates=0)) > 0.2

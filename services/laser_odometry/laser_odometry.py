@@ -8,8 +8,8 @@ laser pose carried by the wheels' motion since the last scan (so ordinary drivin
 also from the last laser pose and from the last laser motion repeated (hector's starts: a push the
 wheels did not see, and one that goes on); the match of the lowest cost is kept.
 
-Only end points that fall inside the local map's window (at the wheels' guess, a cell in from its
-edge) are matched: off the grid a point reads "free" and would count against every pose alike (in
+Only end points that fall inside the local map's window (at the wheels' guess, a coarsest cell in
+from its edge) are matched: off the grid a point reads "free" and would count against every pose alike (in
 an open arena the far walls lie beyond the window). A match is refused — flagged, the pose carried
 by the wheels' motion, the map left alone — when the scan has fewer than min_scan_points such end
 points, when its cost per end point (the mean of (1 − M)², 0 on certainly occupied cells) exceeds
@@ -19,6 +19,14 @@ nothing of where the robot is (the node publishes nothing for it: the wheels' po
 large its covariance, would be fused at every scan and pull a fusion back to the wheels it doubts).
 After restart_after_refusals refusals in a row the map no longer describes the world around the
 robot (obstacles that moved, a robot carried off): it starts afresh at the wheels' guess.
+
+Moving bodies (people, DynaBARN's cylinders) are kept out of the match, or the pose is dragged along
+with them: a cylinder walking ahead is matched against the outline it left in the map where it
+stood, and in an open arena, where only far walls hold the pose along the way, the laser lagged the
+truth by 1 m in 1.4 s. So a cell hit by fewer than confirmed_hits scans (net) that a later scan's
+beams cross is free again at once (hector clears it only after a dozen such scans), and an end point
+on a cell the map has seen free (moving_free_updates scans more than hit) lies on something that
+moved there: it is neither matched nor mapped. A wall, hit at every update, is not touched.
 
 The covariance is Gauss-Newton's, of the match against the local map: hector's H with each end
 point's map gradient replaced by the ideal one of the surface under it (its normal from its
@@ -79,6 +87,12 @@ class LaserOdometryParams(Parameters):
     max_correction_xy: float = param(0.6, gt=0)              # m from the wheels' guess
     max_correction_yaw: float = param(0.5, gt=0)             # rad from the wheels' guess
     restart_after_refusals: int = param(10, ge=1)            # refused matches in a row before the map starts afresh
+    # moving bodies (people, DynaBARN's cylinders) kept out of the match: a cell hit by fewer scans
+    # than confirmed_hits (net) that a later scan's beams cross is free again at once (0: hector's
+    # slow clearing); an end point on a cell the map has taken as free in moving_free_updates scans
+    # more than as hit lies on something that moved there, and is neither matched nor mapped (0: off)
+    confirmed_hits: float = param(1.5, ge=0)
+    moving_free_updates: float = param(1.0, ge=0)
     # the covariance
     covariance_scale: float = param(20.0, gt=0)              # × Gauss-Newton's cost · H⁻¹ (end points are not independent)
     normal_neighbour_dist: float = param(0.5, gt=0)          # m: end points this near lie on one surface
@@ -121,6 +135,7 @@ class LaserOdometry:
         self.pose: np.ndarray | None = None
         self.refusals = 0                                # refused matches in a row
         self.restarts = 0                                # maps started afresh after refusals
+        self.ghosts_cleared = 0                          # cells a moving body left, cleared (clear_unconfirmed)
         self._odometry: np.ndarray | None = None         # the wheels' pose at the last scan
         self._prior = np.diag([params.unmatched_std_xy ** -2, params.unmatched_std_xy ** -2, params.unmatched_std_yaw ** -2])
         self.unmatched = np.diag([params.unmatched_std_xy ** 2, params.unmatched_std_xy ** 2, params.unmatched_std_yaw ** 2])
@@ -134,7 +149,7 @@ class LaserOdometry:
             self.restarts += self.mapper is not None
             self.mapper, self.refusals = HectorMapper(self.params.hector_params(), start=guess), 0
         mapper = self.mapper
-        points = self.in_window(mapper.in_range(points), guess)
+        points = self.unmoved(self.in_window(mapper.in_range(points), guess), guess)
         if len(points) < self.params.min_scan_points:
             return self._refuse(guess, TOO_FEW_POINTS, len(points))
         if mapper.updates == 0:                          # the first scan with enough points starts the map
@@ -156,14 +171,36 @@ class LaserOdometry:
         return self._accept(pose, points, (covariance + covariance.T) / 2, cost)
 
     def in_window(self, points: np.ndarray, pose) -> np.ndarray:
-        """The end points (robot frame) that fall inside the finest grid, a cell in from its edge,
-        with the robot at `pose`."""
+        """The end points (robot frame) that fall inside the grids, a coarsest cell in from their
+        edge, with the robot at `pose`. Nearer the edge the coarse grids' interpolation reads the
+        nothing beyond it and pulls the points inwards: in an open arena, a far wall entering the
+        window dragged the pose 1 m back in a second, each map update laying the wall where the
+        pull had put it."""
+        info = self.mapper.infos[0]
+        margin = 2 ** (len(self.mapper.infos) - 1)
+        u, v = self._cells(points, pose)
+        return points[(u >= margin) & (v >= margin) & (u < info.width - margin) & (v < info.height - margin)]
+
+    def unmoved(self, points: np.ndarray, pose) -> np.ndarray:
+        """The end points (robot frame, inside the window) that do not fall, with the robot at `pose`,
+        on a cell the map has seen free moving_free_updates scans more than hit. A person or a
+        cylinder that walked into space the scans saw empty would otherwise be matched against the
+        outline it left in the map where it stood: the pose is dragged along with it (a DynaBARN
+        obstacle pulled the laser 1 m in 2 s where the wheels and the IMU felt nothing)."""
+        if self.params.moving_free_updates == 0 or self.mapper.updates == 0:
+            return points
+        u, v = self._cells(points, pose)
+        seen_free = self.mapper.log_odds[0][v.astype(np.int64), u.astype(np.int64)] \
+            <= self.params.moving_free_updates * self.mapper.free_update
+        return points[~seen_free]
+
+    def _cells(self, points: np.ndarray, pose) -> tuple[np.ndarray, np.ndarray]:
+        """The end points' (robot frame) column and row in the finest grid, with the robot at `pose`."""
         info = self.mapper.infos[0]
         x, y, yaw = (float(v) for v in pose)
         c, s = math.cos(yaw), math.sin(yaw)
-        u = (x + c * points[:, 0] - s * points[:, 1] - info.origin.x) / info.resolution
-        v = (y + s * points[:, 0] + c * points[:, 1] - info.origin.y) / info.resolution
-        return points[(u >= 1) & (v >= 1) & (u < info.width - 1) & (v < info.height - 1)]
+        return ((x + c * points[:, 0] - s * points[:, 1] - info.origin.x) / info.resolution,
+                (y + s * points[:, 0] + c * points[:, 1] - info.origin.y) / info.resolution)
 
     def constrained(self, information: np.ndarray) -> np.ndarray:
         """The projection onto the directions of the pose the match fixes better than degenerate_std
@@ -200,6 +237,8 @@ class LaserOdometry:
         mapper.place(pose, points)
         if mapper.moved():
             mapper.integrate(filled(points, self.params.normal_neighbour_dist, self.params.map_resolution / 2))
+            if self.params.confirmed_hits > 0:
+                self.ghosts_cleared += mapper.clear_unconfirmed(self.params.confirmed_hits * mapper.occupied_update)
         self.pose = mapper.pose.copy()
         recentred = (math.hypot(*(self.pose[:2] - self._centre())) > self.params.map_recentre_distance
                      and mapper.recentre(self.pose[0], self.pose[1]))

@@ -13,7 +13,8 @@ pose_covariance (the match's), and the twist from the previous published pose (b
 their covariances summed over dt²). The first scan and a refused match publish nothing: a fusion
 takes laser odometry as it comes (services/ekf holds it as sporadic), and the wheels' pose
 republished at every scan would pull it back to the wheels, however large its covariance.
-Counters: matches, failed_matches and failed_matches/<why>, map_recentres, map_restarts.
+Counters: matches, failed_matches and failed_matches/<why>, map_recentres, map_restarts,
+ghost_cells_cleared (laser_odometry.py: what moving bodies left in the local map).
 """
 from __future__ import annotations
 
@@ -98,6 +99,7 @@ class LaserOdometryNode(Node):
             self.counters[f"failed_matches/{result.failure}"] += 1
         self.counters["map_recentres"] += int(result.recentred)
         self.counters["map_restarts"] = self.core.restarts
+        self.counters["ghost_cells_cleared"] = self.core.ghosts_cleared
         if not result.ok:
             return      # the wheels' pose again says nothing a fusion may take (laser_odometry.py)
         twist, twist_covariance = np.zeros(3), result.covariance.copy()

@@ -78,8 +78,8 @@ class HectorMapper:
         self._previous: np.ndarray | None = None
         self._matched: np.ndarray | None = None     # the end points of the last scan matched
         p = params
-        self._free = math.log(p.update_factor_free / (1 - p.update_factor_free))
-        self._occupied = math.log(p.update_factor_occupied / (1 - p.update_factor_occupied))
+        self.free_update = math.log(p.update_factor_free / (1 - p.update_factor_free))     # what a beam passing a cell adds to it (< 0)
+        self.occupied_update = math.log(p.update_factor_occupied / (1 - p.update_factor_occupied))
 
     @property
     def updates(self) -> int:
@@ -126,6 +126,20 @@ class HectorMapper:
         """The end points (in range) into the grids, from the current pose."""
         self._update(points)
         self._updated_at = self.pose.copy()
+
+    def clear_unconfirmed(self, confirmed: float) -> int:
+        """Cells the last scan's beams crossed and ended in none of that held less than `confirmed` of
+        log-odds: free, one free update's worth, as if they had never been hit. What a moving body
+        left in the map goes at the next scan, not after the dozen scans hector's slow clearing
+        takes; a wall hit by enough scans is kept. Returns the cells cleared, every grid."""
+        crossed_mark = 2 * self._scans_integrated - 1      # _integrate's mark − 1: freed in that scan
+        free_probability = 1.0 / (1.0 + math.exp(-self.free_update))
+        cleared = 0
+        for log_odds, probability, marks in zip(self.log_odds, self._probability, self._marks):
+            ghost = (marks == crossed_mark) & (log_odds > self.free_update) & (log_odds < confirmed)
+            log_odds[ghost], probability[ghost] = self.free_update, free_probability
+            cleared += int(np.count_nonzero(ghost))
+        return cleared
 
     def moved(self) -> bool:
         """Whether the robot has moved map_update_distance_thresh or turned map_update_angle_thresh
@@ -196,7 +210,7 @@ class HectorMapper:
             us, vs = grid_coords(info, ends_x, ends_y)
             longest = int(np.max(np.abs(us - u0) + np.abs(vs - v0), initial=0.0)) + 3
             _integrate(log_odds, probability, marks, 2 * self._scans_integrated, float(u0), float(v0),
-                       np.ascontiguousarray(us), np.ascontiguousarray(vs), self._free, self._occupied,
+                       np.ascontiguousarray(us), np.ascontiguousarray(vs), self.free_update, self.occupied_update,
                        np.empty(longest, np.int64), np.empty(longest, np.int64))
 
 
