@@ -30,8 +30,9 @@ from ..services.chassis.kinematics import DRIVES
 from ..experiments.localize_eval import parse_waypoints
 from ..services.runtime.params import parse_overrides
 from ..parameters.declare import ParamError
-from ..experiments.mapping import (MAPPING_ROUTES, build_map, compare_with_truth, explored_share,
-                                     slam_params_for)
+from ..experiments.mapping import (MAPPING_ROUTES, MappingProgress, build_map, compare_with_truth,
+                                   explored_share, slam_params_for)
+from ..experiments.progress import Progress, progress
 from ..sim.node import open_world
 from ..sim.world import WorldError
 from ..geometry.grid import GRID_OBSTACLE
@@ -205,7 +206,24 @@ def add_mapping_arguments(parser: argparse.ArgumentParser) -> None:
                         help="override a slam parameter (e.g. particles=10)")
     parser.add_argument("--force", action="store_true", help="overwrite existing files")
     parser.add_argument("--quiet", action="store_true",
-                        help="no progress lines (every 30 s of sim time: frontiers, mapped share, sim time)")
+                        help="no progress (a bar of the share mapped on a terminal, else a line every 30 s of sim time)")
+
+
+class MappingReport:
+    """How far `map` is: a bar over the share of the reachable space mapped on a terminal, else a
+    line every 30 s of sim time (a log reads those)."""
+
+    def __init__(self, bar: Progress):
+        self.bar, self.percent = bar, 0
+
+    def __call__(self, report: MappingProgress) -> None:
+        if not self.bar.drawn:
+            print(f"map: {report.line()}", flush=True)
+            return
+        percent = round(100 * (report.mapped or 0.0))
+        self.bar.advance(max(percent - self.percent, 0))
+        self.percent = max(percent, self.percent)
+        self.bar.note(f"sim {report.sim_s:.0f} s, {report.driven}")
 
 
 @reports_errors
@@ -225,9 +243,9 @@ def main_mapping(args: argparse.Namespace) -> int:
                              f"{', '.join(MAPPING_ROUTES)}); give --waypoints or explore")
         route = parse_waypoints(args.waypoints) if args.waypoints else MAPPING_ROUTES[world.name] if args.route else None
         params = slam_params_for(world, parse_overrides(args.set), args.seed)
-        say = None if args.quiet else (lambda text: print(f"map: {text}", flush=True))
-        result = build_map(args.world, route, args.drive, args.seed, params, args.laps, args.max_time,
-                           progress=say)
+        with progress(100, "% mapped", args.quiet) as bar:
+            result = build_map(args.world, route, args.drive, args.seed, params, args.laps, args.max_time,
+                               progress=None if args.quiet else MappingReport(bar))
     except (WorldError, ParamError, ValueError) as exc:
         raise CommandError(str(exc), 2) from None
     if result.grid is None:

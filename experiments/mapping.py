@@ -129,13 +129,23 @@ def navigation_stack(world: World, drive: str) -> list[Node]:
             NavigatorNode(NavigatorNodeParams(**NAVIGATOR, **start))]
 
 
+@dataclass(frozen=True)
+class MappingProgress:
+    sim_s: float
+    driven: str                  # frontier goals sent, or the lap driven
+    mapped: float | None         # the share of the reachable space mapped (None: no map yet)
+
+    def line(self) -> str:
+        mapped = "no map yet" if self.mapped is None else f"{100 * self.mapped:.1f} % of the reachable space mapped"
+        return f"sim {self.sim_s:.0f} s: {self.driven}, {mapped}"
+
+
 def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, params: SlamNodeParams | None = None,
               laps: int = 1, max_sim_s: float = 1800.0, speed: float = 0.4,
-              progress: Callable[[str], None] | None = None, progress_every_s: float = 30.0) -> BuildResult:
+              progress: Callable[[MappingProgress], None] | None = None, progress_every_s: float = 30.0) -> BuildResult:
     """Explore (no route) or drive the route (a Route or waypoints) `laps` times at `speed`, at most
-    max_sim_s of sim time, while slam maps. `progress` hears a line every progress_every_s of sim
-    time (frontier goals or laps, the share of the reachable space mapped, the sim time); it only
-    reads, so the map is the same with it or without."""
+    max_sim_s of sim time, while slam maps. `progress` hears every progress_every_s of sim time how
+    far it is; it only reads, so the map is the same with it or without."""
     sim = SimNode(SimNodeParams(world=world_name, drive=drive, seed=seed))
     world, drive = sim.world, sim.sim.drive
     if route is not None:
@@ -161,10 +171,9 @@ def build_map(world_name: str, route=None, drive: str = "", seed: int = 0, param
         taken += runner.run_until(done, min(chunk, max_steps - taken) if progress else max_steps - taken)
         if progress is not None:
             grid = slam.current_map()
-            mapped = f"{100 * explored_share(grid, world):.1f} % of the reachable space mapped" if grid else "no map yet"
             driven = (f"{driver.counters['goals']} frontier goals sent" if exploring
                       else f"lap {min(driver.laps + 1, laps)} of {laps}")
-            progress(f"sim {sim.now_ns * 1e-9:.0f} s: {driven}, {mapped}")
+            progress(MappingProgress(sim.now_ns * 1e-9, driven, explored_share(grid, world) if grid else None))
     runner.close()
     return BuildResult(grid=slam.current_map(), sim_s=sim.now_ns * 1e-9, finished=done(),
                        laps=0 if exploring else driver.laps, goals=driver.counters["goals"] if exploring else 0,

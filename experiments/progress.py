@@ -20,9 +20,18 @@ class Progress:
     def __init__(self, bar: tqdm | None):
         self._bar = bar
 
+    @property
+    def drawn(self) -> bool:
+        return self._bar is not None
+
     def advance(self, units: int = 1) -> None:
         if self._bar is not None:
             self._bar.update(units)
+
+    def note(self, text: str) -> None:
+        """What the bar says beside its count (the sim time, the goals sent)."""
+        if self._bar is not None:
+            self._bar.set_postfix_str(text, refresh=False)
 
     def printing(self) -> contextlib.AbstractContextManager:
         return tqdm.external_write_mode(file=sys.stdout) if self._bar is not None else contextlib.nullcontext()

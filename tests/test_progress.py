@@ -37,3 +37,30 @@ def test_no_bar_under_json_or_without_a_terminal(monkeypatch, capsys):
             print("a line")
         bar.advance(2)
     assert log.getvalue() == "" and capsys.readouterr().out == "a line\n"
+
+
+def test_map_shows_the_share_mapped_as_a_bar_on_a_terminal_and_as_lines_in_a_log(monkeypatch, capsys):
+    from omninav.cli.map import MappingReport
+    from omninav.experiments.mapping import MappingProgress
+
+    reports = [MappingProgress(30.0, "3 frontier goals sent", None), MappingProgress(60.0, "5 frontier goals sent", 0.42),
+               MappingProgress(90.0, "8 frontier goals sent", 0.875)]
+    terminal = Terminal()
+    monkeypatch.setattr(progress_module.sys, "stderr", terminal)
+    with progress(100, "% mapped") as bar:
+        report = MappingReport(bar)
+        for r in reports:
+            report(r)
+        assert report.percent == 88
+    drawn = terminal.getvalue()
+    assert "/100 [" in drawn and "% mapped/s" in drawn
+    assert capsys.readouterr().out == ""
+    monkeypatch.setattr(progress_module.sys, "stderr", io.StringIO())
+    with progress(100, "% mapped") as bar:
+        report = MappingReport(bar)
+        for r in reports:
+            report(r)
+    assert capsys.readouterr().out.splitlines() == [
+        "map: sim 30 s: 3 frontier goals sent, no map yet",
+        "map: sim 60 s: 5 frontier goals sent, 42.0 % of the reachable space mapped",
+        "map: sim 90 s: 8 frontier goals sent, 87.5 % of the reachable space mapped"]
