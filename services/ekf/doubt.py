@@ -57,6 +57,9 @@ class DoubtParams(Parameters):
     doubt_travel_tolerance: float = param(0.02, ge=0)   # m (and rad) per laser interval, plus ...
     doubt_travel_fraction: float = param(0.1, ge=0)     # ... this share of the wheels' travel (and turn) in it
     doubt_laser_gap: float = param(0.3, gt=0)           # s between laser poses beyond which the laser track is broken
+    # a laser interval that disagrees with the wheels while the gyro and the IMU agree with them is the
+    # laser's error (a scan matched to a body that moved), not the wheels': set aside, not held against them
+    doubt_laser_needs_inertia: bool = True
 
 
 @dataclass(frozen=True)
@@ -101,6 +104,10 @@ class Doubt:
         self.now_ns = 0
         self.laser_agreed_ns: int | None = None    # when a laser interval last agreed
         self.track_broken = False                  # the laser track broke during this doubt
+        self._felt: deque[int] = deque()            # wheel steps at which the gyro or the IMU disagreed with the wheels
+        self.laser_set_aside = False               # the last laser interval was the laser's error (see laser())
+        self.laser_mismatches = 0
+        self.wheel_travel: np.ndarray | None = None     # the wheels' motion over the last laser interval
 
     # ------------------------------------------------------------ inputs
 
@@ -116,22 +123,40 @@ class Doubt:
             self._wheels.popleft()
         while self._imu and self._imu[0][0] < stamp_ns - self.history_ns:
             self._imu.popleft()
+        while self._felt and self._felt[0] < stamp_ns - self.history_ns:
+            self._felt.popleft()
         self._judge_rates(stamp_ns)
+        if self.yaw.disagrees or self.speed.disagrees:
+            self._felt.append(stamp_ns)
         return self._verdict(stamp_ns)
 
     def laser(self, stamp_ns: int, pose, covariance) -> Verdict:
         """A laser odometry pose (stamped in the past): the wheels' travel since the previous one
-        against the laser's."""
+        against the laser's. Where they disagree and neither the gyro nor the IMU felt anything the
+        wheels did not (from a window before the interval to a window after it), the laser is wrong -
+        a push or a slip moves the body, and the body's motion is what those two feel - and the
+        interval is set aside (`laser_set_aside`, counted in laser_mismatches) instead of being held
+        against the wheels: the fusion then carries the laser track on by the wheels' travel."""
         pose, covariance = np.asarray(pose, float), np.asarray(covariance, float)
         previous, self._laser = self._laser, (stamp_ns, pose, covariance)
+        self.laser_set_aside, self.wheel_travel = False, None
         if self.doubtful and (previous is None or (stamp_ns - previous[0]) * NS > self.params.doubt_laser_gap):
             self.track_broken = True
         if previous is not None and previous[0] < stamp_ns:
             start, end = self.wheel_pose_at(previous[0]), self.wheel_pose_at(stamp_ns)
             if start is not None and end is not None:
-                self._judge_travel(stamp_ns - previous[0], relative(start, end), relative(previous[1], pose),
+                self.wheel_travel = relative(start, end)
+                self._judge_travel(stamp_ns - previous[0], self.wheel_travel, relative(previous[1], pose),
                                    previous[2] + covariance)
+                if self.travel.disagrees and self.params.doubt_laser_needs_inertia \
+                        and not self._felt_between(previous[0] - self.window_ns, stamp_ns + self.window_ns):
+                    self.travel = _Check(self.travel.distance2, self.travel.reason + " (the laser's: nothing felt)")
+                    self.laser_set_aside = True
+                    self.laser_mismatches += 1
         return self._verdict(self.now_ns)
+
+    def _felt_between(self, start_ns: int, end_ns: int) -> bool:
+        return any(start_ns <= t <= end_ns for t in self._felt)
 
     # ------------------------------------------------------------ what the fusion asks
 

@@ -32,13 +32,13 @@ from __future__ import annotations
 import math
 import sys
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ...geometry.se2 import relative, wrap_angle
+from ...geometry.se2 import compose, inverse, relative, wrap_angle
 from ...parameters.declare import Rule, group, param
-from ...schemas.messages import Imu, Odometry
+from ...schemas.messages import Imu, Odometry, Pose2D
 from .doubt import Doubt, DoubtParams, Verdict
 
 NS = 1e-9
@@ -238,6 +238,8 @@ class OdometryFusion:
         self.history_ns = round(params.history_length / NS)
         self._previous: dict[str, tuple[int, np.ndarray, np.ndarray]] = {}     # differential: the source's last pose
         self._first: dict[str, np.ndarray] = {}                                 # relative: the source's first pose
+        self._laser_offset = np.zeros(3)            # laser track -> the filter's frame: moved by each interval set aside
+        self._laser_fused: np.ndarray | None = None  # the last laser pose, through the offset
         self._replaying = False
 
     # ------------------------------------------------------------ inputs
@@ -266,11 +268,22 @@ class OdometryFusion:
         return verdict
 
     def laser(self, msg: Odometry) -> Verdict:
-        """A laser odometry pose, stamped at its scan (in the past): fused at its stamp."""
-        if self.params.uses("odom1"):
-            self._insert("odom1", msg)
-        verdict = self.doubt.laser(msg.header.stamp_ns, (msg.pose.x, msg.pose.y, msg.pose.theta), msg.pose_covariance)
+        """A laser odometry pose, stamped at its scan (in the past): fused at its stamp, unless the
+        doubt set its interval aside as the laser's error; then the laser track is carried on from
+        where the last pose fused put it by the wheels' travel over the interval (the track's offset
+        from the filter's frame changes, and later poses are fused through it)."""
+        pose = np.array([msg.pose.x, msg.pose.y, msg.pose.theta])
+        verdict = self.doubt.laser(msg.header.stamp_ns, pose, msg.pose_covariance)
         self.counters["slip_events"] = self.doubt.slip_events
+        if self.doubt.laser_set_aside and self._laser_fused is not None:
+            self._laser_offset = compose(compose(self._laser_fused, self.doubt.wheel_travel), inverse(pose))
+            self.counters["laser_set_aside/odom1"] += 1
+        fused = compose(self._laser_offset, pose)
+        self._laser_fused = fused
+        if self.params.uses("odom1") and not self.doubt.laser_set_aside:
+            self._insert("odom1", replace(msg, pose=Pose2D(*map(float, fused)),
+                                          pose_covariance=_rotated(np.asarray(msg.pose_covariance, float),
+                                                                   float(self._laser_offset[2]))))
         return verdict
 
     def estimate(self) -> Estimate:
