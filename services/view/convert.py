@@ -263,11 +263,12 @@ ROUTES: tuple[Route, ...] = (
 
 
 class RouteTable:
-    """The routes on the keys of one robot namespace."""
+    """The routes on the keys of one robot namespace (Foxglove's, or another viewer's with a DIAGNOSTICS route)."""
 
-    def __init__(self, keys: KeyLayout):
+    def __init__(self, keys: KeyLayout, routes: tuple[Route, ...] = ROUTES):
         self.keys = keys
-        self._by_key = {self.key_expr(route): route for route in ROUTES}
+        self.routes = routes
+        self._by_key = {self.key_expr(route): route for route in routes}
         self._diagnostics = self._by_key[keys.diagnostics_of_all()]
 
     def key_expr(self, route: Route) -> str:
@@ -304,7 +305,8 @@ class Throttle:
 
 
 class Converter:
-    """Routes decoded messages to Foxglove outputs (the same for the live view and the export)."""
+    """Routes decoded messages to a viewer's outputs (the routes' own: Foxglove messages, Rerun log
+    calls), the same for the live view and the export."""
 
     def __init__(self, params: ViewParams | None = None, grid_period_s: float = 1.0):
         self.params = params or ViewParams()

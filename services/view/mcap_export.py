@@ -11,11 +11,10 @@ from typing import Callable
 
 import foxglove
 
-from ...schemas import MessageError, decode
-from ...schemas.keys import DEFAULT_ROBOT, KeyLayout, type_for_key
-from ..recorder.mcap_io import read_records
+from ...schemas.keys import DEFAULT_ROBOT, KeyLayout
 from .channels import ChannelSet
 from .convert import Converter, RouteTable, ViewParams
+from .recorded import refuse_existing, routed_records
 
 PROFILE = "omninav-foxglove"
 
@@ -26,9 +25,7 @@ def export_foxglove(source: str | Path, target: str | Path, robot: str = DEFAULT
     under 'malformed/<key>' how many recorded payloads did not decode (they are skipped). Raises
     RecordingError for an unreadable source and FileExistsError when target exists. on_record() is
     called after each recorded message is read (a progress bar)."""
-    target = Path(target)
-    if target.exists():
-        raise FileExistsError(f"{target} exists; the export never overwrites a file (choose another output)")
+    target = refuse_existing(target)
     routes = RouteTable(KeyLayout(robot))
     converter = Converter(params)
     context = foxglove.Context()     # its own: nothing else logged in this process lands in the file
@@ -37,18 +34,8 @@ def export_foxglove(source: str | Path, target: str | Path, robot: str = DEFAULT
     writer = foxglove.open_mcap(target, context=context,
                                 writer_options=foxglove.mcap.MCAPWriteOptions(profile=PROFILE))
     try:
-        for record in read_records(source):
-            if on_record is not None:
-                on_record()
-            route = routes.route_for(record.key)
-            if route is None:
-                continue
-            try:
-                msg = decode(record.payload, type_for_key(record.key), key=record.key)
-            except MessageError:
-                counts[f"malformed/{record.key}"] += 1
-                continue
-            for topic, message in converter.outputs(route, msg):
+        for msg, outputs in routed_records(source, routes, converter, counts, on_record):
+            for topic, message in outputs:
                 channels.log(topic, message, log_time_ns=max(msg.header.stamp_ns, 0))
                 counts[topic] += 1
     finally:

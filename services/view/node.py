@@ -19,9 +19,8 @@ from urllib.parse import quote
 import foxglove
 from foxglove.websocket import Capability, ChannelView, Client, ClientChannel, ServerListener
 
-from ..runtime.live import LiveRunner
 from ..runtime.node import Node
-from ..runtime.zenoh_config import open_client
+from .bus import follow_the_bus
 from .channels import ChannelSet
 from .convert import Converter, ROUTES, Route, RouteTable, ViewParams, goal_from_client
 from .gate import TOKEN_PARAM, Gate, admit_message, normal_origin
@@ -156,20 +155,11 @@ class ViewNode(Node):
 
     def run_live(self, router: str | None, stop_event: threading.Event) -> None:
         """Serve viewers while the bus is followed; the server lives only as long as the live run."""
-        runner = LiveRunner(self, router)
-        runner.stops_with(stop_event)       # `omninav run`'s signal handlers set this one
         try:
             self.start_server()
         except RuntimeError as exc:     # the SDK's FoxgloveError, e.g. the port is taken
             raise SystemExit(f"view: cannot serve on {LOOPBACK}:{self.params.port}: {exc}") from None
-        try:
-            # as a tool: the run's read-only identity where $OMNINAV_CREDENTIALS names none (joining.py)
-            session = open_client(router, stopped=stop_event.is_set, as_tool=True, warn=self.log.warning)
-            if session is not None:     # else stopped while waiting for the router
-                with session:
-                    runner.run(session)
-        finally:
-            self.close()
+        follow_the_bus(self, router, stop_event)
 
     def close(self) -> None:
         if self.gate is not None:
