@@ -7,7 +7,7 @@ STAMP := $(VENV)/.installed
 $(STAMP): pyproject.toml
 	test -x $(PY) || python3 -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[test,rosbag]'
+	$(PY) -m pip install --quiet -e '.[test,rosbag,rerun]'
 	$(VENV)/bin/omninav warm
 	touch $(STAMP)
 
