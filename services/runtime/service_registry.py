@@ -27,6 +27,7 @@ SERVICES: dict[str, str] = {
     "navigator": "omninav.services.navigator.node:NavigatorNode",
     "truth_pose": "omninav.services.truth_pose.node:TruthPoseNode",
     "view": "omninav.services.view.node:ViewNode",
+    "rerun_view": "omninav.services.view.rerun_node:RerunViewNode",
     "tracker": "omninav.services.tracker.node:TrackerNode",
     "ros2_bridge": "omninav.services.ros2_bridge.node:Ros2BridgeNode",
     "ekf": "omninav.services.ekf.node:EkfNode",
