@@ -192,10 +192,10 @@ class Navigator:
         if inputs.velocity is not None:
             self.velocity = np.asarray(inputs.velocity, dtype=float).reshape(3)
         if inputs.beam_fit is not None or inputs.odometry_doubt is not None:
-            was_doubted = self._pose_doubted() or bool(self.odometry_doubt)
+            was_doubted = bool(self._doubt())
             self.beam_fit = self.beam_fit if inputs.beam_fit is None else float(inputs.beam_fit)
             self.odometry_doubt = self.odometry_doubt if inputs.odometry_doubt is None else inputs.odometry_doubt
-            if was_doubted and not (self._pose_doubted() or self.odometry_doubt) and self.state is State.CONTROLLING:
+            if was_doubted and not self._doubt() and self.state is State.CONTROLLING:
                 self._want_plan = True   # the pose the plan started from was wrong: plan from the found one
         if inputs.cancel is not None and self._cancel(inputs.cancel, out) and inputs.goal is not None:
             out.statuses.append(self.status())
@@ -285,10 +285,9 @@ class Navigator:
                 self._begin_target()
                 continue
             if self._stopped():
-                if self._pose_doubted():
-                    self.reason = WAITING_FOR_CONFIDENT_POSE
-                elif self.odometry_doubt:
-                    self.reason = f"{WAITING_FOR_TRUSTED_ODOMETRY} ({self.odometry_doubt})"
+                doubt = self._doubt()
+                if doubt:
+                    self.reason = doubt
                 else:
                     self._finish(State.SUCCEEDED, "", out)
             return
@@ -307,8 +306,12 @@ class Navigator:
             return distance <= self.params.xy_goal_tolerance
         return self._latch.within(distance) and yaw_error <= self.params.yaw_goal_tolerance
 
-    def _pose_doubted(self) -> bool:
-        return self.beam_fit is not None and self.beam_fit < self.params.min_pose_beam_fit
+    def _doubt(self) -> str:
+        """Why the pose is not trusted now: the localizer's beam fit is too low, or the odometry fusion
+        doubts its odometry; '' when neither."""
+        if self.beam_fit is not None and self.beam_fit < self.params.min_pose_beam_fit:
+            return WAITING_FOR_CONFIDENT_POSE
+        return f"{WAITING_FOR_TRUSTED_ODOMETRY} ({self.odometry_doubt})" if self.odometry_doubt else ""
 
     def _stopped(self) -> bool:
         """As base_local_planner's goal check: at the goal only once the robot has (nearly) stopped,
