@@ -1,0 +1,87 @@
+"""Results files and `omninav bench report`: the record and the README's table are written, not typed."""
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+
+import pytest
+
+from conftest import REPO
+from omninav.bench import measurements, results
+
+
+def report_args(**paths) -> argparse.Namespace:
+    return argparse.Namespace(check=paths.pop("check", False), **paths)
+
+
+def test_the_record_and_the_readme_table_are_what_the_results_files_say(monkeypatch):
+    monkeypatch.chdir(REPO)
+    args = report_args(check=True, results=results.RESULTS_DIR, measurements=measurements.MEASUREMENTS,
+                       readme=measurements.README)
+    assert measurements.main(args) == 0, "docs/measurements.md or README.md differs: run `omninav bench report`"
+
+
+def test_every_results_file_says_where_it_comes_from():
+    for path, record in results.load_results(REPO / "docs" / "results"):
+        source = record.get("source", "")
+        assert source == "measured" or source.startswith("transcribed from "), path
+        if source == "measured":
+            assert record["commit"] and record["date_utc"] and "figures" in record, path
+        else:       # nothing of a run's provenance invented for a figure copied from text
+            assert record["commit"] is None and record["machine"] is None, path
+            assert record["figure"], path
+
+
+def test_a_saved_run_keeps_the_json_the_bench_printed_with_its_provenance(tmp_path, capsys):
+    def bench() -> int:
+        print("warming up")
+        print(json.dumps({"median_ms": 1.5, "runs": [1, 2]}), flush=True)
+        return 0
+
+    assert results.run_recorded("transport", ["--json"], bench, results_dir=tmp_path) == 0
+    assert '{"median_ms": 1.5' in capsys.readouterr().out     # still printed as --json prints it
+    [saved] = tmp_path.glob("*-transport.json")
+    record = json.loads(saved.read_text())
+    assert record["figures"] == {"median_ms": 1.5, "runs": [1, 2]}
+    assert record["source"] == "measured" and record["command"] == "omninav bench transport --json"
+    assert len(record["commit"]) == 40 and isinstance(record["dirty"], bool)
+    assert record["machine"]["cores"] >= 1 and len(record["machine"]["load_start"]) == 3
+    assert record["date_utc"].endswith("Z") and record["duration_s"] >= 0
+
+
+def test_a_failed_or_silent_bench_writes_no_results_file(tmp_path):
+    assert results.run_recorded("sim", [], lambda: 3, results_dir=tmp_path) == 3
+    assert results.run_recorded("sim", [], lambda: print("no json") or 0, results_dir=tmp_path) == 1
+    assert not list(tmp_path.iterdir())
+
+
+def test_an_indented_json_object_is_found_too():
+    text = 'progress\n{\n  "a": 1,\n  "b": {"c": 2}\n}\n'
+    assert results.last_json_object(text) == {"a": 1, "b": {"c": 2}}
+
+
+def test_a_new_run_becomes_the_headline_and_a_missed_aim_says_so(tmp_path, monkeypatch):
+    """A measured transport run newer than the transcribed figure takes its row; 1.3 × raw misses ≤ 1.1 ×."""
+    shutil.copytree(REPO / "docs" / "results", tmp_path / "results")
+    shutil.copy(REPO / "README.md", tmp_path / "README.md")
+    run = {"format": 1, "bench": "transport", "source": "measured", "command": "omninav bench transport --json",
+           "commit": "0" * 40, "dirty": False, "date_utc": "2031-01-01T00:00:00Z",
+           "machine": {"cores": 2, "load_start": [1.0, 1.0, 1.0], "load_end": [1.5, 1.0, 1.0]}, "duration_s": 9.0,
+           "figures": {"rtt_median_ms": 0.39, "rtt_raw_median_ms": 0.3, "msgs_per_s": 300000,
+                       "msgs_raw_per_s": 900000}}
+    (tmp_path / "results" / "2031-01-01T000000Z-transport.json").write_text(json.dumps(run))
+    args = report_args(results=tmp_path / "results", measurements=tmp_path / "measurements.md",
+                       readme=tmp_path / "README.md")
+    assert measurements.main(args) == 0
+    row = next(line for line in (tmp_path / "README.md").read_text().splitlines() if "2031-01-01T000000Z-transport" in line)
+    assert "1.30 × raw" in row and "33% of raw" in row and "**missed**" in row
+    assert "0000000" not in row, "no commit in the README's table"
+    assert measurements.main(argparse.Namespace(**(vars(args) | {"check": True}))) == 0
+    (tmp_path / "README.md").write_text((tmp_path / "README.md").read_text().replace("1.30 × raw", "1.0 × raw"))
+    assert measurements.main(argparse.Namespace(**(vars(args) | {"check": True}))) == 1
+
+
+def test_a_readme_without_the_markers_is_refused(tmp_path):
+    with pytest.raises(SystemExit, match="markers"):
+        measurements.readme_with_table("# no table here\n", "| a |")
