@@ -218,6 +218,8 @@ def record_entry(path: Path, record: dict) -> str:
             verdict = _aim_verdict(record.get("aim_met"))
             why = f" ({record['aim_met_note']})" if record.get("aim_met_note") else ""
             fields.append(("aim", f"{record.get('aim') or 'as the texts say'} — {verdict}{why}"))
+    if not measured:    # the README's texts link docs/X.md; this page is in docs/
+        fields = [(name, value.replace("](docs/", "](") if isinstance(value, str) else value) for name, value in fields]
     notes = [record[k] for k in sorted(record) if k.startswith("note")]
     fields += [("note", note) for note in notes]
     fields.append(("source", f"{record['source']}; [{path.name}](results/{path.name})"))
