@@ -169,3 +169,18 @@ def test_bad_parameters_are_named():
         tracker = MoverTracker()
         tracker.update(1.0, (0, 0), np.zeros((0, 2)))
         tracker.update(0.5, (0, 0), np.zeros((0, 2)))
+
+
+@pytest.mark.parametrize("jump", [(30.0, 0.0), (-30.0, 5.0), (0.0, -25.0)])
+def test_the_evidence_grid_follows_a_robot_that_jumped_beyond_its_window(jump):
+    """An odometry that jumps farther than the grid's side (a fusion restarted, a pose corrected):
+    nothing of the old window lies in the new one, so it starts empty - it neither fails (it did:
+    negative slices wrapped round) nor keeps cells from where the robot was."""
+    from omninav.services.tracker.tracker import UNSET, EvidenceGrid
+    grid = EvidenceGrid(TrackerParams())
+    wall = np.column_stack([np.linspace(-2.0, 2.0, 41), np.full(41, 3.0)])
+    grid.update(0.0, np.zeros(2), wall)
+    assert (grid.since != UNSET).any()
+    grid.update(0.1, np.asarray(jump), wall + jump)
+    hit_here = grid.since != UNSET
+    assert hit_here.any() and np.all(grid.since[hit_here] == 0.1)

@@ -156,8 +156,9 @@ class EvidenceGrid:
             return
         moved = np.full_like(self.since, UNSET)
         dc, dr = (int(v) for v in shift)
-        src = self.since[max(dr, 0):self.cells + min(dr, 0), max(dc, 0):self.cells + min(dc, 0)]
-        moved[max(-dr, 0):max(-dr, 0) + src.shape[0], max(-dc, 0):max(-dc, 0) + src.shape[1]] = src
+        if max(abs(dc), abs(dr)) < self.cells:      # else nothing of the old window is in the new one
+            src = self.since[max(dr, 0):self.cells + min(dr, 0), max(dc, 0):self.cells + min(dc, 0)]
+            moved[max(-dr, 0):max(-dr, 0) + src.shape[0], max(-dc, 0):max(-dc, 0) + src.shape[1]] = src
         self.since, self.origin = moved, centre
 
     def grid_coords(self, points: np.ndarray) -> np.ndarray:
