@@ -137,7 +137,7 @@ def headline_row(spec: Headline, path: Path, record: dict) -> tuple[str, str, st
         if spec.summary is not None:
             figure, reference, met = spec.summary(record["figures"])
         else:
-            figure, reference, met = _scalars(record["figures"]), None, None
+            figure, reference, met = _scalars(record["figures"], record["bench"]), None, None
         aim = spec.aim
     else:
         figure = record.get("headline_figure") or record["figure"]
@@ -147,8 +147,31 @@ def headline_row(spec: Headline, path: Path, record: dict) -> tuple[str, str, st
     return figure, reference or "—", aim or "—", "—" if aim is None else _aim_verdict(met)
 
 
-def _scalars(figures: dict, most: int = 6) -> str:
-    """A measured run of a bench with no summary yet: its first few top-level numbers, as printed."""
+def _outcomes(block: dict) -> str:
+    """A bench's block of runs (barn's 'all', dynabarn's difficulty) in one phrase."""
+    runs = block["runs"]
+    return (f"{round(block['success_rate'] * runs)}/{runs}, {block['collisions']} collisions, "
+            f"{block['timeouts']} timeouts, {block.get('false_successes', 0)} false successes, "
+            f"mean score {block['mean_score']:.4f}")
+
+
+def _barn_figure(figures: dict) -> str:
+    return f"{figures.get('odometry', 'chassis')} odometry, worlds {figures['range']}: {_outcomes(figures['all'])}"
+
+
+def _dynabarn_figure(figures: dict) -> str:
+    per = "; ".join(f"{name} {_outcomes(block)}" for name, block in figures["difficulties"].items())
+    return f"{figures.get('odometry', 'auto')} odometry, {figures.get('controller', 'dwa')}: {per}"
+
+
+# what a measured run of a bench says in one line where no headline summary does
+BENCH_FIGURES: dict[str, Callable[[dict], str]] = {"barn": _barn_figure, "dynabarn": _dynabarn_figure}
+
+
+def _scalars(figures: dict, bench: str = "", most: int = 6) -> str:
+    """A measured run's figure line: its bench's (BENCH_FIGURES), else its first few top-level numbers."""
+    if bench in BENCH_FIGURES:
+        return BENCH_FIGURES[bench](figures)
     items = [f"{k} {v}" for k, v in figures.items() if isinstance(v, (int, float)) and not isinstance(v, bool)]
     return "; ".join(items[:most]) or "figures in the results file"
 
@@ -209,7 +232,7 @@ def record_entry(path: Path, record: dict) -> str:
             figure, reference, met = spec.summary(record["figures"])
             fields += [("figure", figure), ("reference", reference), ("aim", f"{spec.aim} — {_aim_verdict(met)}")]
         else:
-            fields.append(("figure", _scalars(record["figures"])))
+            fields.append(("figure", _scalars(record["figures"], record["bench"])))
     else:
         fields += [("figure", record.get("figure")), ("reference", record.get("reference")),
                    ("seeds", record.get("seeds"))]

@@ -85,3 +85,11 @@ def test_a_new_run_becomes_the_headline_and_a_missed_aim_says_so(tmp_path, monke
 def test_a_readme_without_the_markers_is_refused(tmp_path):
     with pytest.raises(SystemExit, match="markers"):
         measurements.readme_with_table("# no table here\n", "| a |")
+
+
+def test_barn_and_dynabarn_runs_say_their_outcomes_in_one_line():
+    block = {"runs": 20, "success_rate": 0.75, "collisions": 5, "timeouts": 0, "false_successes": 1, "mean_score": 0.37339}
+    assert measurements._scalars({"odometry": "fused", "controller": "dwa", "difficulties": {"easy": block}}, "dynabarn") \
+        == "fused odometry, dwa: easy 15/20, 5 collisions, 0 timeouts, 1 false successes, mean score 0.3734"
+    assert measurements._scalars({"range": "0-149", "all": dict(block, runs=150, success_rate=1.0)}, "barn") \
+        == "chassis odometry, worlds 0-149: 150/150, 5 collisions, 0 timeouts, 1 false successes, mean score 0.3734"
