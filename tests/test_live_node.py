@@ -96,3 +96,25 @@ def test_a_lockstep_service_drops_at_its_stop_what_it_held_for_a_step_that_never
             thread.join(20)
         handled[how] = listener.count
     assert handled == {"live": 1, "lockstep": 0}
+
+
+def test_a_runner_stopping_with_another_event_is_woken_when_it_is_set():
+    """The ros2 bridge's inner runner stops with `omninav run`'s event: setting it must also put the
+    wake-up item in the runner's inbox (a get(timeout) a signal interrupted blocks until the next
+    put). `event.wait() or put(...)` never put it - wait() returns True - and the idle bridge
+    waiting for a robot's router hung at SIGINT in about one run of two."""
+    import queue
+    import threading
+
+    from omninav.services.demo.listener import Listener, ListenerParams
+    from omninav.services.runtime.live import LiveRunner
+
+    runner = LiveRunner(Listener(ListenerParams(), robot="r1"), "tcp/127.0.0.1:7447")
+    event = threading.Event()
+    runner.stops_with(event)
+    event.set()
+    try:
+        assert runner._inbox.get(timeout=10) == ("wake",)
+    except queue.Empty:
+        raise AssertionError("no wake-up item after the event was set") from None
+    assert runner.stop_event.is_set()

@@ -159,8 +159,11 @@ class LiveRunner:
         get(timeout) a signal interrupted can block until the next put (the ros2 bridge, idle, did
         not stop at SIGINT within 120 s)."""
         self.stop_event = event
-        threading.Thread(target=lambda: event.wait() or self._inbox.put(("wake",)), daemon=True,
-                         name="stop-wake").start()
+
+        def wake_when_set() -> None:
+            event.wait()
+            self._inbox.put(("wake",))
+        threading.Thread(target=wake_when_set, daemon=True, name="stop-wake").start()
 
     # ------------------------------------------------------------ wiring
 
