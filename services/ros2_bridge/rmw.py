@@ -14,12 +14,30 @@ Every format here follows rmw_zenoh (ROS 2 Jazzy's rmw_zenoh_cpp), read from its
   serialize_to_zbytes, attachment_helpers.cpp. A sample without it is dropped by rmw_zenoh's subscriptions.
 Rmw enum values (rmw/types.h): reliability RELIABLE 1, BEST_EFFORT 2; durability TRANSIENT_LOCAL 1,
 VOLATILE 2; history KEEP_LAST 1, KEEP_ALL 2.
+
+Supported: rmw_zenoh_cpp 0.2.4 and later on Jazzy (read up to 0.2.10 in ros2-gbp/rmw_zenoh-release's
+release/jazzy/rmw_zenoh_cpp/0.2.x-1 tags). Older peers speak another wire and are refused (graph.py):
+- the attachment: up to 0.2.3 each field is preceded by its name as a zenoh-ext string
+  ("sequence_number", "source_timestamp", "source_gid"), and a subscription that finds no name
+  throws: our samples would never reach them, nor theirs us (attachment_helpers.cpp, 0.2.3 -> 0.2.4);
+- transient local: 0.2.2-0.2.3 run Zenoh 1.2, whose advanced publisher announces itself at
+  `@adv/pub/<zid>/<eid>/<meta>/@/<key>` where Zenoh >= 1.3 (and so this bridge: pyproject) uses
+  `<key>/@adv/pub/<zid>/<eid>/<meta>`, so neither side finds the other's cache (/tf_static, /map);
+  0.2.0-0.2.1 have no advanced publisher at all (a publication cache);
+- the QoS part of tokens: up to 0.2.2 rmw_zenoh's default durability is transient local (qos.cpp), so
+  a volatile endpoint writes its durability "2" where 0.2.3 and later leave it empty;
+- Humble (0.1.x) has no type hashes: its keys and tokens say "TypeHashNotSupported".
+The heartbeat: from 0.2.4 a RELIABLE + TRANSIENT_LOCAL publisher sends a sporadic heartbeat every
+500 ms (its last sequence number, only when it changed: rmw_publisher_data.cpp,
+SAMPLE_MISS_DETECTION_HEARTBEAT_PERIOD) and such subscriptions recover a missed last sample from the
+publisher's cache (rmw_subscription_data.cpp); congestion control is DROP unless RELIABLE + KEEP_ALL.
 """
 from __future__ import annotations
 
 import struct
 from dataclasses import dataclass
 
+SUPPORTED_RMW_ZENOH = "rmw_zenoh_cpp 0.2.4 or later (ROS 2 Jazzy)"
 ADMIN_SPACE = "@ros2_lv"
 NODE, PUBLISHER, SUBSCRIPTION = "NN", "MP", "MS"
 GID_SIZE = 16
@@ -27,7 +45,10 @@ _ATTACHMENT = struct.Struct("<qqB16s")     # the length byte is zenoh-ext's LEB1
 ATTACHMENT_SIZE = _ATTACHMENT.size         # 33
 RELIABLE, BEST_EFFORT = 1, 2
 TRANSIENT_LOCAL, VOLATILE = 1, 2
-KEEP_LAST = 1
+KEEP_LAST, KEEP_ALL = 1, 2
+HEARTBEAT_S = 0.5          # rmw_zenoh's sporadic heartbeat of a reliable transient-local publisher
+# what an rmw_zenoh <= 0.2.3 attachment starts with: the zenoh-ext string "sequence_number" (LEB128 length 15)
+KEYED_ATTACHMENT_START = b"\x0fsequence_number"
 
 
 @dataclass(frozen=True)
@@ -40,6 +61,23 @@ class Qos:
 
 
 _RMW_ZENOH_DEFAULT = Qos(depth=42)
+
+
+@dataclass(frozen=True)
+class Publishing:
+    """How rmw_zenoh (0.2.4+, rmw_publisher_data.cpp) puts a publisher of this QoS on Zenoh."""
+    reliable: bool
+    block: bool                            # congestion control BLOCK; else DROP (a full queue drops the sample)
+    cache_depth: int | None                # transient local: an advanced publisher's cache, announced to late joiners
+    heartbeat_s: float | None              # sporadic heartbeat: subscribers detect a missed last sample and fetch it
+
+
+def publishing(qos: Qos) -> Publishing:
+    reliable = qos.reliability == RELIABLE
+    latched = qos.durability == TRANSIENT_LOCAL
+    return Publishing(reliable=reliable, block=reliable and qos.history == KEEP_ALL,
+                      cache_depth=qos.depth if latched else None,
+                      heartbeat_s=HEARTBEAT_S if latched and reliable else None)
 
 
 def dds_type_name(msgtype: str) -> str:
@@ -62,6 +100,19 @@ def topic_key(domain: int, topic: str, msgtype: str, type_hash: str) -> str:
 
 def mangle(name: str) -> str:
     return name.replace("/", "%")
+
+
+def demangle(name: str) -> str:
+    return name.replace("%", "/")
+
+
+def ros_type_name(dds_type: str) -> str:
+    """'geometry_msgs::msg::dds_::Twist_' -> 'geometry_msgs/msg/Twist' (dds_type_name's inverse; ValueError
+    for anything else)."""
+    parts = dds_type.split("::")
+    if len(parts) != 4 or parts[2] != "dds_" or not parts[3].endswith("_"):
+        raise ValueError(f"DDS type {dds_type!r}: expected package::msg::dds_::Name_")
+    return f"{parts[0]}/{parts[1]}/{parts[3][:-1]}"
 
 
 def qos_part(qos: Qos) -> str:
@@ -111,6 +162,9 @@ def pack_attachment(sequence_number: int, source_timestamp_ns: int, gid: bytes) 
 
 def unpack_attachment(data: bytes) -> tuple[int, int, bytes]:
     """(sequence number, source timestamp ns, GID); ValueError naming what is wrong."""
+    if data.startswith(KEYED_ATTACHMENT_START):
+        raise ValueError(f"an rmw_zenoh attachment with field names, as before 0.2.4: "
+                         f"the robot's rmw_zenoh is older than {SUPPORTED_RMW_ZENOH}")
     if len(data) != ATTACHMENT_SIZE:
         raise ValueError(f"an rmw_zenoh attachment has {ATTACHMENT_SIZE} bytes, not {len(data)}")
     seq, stamp, length, gid = _ATTACHMENT.unpack(data)
