@@ -7,8 +7,10 @@ Without --laser the mounting is found on the robot before the stack starts: the 
 from its scans' frame to base_link on /tf and /tf_static (robot_state_publisher's), read as the
 ros2_bridge reads them. The robot's router may ask for a login, as rmw_zenoh's security does: --zenoh-config
 (usrpwd or TLS, checked: zenoh_config.checked_login_config) or --user/--password-file; a refused login
-ends the command with one line, exit 2, before the stack starts. README "Drive a ROS 2 robot" walks
-through the robot's side.
+ends the command with one line, exit 2, before the stack starts, and so does a robot whose rmw_zenoh
+is older than the bridge speaks (rmw.SUPPORTED_RMW_ZENOH, read from its graph: graph.py).
+--cmd-vel-type says which message the robot's /cmd_vel takes (TwistStamped, Jazzy's default, or Twist).
+README "Drive a ROS 2 robot" walks through the robot's side.
 """
 from __future__ import annotations
 
@@ -23,8 +25,10 @@ from pathlib import Path
 import yaml
 import zenoh
 
-from ..services.ros2_bridge.translate import INPUTS, Mounting, Ros2BridgeParams, laser_mounting, typestore
-from ..services.ros2_bridge.node import LoginRefused, declare_ros_subscription, open_ros_session, ros_endpoints, ros_login
+from ..services.ros2_bridge.translate import (CMD_VEL_TYPES, DEFAULT_CMD_VEL_TYPE, INPUTS, Mounting, Ros2BridgeParams,
+                                               laser_mounting, typestore)
+from ..services.ros2_bridge.node import (LoginRefused, OlderRmwZenoh, declare_ros_subscription, open_ros_session,
+                                         refuse_older_peer, robot_graph, ros_endpoints, ros_login)
 from ..services.ros2_bridge.rmw import NodeIdentity
 from ..services.runtime import launcher
 from ..services.runtime.params import read_yaml
@@ -63,6 +67,12 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--user", help="log in to the robot's router with Zenoh's usrpwd as this user (with "
                                        "--password-file; default: none)")
     parser.add_argument("--password-file", metavar="FILE", help="the file holding --user's password alone")
+    parser.add_argument("--cmd-vel-type", choices=list(CMD_VEL_TYPES),
+                        help=f"the message the robot's /cmd_vel takes: twist_stamped (geometry_msgs/TwistStamped, "
+                             f"what Jazzy's diff_drive_controller and Nav2 use) or twist (geometry_msgs/Twist); "
+                             f"default: the compose file's, {DEFAULT_CMD_VEL_TYPE}")
+    parser.add_argument("--cmd-vel-frame-id", metavar="FRAME",
+                        help="a TwistStamped command's header.frame_id (default: the compose file's, base_link)")
 
 
 def stack(args: argparse.Namespace) -> dict:
@@ -87,6 +97,10 @@ def stack(args: argparse.Namespace) -> dict:
     bridge.update({name: str(Path(value).resolve()) for name, value in login.items() if value})
     if args.user:
         bridge["ros_user"] = args.user
+    if args.cmd_vel_type:
+        bridge["cmd_vel_type"] = args.cmd_vel_type
+    if args.cmd_vel_frame_id:
+        bridge["cmd_vel_frame_id"] = args.cmd_vel_frame_id
     given = ros_login(bridge_params(data))      # ValueError naming the key that is refused
     if given is not None and login_endpoints(given) and args.router is not None:
         raise ValueError(f"--router {args.router} and connect/endpoints of --zenoh-config {args.zenoh_config}: "
@@ -169,17 +183,23 @@ def find_laser(params: Ros2BridgeParams, timeout_s: float) -> tuple[tuple[float,
 
 def _open_robot_session(params: Ros2BridgeParams, deadline: float) -> zenoh.Session:
     """A session with the robot's router, tried until the deadline (LookupError if it never answers,
-    LoginRefused if it refuses the login)."""
+    LoginRefused if it refuses the login), on a robot the bridge can drive (OlderRmwZenoh if not)."""
     session = open_ros_session(params, lambda: time.monotonic() >= deadline)
     if session is None:
         raise LookupError(f"the robot's router at {', '.join(ros_endpoints(params))} does not answer "
                           "(is rmw_zenohd running?)")
+    try:
+        refuse_older_peer(robot_graph(session, params.domain))
+    except OlderRmwZenoh:
+        session.close()
+        raise
     return session
 
 
-def check_login(params: Ros2BridgeParams, timeout_s: float) -> None:
+def check_robot(params: Ros2BridgeParams, timeout_s: float) -> None:
     """With --laser nothing joins the robot before the stack: if its router is there now, log in once
-    (LoginRefused if it refuses); if not, the bridge waits for it (and refuses then, alone)."""
+    (LoginRefused if it refuses) and read its graph (OlderRmwZenoh); if not, the bridge waits for it
+    (and refuses then, alone)."""
     if login_refused(ros_endpoints(params)):
         _open_robot_session(params, time.monotonic() + timeout_s).close()
 
@@ -194,10 +214,11 @@ def main(args: argparse.Namespace) -> int:
         return 2
     try:
         if args.laser is not None:
-            check_login(bridge_params(data), args.tf_timeout)
+            check_robot(bridge_params(data), args.tf_timeout)
         else:
             print(mount_laser_from_tf(data, args.tf_timeout), flush=True)
-    except (LoginRefused, ValueError) as exc:      # a refused login; the compose file's ros_router off loopback
+    # a refused login, a robot too old, the compose file's ros_router off loopback
+    except (LoginRefused, OlderRmwZenoh, ValueError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
     except LookupError as exc:

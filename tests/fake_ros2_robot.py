@@ -1,6 +1,6 @@
 """A stand-in for a ROS 2 robot running rmw_zenoh, for tests/test_ros2_bridge.py: no ROS needed.
 
-    python tests/fake_ros2_robot.py ROUTER BAG GOAL_X GOAL_Y GOAL_YAW [--no-tf-static]
+    python tests/fake_ros2_robot.py ROUTER BAG GOAL_X GOAL_Y GOAL_YAW [--no-tf-static] [--cmd-vel-type TYPE]
 
 Publishes as rmw_zenoh does (rmw.py: keys, 33-byte attachments; CDR by rosbags, ROS 2 Jazzy types)
 the racecar bag's /scan and its /vesc/odom as /odom, in stamp order at the bag's pace, once omninav's
@@ -10,7 +10,9 @@ robot_state_publisher's (before the bridge exists: it must ask the publisher's c
 --no-tf-static), and /goal_pose after the tenth scan. Until the bridge is there the robot stands at
 its start, as a robot does: the bag's first scan and its first odometry's odom -> base_link on /tf,
 every STAND_PERIOD_NS (what `omninav bridge ros2` looks at to find the laser's mounting). When the bag ends the robot stands: the last scan and odometry go on with advancing stamps,
-until the process is stopped.
+until the process is stopped. Its base listens on /cmd_vel as Jazzy's diff_drive_controller does
+(geometry_msgs/msg/TwistStamped, or the ROS type --cmd-vel-type names), with a liveliness token, and
+prints the first moving command it decodes: "cmd_vel heard: <type> in frame <frame_id> stamped <ns>".
 """
 from __future__ import annotations
 
@@ -25,19 +27,19 @@ from zenoh.ext import CacheConfig, declare_advanced_publisher
 
 from omninav.services.ros2_bridge.translate import Ros2BridgeParams, typestore
 from omninav.services.ros2_bridge.node import ros_session_config
-from omninav.services.ros2_bridge.rmw import (PUBLISHER, TRANSIENT_LOCAL, NodeIdentity, Qos, entity_gid,
+from omninav.services.ros2_bridge.rmw import (PUBLISHER, SUBSCRIPTION, TRANSIENT_LOCAL, NodeIdentity, Qos, entity_gid,
                                               pack_attachment, topic_key)
 
 LASER_X = 0.285        # the MIT racecar's base_link -> laser (docs/localize_eval.md)
 STAND_PERIOD_NS = 50_000_000
 
 
-def main(router: str, bag: str, goal: tuple[float, float, float], tf_static: bool) -> None:
+def main(router: str, bag: str, goal: tuple[float, float, float], tf_static: bool, cmd_vel_type: str) -> None:
     store = typestore()
     t = store.types
     with zenoh.open(ros_session_config(Ros2BridgeParams(ros_router=router))) as session:
         me = NodeIdentity(0, str(session.info.zid()), "fake_robot")
-        publishers, tokens = {}, []
+        publishers, tokens = {}, listen_to_cmd_vel(session, me, store, cmd_vel_type)   # kept to the end
         for number, (topic, msgtype) in enumerate((("/scan", "sensor_msgs/msg/LaserScan"),
                                                    ("/odom", "nav_msgs/msg/Odometry"),
                                                    ("/tf_static", "tf2_msgs/msg/TFMessage"),
@@ -110,6 +112,24 @@ def main(router: str, bag: str, goal: tuple[float, float, float], tf_static: boo
             time.sleep(STAND_PERIOD_NS / 1e9)
 
 
+def listen_to_cmd_vel(session, me: NodeIdentity, store, msgtype: str) -> list:
+    """The base's /cmd_vel subscription (entity 6 of this node: its publishers are 1..5), and its token."""
+    type_hash = store.hash_rihs01(msgtype)
+    heard = []
+
+    def on_command(sample) -> None:
+        msg = store.deserialize_cdr(sample.payload.to_bytes(), msgtype)
+        twist = msg.twist if hasattr(msg, "twist") else msg
+        if not heard and (abs(twist.linear.x) > 1e-3 or abs(twist.angular.z) > 1e-3):
+            heard.append(True)
+            frame, stamp = (msg.header.frame_id, _ns(msg.header.stamp)) if hasattr(msg, "header") else ("-", 0)
+            print(f"cmd_vel heard: {msgtype} in frame {frame} stamped {stamp}", flush=True)
+    subscriber = session.declare_subscriber(topic_key(0, "/cmd_vel", msgtype, type_hash), on_command)
+    token = session.liveliness().declare_token(
+        me.entity_token(me.nid + 6, SUBSCRIPTION, "/cmd_vel", msgtype, type_hash, Qos()))
+    return [subscriber, token]
+
+
 def _ns(time_msg) -> int:
     return int(time_msg.sec) * 1_000_000_000 + int(time_msg.nanosec)
 
@@ -130,5 +150,8 @@ def _time(types, stamp_ns: int):
 
 
 if __name__ == "__main__":
+    options = sys.argv[6:]
     main(sys.argv[1], sys.argv[2], (float(sys.argv[3]), float(sys.argv[4]), float(sys.argv[5])),
-         tf_static="--no-tf-static" not in sys.argv[6:])
+         tf_static="--no-tf-static" not in options,
+         cmd_vel_type=options[options.index("--cmd-vel-type") + 1] if "--cmd-vel-type" in options
+         else "geometry_msgs/msg/TwistStamped")

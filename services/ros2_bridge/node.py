@@ -11,6 +11,13 @@ each announced by its liveliness token as rmw_zenoh does (rmw.py), so `ros2 topi
 subscriber as rmw_zenoh does: /tf_static sent before the bridge started still reaches it, and /map
 reaches an RViz that starts later. ROS samples wait in an inbox that the node drains on its
 own thread (it is paced like a source), so the Node's state is touched by one thread only.
+
+Before it declares anything on the robot's graph the bridge reads it (graph.py): a robot whose
+rmw_zenoh is older than rmw.SUPPORTED_RMW_ZENOH is refused in one line, and a /cmd_vel subscriber of
+the other type is warned about; tokens that appear later are read the same way.
+No put to the robot ever blocks the node's thread (every publisher drops when its queue is full, as
+rmw_zenoh's KEEP_LAST ones do), and /cmd_vel goes on a higher Zenoh priority, express, so a large
+/map over a slow link queues behind it, never in front: publisher_options.
 """
 from __future__ import annotations
 
@@ -20,18 +27,21 @@ import threading
 from collections.abc import Callable
 
 import zenoh
-from zenoh.ext import CacheConfig, HistoryConfig, declare_advanced_publisher, declare_advanced_subscriber
+from zenoh.ext import (CacheConfig, HistoryConfig, MissDetectionConfig, RecoveryConfig, declare_advanced_publisher,
+                       declare_advanced_subscriber)
 
 from ..runtime.live import LiveRunner
 from ..runtime.node import Node
 from ..runtime.zenoh_config import (check_loopback, checked_login_config, foreign_client_config, login_endpoints,
                                    login_refused)
-from .translate import INPUTS, OUTPUTS, Bridge, Ros2BridgeParams, RosTopic
-from .rmw import (PUBLISHER, SUBSCRIPTION, TRANSIENT_LOCAL, NodeIdentity, entity_gid, pack_attachment, topic_key,
-                  unpack_attachment)
+from .graph import cmd_vel_type_warning, graph_selectors, older_rmw_zenoh, refusal
+from .translate import INPUTS, Bridge, Ros2BridgeParams, RosTopic
+from .rmw import (PUBLISHER, RELIABLE, SUBSCRIPTION, TRANSIENT_LOCAL, NodeIdentity, entity_gid, pack_attachment,
+                  publishing, topic_key, unpack_attachment)
 
 POLL_S = 0.01       # wall s between drains of the ROS inbox (a source's pace: it adds at most this latency)
 RETRY_S = 1.0       # wall s between attempts to reach the robot's router
+GRAPH_S = 5.0       # wall s at most for the robot's router to answer for its graph (it answers at once)
 
 
 REFUSALS = 3        # attempts in a row that the robot's router accepts over tcp but not in Zenoh: a refused login
@@ -39,6 +49,48 @@ REFUSALS = 3        # attempts in a row that the robot's router accepts over tcp
 
 class LoginRefused(Exception):
     """The robot's router is there but does not let the bridge in (credentials or certificates)."""
+
+
+class OlderRmwZenoh(Exception):
+    """The robot runs an rmw_zenoh older than the bridge speaks (graph.refusal: one line)."""
+
+
+def robot_graph(ros: zenoh.Session, domain: int) -> list[str]:
+    """The liveliness tokens of the robot's graph now (graph.graph_selectors)."""
+    return [str(reply.ok.key_expr) for selector in graph_selectors(domain)
+            for reply in ros.liveliness().get(selector, timeout=GRAPH_S) if reply.ok is not None]
+
+
+def refuse_older_peer(tokens: list[str]) -> None:
+    """OlderRmwZenoh naming the first token that shows an older rmw_zenoh, if any does."""
+    for token in tokens:
+        reason = older_rmw_zenoh(token)
+        if reason is not None:
+            raise OlderRmwZenoh(refusal(reason))
+
+
+# Zenoh's priorities: /cmd_vel above the default one every other output (and rmw_zenoh) uses
+URGENT_PRIORITY = zenoh.Priority.INTERACTIVE_HIGH
+
+
+def publisher_options(topic: RosTopic) -> dict:
+    """declare_advanced_publisher's options for one of the bridge's outputs: rmw_zenoh's for its QoS
+    (rmw.publishing: DROP unless reliable keep-all, which the bridge never uses; a transient-local
+    topic's cache, announced, and its heartbeat), and for an urgent one (/cmd_vel) a higher priority,
+    express: Zenoh keeps a queue per priority and sends the higher first, so a large /map (fragmented,
+    on the default priority) is never in front of a command, and a full queue drops rather than
+    blocks the node's one thread."""
+    how = publishing(topic.qos)
+    options = dict(
+        congestion_control=zenoh.CongestionControl.BLOCK if how.block else zenoh.CongestionControl.DROP,
+        reliability=zenoh.Reliability.RELIABLE if how.reliable else zenoh.Reliability.BEST_EFFORT,
+        priority=URGENT_PRIORITY if topic.urgent else zenoh.Priority.DEFAULT, express=topic.urgent,
+        publisher_detection=how.cache_depth is not None)
+    if how.cache_depth is not None:
+        options["cache"] = CacheConfig(max_samples=how.cache_depth)
+    if how.heartbeat_s is not None:
+        options["sample_miss_detection"] = MissDetectionConfig(heartbeat=None, sporadic_heartbeat=how.heartbeat_s)
+    return options
 
 
 def ros_login(p: Ros2BridgeParams) -> zenoh.Config | None:
@@ -101,12 +153,15 @@ def declare_ros_subscription(ros: zenoh.Session, me: NodeIdentity, entity_id: in
     this process itself puts on /tf), and its liveliness token. Returns both, to undeclare."""
     latched = topic.qos.durability == TRANSIENT_LOCAL
     # as rmw_zenoh's transient-local subscriptions: ask late-detected publishers' caches for what they
-    # sent before (robot_state_publisher's /tf_static, sent once at its start)
+    # sent before (robot_state_publisher's /tf_static, sent once at its start), and, reliable, fetch a
+    # last sample that their heartbeat says was missed
     history = HistoryConfig(detect_late_publishers=True, max_samples=topic.qos.depth) if latched else None
+    recovery = (RecoveryConfig(periodic_queries=None, heartbeat=True)
+                if latched and topic.qos.reliability == RELIABLE else None)
     subscriber = declare_advanced_subscriber(
         ros, topic_key(me.domain, topic.name, topic.msgtype, type_hash),
         lambda sample: on_sample(sample.payload.to_bytes(), _bytes(sample.attachment)),
-        allowed_origin=zenoh.Locality.REMOTE, history=history, subscriber_detection=latched)
+        allowed_origin=zenoh.Locality.REMOTE, history=history, recovery=recovery, subscriber_detection=latched)
     token = me.entity_token(entity_id, SUBSCRIPTION, topic.name, topic.msgtype, type_hash, topic.qos)
     return [subscriber, ros.liveliness().declare_token(token)]
 
@@ -126,17 +181,23 @@ class Ros2BridgeNode(Node):
         # (topic, CDR payload, rmw_zenoh attachment or b"")
         self.inbox: queue.SimpleQueue[tuple[RosTopic, bytes, bytes]] = queue.SimpleQueue()
         self._last_seq: dict[bytes, int] = {}      # a ROS publisher's GID -> its last sequence number
+        # liveliness tokens that appeared on the robot's graph, read on the node's thread (read_graph_token)
+        self.graph_inbox: queue.SimpleQueue[str] = queue.SimpleQueue()
+        self.stopping = threading.Event()         # run_live's stop: a refusal sets it
         # (ROS topic, CDR payload, stamp_ns) -> the robot; set by the ROS session (or a test)
         self.ros_sink: Callable[[RosTopic, bytes, int], None] | None = None
         self._reported: set[str] = set()
         self.to_stack = {name: self.publisher(name) for name in ("sim/clock", "scan", "odom", "goal", "initialpose")}
-        for topic in OUTPUTS:
+        self.cmd_vel = next(topic for topic in self.bridge.outputs if topic.omninav == "cmd_vel")
+        for topic in self.bridge.outputs:
             self.subscribe(topic.omninav, lambda msg, t=topic: self._to_robot(t, msg), synced=False)
 
     def pace_s(self) -> float:
         return POLL_S
 
     def tick(self) -> None:
+        while not self.graph_inbox.empty():
+            self.read_graph_token(self.graph_inbox.get_nowait(), self.stopping)
         while True:
             try:
                 topic, payload, attachment = self.inbox.get_nowait()
@@ -176,8 +237,9 @@ class Ros2BridgeNode(Node):
         self._last_seq[gid] = seq
 
     def _to_robot(self, topic: RosTopic, msg) -> None:
-        if self.ros_sink is not None:
-            self.ros_sink(topic, self.bridge.to_ros(topic, msg), msg.header.stamp_ns)
+        sink = self.ros_sink        # once: a refusal on Zenoh's thread may clear it meanwhile
+        if sink is not None:
+            sink(topic, self.bridge.to_ros(topic, msg), msg.header.stamp_ns)
             self.counters[f"sent/ros2{topic.name}"] += 1
 
     def diagnostic(self):
@@ -190,6 +252,7 @@ class Ros2BridgeNode(Node):
         answers, and left only after the last omninav input was handled."""
         runner = LiveRunner(self, router)
         runner.stops_with(stop_event)       # `omninav run`'s signal handlers set this one
+        self.stopping = stop_event
         finished = threading.Event()
         robot = threading.Thread(target=self._join_robot, args=(stop_event, finished), name="ros2-session")
         robot.start()
@@ -218,7 +281,12 @@ class Ros2BridgeNode(Node):
         if ros is None:
             return
         with ros:
-            handles = self._declare_ros(ros)
+            try:
+                handles = self._declare_ros(ros)
+            except OlderRmwZenoh as exc:     # nothing declared yet: no /cmd_vel ever went out
+                self.refused = str(exc)
+                stop.set()
+                return
             self.log.info("on the robot's ROS 2 graph (domain %d, router %s) as node %s", p.domain,
                           ", ".join(ros_endpoints(p)), p.node_name)
             finished.wait()
@@ -227,11 +295,21 @@ class Ros2BridgeNode(Node):
                 handle.undeclare()
 
     def _declare_ros(self, ros: zenoh.Session) -> list:
+        """The bridge's node on the robot's graph, once that graph shows a robot it can drive
+        (OlderRmwZenoh if not), with a watch on the tokens that come later."""
         p = self.params
+        # watched from before the graph is read, so that no token falls between the two (a refusal
+        # leaves them to the session's close); read on the node's thread, as every ROS sample
+        handles = [ros.liveliness().declare_subscriber(selector, self._queue_token)
+                   for selector in graph_selectors(p.domain)]
+        tokens = robot_graph(ros, p.domain)
+        refuse_older_peer(tokens)
+        for token in tokens:
+            self._warn_cmd_vel_type(token)
         me = NodeIdentity(p.domain, str(ros.info.zid()), p.node_name, p.namespace)
-        handles = [ros.liveliness().declare_token(me.node_token())]
+        handles.append(ros.liveliness().declare_token(me.node_token()))
         publishers = {}
-        for entity_id, topic in enumerate((*INPUTS, *OUTPUTS), start=me.nid + 1):
+        for entity_id, topic in enumerate((*INPUTS, *self.bridge.outputs), start=me.nid + 1):
             type_hash = self.bridge.store.hash_rihs01(topic.msgtype)
             if topic in INPUTS:
                 handles += declare_ros_subscription(
@@ -239,18 +317,36 @@ class Ros2BridgeNode(Node):
                     lambda payload, attachment, t=topic: self.inbox.put((t, payload, attachment)))
                 continue
             token = me.entity_token(entity_id, PUBLISHER, topic.name, topic.msgtype, type_hash, topic.qos)
-            # a transient-local topic (/map) keeps its last samples for subscribers that come later
-            latched = topic.qos.durability == TRANSIENT_LOCAL
             publishers[topic.name] = (declare_advanced_publisher(
-                ros, topic_key(p.domain, topic.name, topic.msgtype, type_hash),
-                congestion_control=zenoh.CongestionControl.BLOCK, reliability=zenoh.Reliability.RELIABLE,
-                cache=CacheConfig(max_samples=topic.qos.depth) if latched else None,
-                publisher_detection=latched), entity_gid(token), [0])
+                ros, topic_key(p.domain, topic.name, topic.msgtype, type_hash), **publisher_options(topic)),
+                entity_gid(token), [0])
             handles += [publishers[topic.name][0], ros.liveliness().declare_token(token)]
 
         def sink(topic: RosTopic, payload: bytes, stamp_ns: int) -> None:
             publisher, gid, seq = publishers[topic.name]
             seq[0] += 1
             publisher.put(payload, attachment=pack_attachment(seq[0], stamp_ns, gid))
-        self.ros_sink = sink
+        if not self.refused:        # an older rmw_zenoh may have joined meanwhile (read_graph_token)
+            self.ros_sink = sink
         return handles
+
+    def _queue_token(self, sample: zenoh.Sample) -> None:
+        if sample.kind == zenoh.SampleKind.PUT:     # a token that appears; not one that goes
+            self.graph_inbox.put(str(sample.key_expr))
+
+    def read_graph_token(self, token: str, stop: threading.Event) -> None:
+        """A token that appeared on the robot's graph: an older rmw_zenoh that joins later stops the
+        bridge at once, as one there from the start would have."""
+        reason = older_rmw_zenoh(token)
+        if reason is None:
+            self._warn_cmd_vel_type(token)
+        elif not self.refused:
+            self.ros_sink = None        # no command after this one
+            self.refused = refusal(reason)      # run_live ends with it: one line
+            stop.set()
+
+    def _warn_cmd_vel_type(self, token: str) -> None:
+        warning = cmd_vel_type_warning(token, self.cmd_vel)
+        if warning is not None and warning not in self._reported:
+            self._reported.add(warning)
+            self.log.warning("%s", warning)

@@ -3,7 +3,9 @@
 In from the robot: /scan (sensor_msgs/LaserScan) -> scan, /odom (nav_msgs/Odometry) -> odom,
 /goal_pose (geometry_msgs/PoseStamped, map frame) -> goal, /initialpose (RViz's "2D Pose Estimate",
 geometry_msgs/PoseWithCovarianceStamped) -> initialpose, /tf and /tf_static (tf2_msgs/TFMessage):
-the laser's mounting on base_link. Out to the robot: cmd_vel -> /cmd_vel (geometry_msgs/Twist),
+the laser's mounting on base_link. Out to the robot: cmd_vel -> /cmd_vel (geometry_msgs/TwistStamped,
+Jazzy's diff_drive_controller and Nav2 default, stamped with the bridge's clock in cmd_vel_frame_id; or
+geometry_msgs/Twist with cmd_vel_type twist: the type is part of rmw_zenoh's key, so it must be the robot's),
 map -> /map (nav_msgs/OccupancyGrid), pose -> /amcl_pose (geometry_msgs/PoseWithCovarianceStamped),
 plan -> /plan (nav_msgs/Path), tf/map_odom -> /tf (map -> odom, as amcl broadcasts it: RViz then
 places the robot's odom -> base_link in the map). Poses are projected to the plane as the bag importer does (x, y and
@@ -34,7 +36,7 @@ from ...schemas.messages import (Clock, Goal, Header, OccupancyGrid, Path, Pose2
 from ..importers.rosbag import laser_scan, odometry, yaw_of
 from ...geometry.se2 import compose
 from .rmw import BEST_EFFORT, TRANSIENT_LOCAL, Qos
-from ...parameters.declare import Parameters
+from ...parameters.declare import Parameters, param
 
 NS_PER_S = 1_000_000_000
 _PLANAR = (0, 1, 5)         # x, y, yaw among ROS's (x, y, z, roll, pitch, yaw) covariance axes
@@ -48,6 +50,7 @@ class RosTopic:
     msgtype: str
     omninav: str
     qos: Qos = Qos()
+    urgent: bool = False    # sent ahead of everything else the bridge sends (node.publisher_options)
 
 
 INPUTS = (
@@ -58,13 +61,25 @@ INPUTS = (
     RosTopic("/goal_pose", "geometry_msgs/msg/PoseStamped", "goal"),
     RosTopic("/initialpose", "geometry_msgs/msg/PoseWithCovarianceStamped", "initialpose"),
 )
-OUTPUTS = (
-    RosTopic("/cmd_vel", "geometry_msgs/msg/Twist", "cmd_vel"),
-    RosTopic("/map", "nav_msgs/msg/OccupancyGrid", "map", Qos(durability=TRANSIENT_LOCAL, depth=1)),
-    RosTopic("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", "pose"),
-    RosTopic("/plan", "nav_msgs/msg/Path", "plan"),
-    RosTopic("/tf", "tf2_msgs/msg/TFMessage", "tf/map_odom", Qos(depth=100)),
-)
+# --cmd-vel-type: the /cmd_vel message; TwistStamped is what Jazzy's diff_drive_controller and Nav2 take
+CMD_VEL_TYPES = {"twist_stamped": "geometry_msgs/msg/TwistStamped", "twist": "geometry_msgs/msg/Twist"}
+DEFAULT_CMD_VEL_TYPE = "twist_stamped"
+
+
+def ros_outputs(cmd_vel_type: str = DEFAULT_CMD_VEL_TYPE) -> tuple[RosTopic, ...]:
+    """What the bridge publishes, with the QoS Nav2's publishers of those topics use (depth 1 for
+    cmd_vel, map and amcl_pose; /map and /amcl_pose transient local, so a late RViz gets them)."""
+    latched = Qos(durability=TRANSIENT_LOCAL, depth=1)
+    return (
+        RosTopic("/cmd_vel", CMD_VEL_TYPES[cmd_vel_type], "cmd_vel", Qos(depth=1), urgent=True),
+        RosTopic("/map", "nav_msgs/msg/OccupancyGrid", "map", latched),
+        RosTopic("/amcl_pose", "geometry_msgs/msg/PoseWithCovarianceStamped", "pose", latched),
+        RosTopic("/plan", "nav_msgs/msg/Path", "plan"),
+        RosTopic("/tf", "tf2_msgs/msg/TFMessage", "tf/map_odom", Qos(depth=100)),
+    )
+
+
+OUTPUTS = ros_outputs()
 
 
 def typestore():
@@ -151,6 +166,8 @@ class Ros2BridgeParams(Parameters):
     namespace: str = "/"
     base_frame: str = "base_link"
     map_frame: str = "map"
+    cmd_vel_type: str = param(DEFAULT_CMD_VEL_TYPE, choices=tuple(CMD_VEL_TYPES))  # the robot's /cmd_vel type
+    cmd_vel_frame_id: str = "base_link"     # a TwistStamped's header.frame_id
     laser_x: float = 0.0
     laser_y: float = 0.0
     laser_yaw: float = 0.0
@@ -162,6 +179,7 @@ class Bridge:
 
     def __init__(self, params: Ros2BridgeParams):
         self.params = params
+        self.outputs = ros_outputs(params.cmd_vel_type)
         self.store = typestore()
         self.types = self.store.types
         self.mounting = Mounting()
@@ -262,9 +280,20 @@ class Bridge:
             orientation=t["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=math.sin(theta / 2), w=math.cos(theta / 2)))
 
     def _twist(self, msg: Twist):
-        vector = self.types["geometry_msgs/msg/Vector3"]
-        return self.types["geometry_msgs/msg/Twist"](linear=vector(x=msg.linear_x, y=msg.linear_y, z=0.0),
-                                                     angular=vector(x=0.0, y=0.0, z=msg.angular_z))
+        t = self.types
+        vector = t["geometry_msgs/msg/Vector3"]
+        twist = t["geometry_msgs/msg/Twist"](linear=vector(x=msg.linear_x, y=msg.linear_y, z=0.0),
+                                             angular=vector(x=0.0, y=0.0, z=msg.angular_z))
+        if self.params.cmd_vel_type == "twist":
+            return twist
+        # stamped now by the robot's clock, not by the scan the command came from: diff_drive_controller
+        # drops a command older than its cmd_vel_timeout (0.5 s) by that stamp
+        now = Header(stamp_ns=self.command_stamp_ns(msg))
+        return t["geometry_msgs/msg/TwistStamped"](header=self._header(now, self.params.cmd_vel_frame_id), twist=twist)
+
+    def command_stamp_ns(self, msg: Twist) -> int:
+        """A command's stamp on the robot: the latest of its own and the bridge's clock."""
+        return max(msg.header.stamp_ns, self.clock_ns or 0)
 
     def _grid(self, msg: OccupancyGrid):
         t, info = self.types, msg.info
