@@ -9,8 +9,8 @@ import threading
 import pytest
 import zenoh
 
-from conftest import free_port, wait_until
-from test_ros2_bridge import JAZZY_HASHES, header, stack_args, store  # noqa: F401 (store: a fixture)
+from conftest import free_port
+from test_ros2_bridge import JAZZY_HASHES, header, stack_args
 from omninav.parameters.declare import ParamError
 from omninav.schemas.messages import Header, Twist
 from omninav.services.ros2_bridge.graph import (cmd_vel_type_warning, graph_selectors, older_rmw_zenoh,
@@ -22,6 +22,11 @@ from omninav.services.ros2_bridge.translate import Bridge, Ros2BridgeParams, ros
 from omninav.services.runtime.zenoh_config import foreign_client_config, open_router
 
 pytest.importorskip("rosbags")
+
+@pytest.fixture(scope="module")
+def store():
+    return typestore()
+
 
 STRING_HASH = JAZZY_HASHES["std_msgs/msg/String"]
 TWIST_STAMPED = "geometry_msgs/msg/TwistStamped"
