@@ -60,7 +60,8 @@ class Headline:
 HEADLINES = (
     Headline("barn", "BARN worlds 0–149, Jackal, no map", "barn", ("--range 0-149",), ("--odometry",),
              "100 %, 0 collisions, ≥ 0.45 lockstep, ≥ 0.42 real time"),
-    Headline("dynabarn", "DynaBARN-style worlds, reporting seeds", "dynabarn", ("--seed 100100",), ("--controller",),
+    Headline("dynabarn", "DynaBARN-style worlds, reporting seeds", "dynabarn", ("--seed 100100", "--count 100"),
+             ("--controller",),
              "≥ 90 % each"),
     Headline("scenarios-people", "people kinds, reporting seeds", "scenarios", ("--seed 100000", "--count 100"),
              ("--controller",), "≥ 95 % each"),
