@@ -93,3 +93,15 @@ def test_barn_and_dynabarn_runs_say_their_outcomes_in_one_line():
         == "fused odometry, dwa: easy 15/20, 5 collisions, 0 timeouts, 1 false successes, mean score 0.3734"
     assert measurements._scalars({"range": "0-149", "all": dict(block, runs=150, success_rate=1.0)}, "barn") \
         == "chassis odometry, worlds 0-149: 150/150, 5 collisions, 0 timeouts, 1 false successes, mean score 0.3734"
+
+
+def test_a_shove_run_says_how_far_the_fused_odometry_was_off_against_the_chassis():
+    def run(odometry, shoved, end, after, doubt):
+        return {"odometry": odometry, "shoved_m": shoved, "error_at_end_m": end, "error_after_1s_m": after,
+                "doubt_after_s": doubt}
+    figures = {"profile": "jackal", "aim_met": True,
+               "runs": [run("chassis", 0.56, 0.55, 0.55, None), run("fused", 0.56, 0.028, 0.012, 0.0),
+                        run("chassis", 2.06, 2.05, 2.05, None), run("fused", 2.06, 0.067, 0.028, 0.0)]}
+    assert measurements._shove(figures) == (
+        "the jackal carried 0.56–2.06 m: fused odometry 1.20–2.80 cm off 1 s after the shove, 2.80–6.70 cm at "
+        "its end; doubtful 0.00 s after it began", "the chassis's odometry 0.55–2.05 m off", True)
