@@ -241,6 +241,8 @@ def record_entry(path: Path, record: dict) -> str:
         ("when", _when(record)),
         ("command", None if measured else record.get("command")),
         ("machine", _machine(record)),
+        ("exit code", f"{record['exit_code']} (a run or an aim failed; the figures say which)"
+         if record.get("exit_code") else None),
     ]
     if measured:
         spec = next((s for s in HEADLINES if s.matches(record) and s.summary), None)

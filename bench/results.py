@@ -27,6 +27,7 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parent.parent
 # relative to the directory the bench runs in (the repository), as compose files' paths are
 RESULTS_DIR = Path("docs") / "results"
+INTERRUPTED = 130     # Ctrl-C: the figures are of the runs done so far
 FORMAT = 1
 
 
@@ -102,7 +103,9 @@ def results_file_name(bench: str, started: dt.datetime) -> str:
 def run_recorded(bench: str, argv: list[str], run: Callable[[], int], results_dir: Path = RESULTS_DIR) -> int:
     """Run `run` (a bench already set to --json), print what it prints, and keep its JSON with provenance.
 
-    Writes nothing when the bench fails or prints no JSON object: a results file is a finished run.
+    A bench that finished with its aim missed exits nonzero and is kept all the same, with its exit
+    code (a record of only the runs that met their aims would be no record). Nothing is written when
+    it printed no JSON object (it broke) or was interrupted: a results file is a finished run.
     """
     commit, dirty = git_state()
     started = dt.datetime.now(dt.timezone.utc).replace(microsecond=0)
@@ -111,8 +114,9 @@ def run_recorded(bench: str, argv: list[str], run: Callable[[], int], results_di
         code = run()
     duration = time.monotonic() - t0
     figures = last_json_object(tee.copy.getvalue())
-    if code != 0 or figures is None:
-        why = f"exit code {code}" if code != 0 else "no JSON object printed"
+    interrupted = code == INTERRUPTED or (figures or {}).get("interrupted") is True
+    if figures is None or interrupted:
+        why = "interrupted" if interrupted else f"no JSON object printed (exit code {code})"
         print(f"omninav bench {bench} --save-results: nothing written ({why})", file=sys.stderr)
         return code or 1
     record = {
@@ -125,13 +129,14 @@ def run_recorded(bench: str, argv: list[str], run: Callable[[], int], results_di
         "date_utc": started.isoformat().replace("+00:00", "Z"),
         "machine": {"cores": os.cpu_count(), "load_start": load_start, "load_end": machine_load()},
         "duration_s": round(duration, 1),
+        "exit_code": code,
         "figures": figures,
     }
     results_dir.mkdir(parents=True, exist_ok=True)
     path = results_dir / results_file_name(bench, started)
     path.write_text(json.dumps(record, indent=1, ensure_ascii=False) + "\n")
     print(f"omninav bench {bench}: recorded {path}", file=sys.stderr)
-    return 0
+    return code
 
 
 def load_results(results_dir: Path = RESULTS_DIR) -> list[tuple[Path, dict]]:

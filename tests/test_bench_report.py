@@ -50,10 +50,20 @@ def test_a_saved_run_keeps_the_json_the_bench_printed_with_its_provenance(tmp_pa
     assert record["date_utc"].endswith("Z") and record["duration_s"] >= 0
 
 
-def test_a_failed_or_silent_bench_writes_no_results_file(tmp_path):
+def test_a_broken_silent_or_interrupted_bench_writes_no_results_file(tmp_path):
     assert results.run_recorded("sim", [], lambda: 3, results_dir=tmp_path) == 3
     assert results.run_recorded("sim", [], lambda: print("no json") or 0, results_dir=tmp_path) == 1
+    assert results.run_recorded("barn", [], lambda: print('{"interrupted": true}') or 130, results_dir=tmp_path) == 130
     assert not list(tmp_path.iterdir())
+
+
+def test_a_bench_that_missed_its_aim_is_recorded_with_its_exit_code(tmp_path):
+    """`bench scenarios` exits 1 when a mission failed; its figures are the record all the same."""
+    assert results.run_recorded("scenarios", ["--kind", "crossing"], lambda: print('{"success_rate": 0.8}') or 1,
+                                results_dir=tmp_path) == 1
+    (path,) = tmp_path.iterdir()
+    record = json.loads(path.read_text())
+    assert record["exit_code"] == 1 and record["figures"] == {"success_rate": 0.8}
 
 
 def test_an_indented_json_object_is_found_too():
