@@ -25,10 +25,12 @@ PARENT_POLL_S = 0.5     # how often a process looks whether its parent is still 
 
 
 def interrupt_on_stop_signals() -> None:
-    """SIGTERM and SIGHUP raise KeyboardInterrupt in the main thread, as SIGINT does, so a command's
-    `finally` (stopping what it started, closing its recording) runs whichever ended it: `timeout`,
-    a CI job's cancel, a closed terminal."""
-    for sig in STOP_SIGNALS[1:]:
+    """SIGINT, SIGTERM and SIGHUP raise KeyboardInterrupt in the main thread, so a command's
+    `finally` (stopping what it started, closing its recording) runs whichever ended it: Ctrl-C,
+    `timeout`, a CI job's cancel, a closed terminal. SIGINT too, explicitly: a command a script starts
+    in the background (`omninav navigate … &`) inherits SIGINT ignored, and Python then installs no
+    KeyboardInterrupt for it - `kill -INT` did nothing and the mission ran to its end."""
+    for sig in STOP_SIGNALS:
         signal.signal(sig, signal.default_int_handler)
 
 
