@@ -106,7 +106,6 @@ class Doubt:
         self.track_broken = False                  # the laser track broke during this doubt
         self._felt: deque[int] = deque()            # wheel steps at which the gyro or the IMU disagreed with the wheels
         self.laser_set_aside = False               # the last laser interval was the laser's error (see laser())
-        self.laser_mismatches = 0
         self.wheel_travel: np.ndarray | None = None     # the wheels' motion over the last laser interval
 
     # ------------------------------------------------------------ inputs
@@ -135,7 +134,7 @@ class Doubt:
         against the laser's. Where they disagree and neither the gyro nor the IMU felt anything the
         wheels did not (from a window before the interval to a window after it), the laser is wrong -
         a push or a slip moves the body, and the body's motion is what those two feel - and the
-        interval is set aside (`laser_set_aside`, counted in laser_mismatches) instead of being held
+        interval is set aside (`laser_set_aside`; the fusion counts it) instead of being held
         against the wheels: the fusion then carries the laser track on by the wheels' travel."""
         pose, covariance = np.asarray(pose, float), np.asarray(covariance, float)
         previous, self._laser = self._laser, (stamp_ns, pose, covariance)
@@ -152,7 +151,6 @@ class Doubt:
                         and not self._felt_between(previous[0] - self.window_ns, stamp_ns + self.window_ns):
                     self.travel = _Check(self.travel.distance2, self.travel.reason + " (the laser's: nothing felt)")
                     self.laser_set_aside = True
-                    self.laser_mismatches += 1
         return self._verdict(self.now_ns)
 
     def _felt_between(self, start_ns: int, end_ns: int) -> bool:
