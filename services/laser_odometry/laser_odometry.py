@@ -149,7 +149,7 @@ class LaserOdometry:
             self.restarts += self.mapper is not None
             self.mapper, self.refusals = HectorMapper(self.params.hector_params(), start=guess), 0
         mapper = self.mapper
-        points = self.unmoved(self.in_window(mapper.in_range(points), guess), guess)
+        points = self.matchable(mapper.in_range(points), guess)
         if len(points) < self.params.min_scan_points:
             return self._refuse(guess, TOO_FEW_POINTS, len(points))
         if mapper.updates == 0:                          # the first scan with enough points starts the map
@@ -170,29 +170,26 @@ class LaserOdometry:
         pose = guess + self.constrained(information) @ correction
         return self._accept(pose, points, (covariance + covariance.T) / 2, cost)
 
-    def in_window(self, points: np.ndarray, pose) -> np.ndarray:
-        """The end points (robot frame) that fall inside the grids, a coarsest cell in from their
-        edge, with the robot at `pose`. Nearer the edge the coarse grids' interpolation reads the
-        nothing beyond it and pulls the points inwards: in an open arena, a far wall entering the
-        window dragged the pose 1 m back in a second, each map update laying the wall where the
-        pull had put it."""
+    def matchable(self, points: np.ndarray, pose) -> np.ndarray:
+        """The end points (robot frame) to match and map, with the robot at `pose`: those inside the
+        grids, a coarsest cell in from their edge, and not on a cell the map has seen free
+        moving_free_updates scans more than hit.
+
+        Nearer the edge the coarse grids' interpolation reads the nothing beyond it and pulls the
+        points inwards: in an open arena, a far wall entering the window dragged the pose 1 m back
+        in a second, each map update laying the wall where the pull had put it. A person or a
+        cylinder that walked into space the scans saw empty would be matched against the outline it
+        left in the map where it stood: the pose is dragged along with it (a DynaBARN obstacle pulled
+        the laser 1 m in 2 s where the wheels and the IMU felt nothing)."""
         info = self.mapper.infos[0]
         margin = 2 ** (len(self.mapper.infos) - 1)
         u, v = self._cells(points, pose)
-        return points[(u >= margin) & (v >= margin) & (u < info.width - margin) & (v < info.height - margin)]
-
-    def unmoved(self, points: np.ndarray, pose) -> np.ndarray:
-        """The end points (robot frame, inside the window) that do not fall, with the robot at `pose`,
-        on a cell the map has seen free moving_free_updates scans more than hit. A person or a
-        cylinder that walked into space the scans saw empty would otherwise be matched against the
-        outline it left in the map where it stood: the pose is dragged along with it (a DynaBARN
-        obstacle pulled the laser 1 m in 2 s where the wheels and the IMU felt nothing)."""
-        if self.params.moving_free_updates == 0 or self.mapper.updates == 0:
-            return points
-        u, v = self._cells(points, pose)
-        seen_free = self.mapper.log_odds[0][v.astype(np.int64), u.astype(np.int64)] \
-            <= self.params.moving_free_updates * self.mapper.free_update
-        return points[~seen_free]
+        keep = (u >= margin) & (v >= margin) & (u < info.width - margin) & (v < info.height - margin)
+        if self.params.moving_free_updates > 0 and self.mapper.updates > 0:
+            seen_free = self.mapper.log_odds[0][v[keep].astype(np.int64), u[keep].astype(np.int64)] \
+                <= self.params.moving_free_updates * self.mapper.free_update
+            keep[keep] = ~seen_free
+        return points[keep]
 
     def _cells(self, points: np.ndarray, pose) -> tuple[np.ndarray, np.ndarray]:
         """The end points' (robot frame) column and row in the finest grid, with the robot at `pose`."""
