@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import textwrap
 import sys
@@ -16,7 +15,7 @@ from hypothesis import settings
 from omninav.schemas.keys import KeyLayout
 from omninav.services.runtime.acl import CREDENTIALS_ENV, DICTIONARY, TOOL
 from omninav.services.runtime.lockstep import LOCKSTEP_ENV, Lockstep
-from omninav.services.runtime.zenoh_config import ROUTER_ENV, open_client, open_router
+from omninav.services.runtime.zenoh_config import ROUTER_ENV, free_loopback_port, open_client, open_router
 
 from launching import processes_using
 
@@ -30,9 +29,7 @@ SHARED_DATA = REPO.parent / "shared" / "data"
 
 
 def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return free_loopback_port()
 
 
 def wait_until(predicate, timeout: float = 10.0, interval: float = 0.05, what: str = "condition"):

@@ -36,11 +36,16 @@ def router_endpoint(explicit: str | None = None) -> str:
     return check_loopback(explicit or os.environ.get(ROUTER_ENV) or DEFAULT_ROUTER)
 
 
-def free_loopback_endpoint() -> str:
-    """A tcp endpoint on 127.0.0.1 with a port that is free right now (for benches and demos)."""
+def free_loopback_port() -> int:
+    """A tcp port on 127.0.0.1 that is free right now (whoever binds it next may lose a race for it)."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
         s.bind(("127.0.0.1", 0))
-        return f"tcp/127.0.0.1:{s.getsockname()[1]}"
+        return s.getsockname()[1]
+
+
+def free_loopback_endpoint() -> str:
+    """A tcp endpoint on 127.0.0.1 with a port that is free right now (for benches and demos)."""
+    return f"tcp/127.0.0.1:{free_loopback_port()}"
 
 
 def check_loopback(endpoint: str) -> str:

@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import os
 import signal
-import socket
 import subprocess
 import sys
 import threading
@@ -27,7 +26,9 @@ from urllib.parse import quote
 import rerun as rr
 import rerun_cli
 
+from ..runtime.joining import listening as endpoint_listening
 from ..runtime.node import Node
+from ..runtime.zenoh_config import free_loopback_port
 from .bus import follow_the_bus
 from .convert import Converter, Route, RouteTable, ViewParams
 from .rerun_scene import APPLICATION_ID, RERUN_ROUTES, blueprint, log_at, log_static
@@ -52,17 +53,9 @@ class RerunViewParams(ViewParams):
     grid_period_s: float = param(1.0, ge=0)        # sim time between two publications of one grid, at least
 
 
-def free_loopback_port() -> int:
-    """A port free now on 127.0.0.1 (the rerun binary binds it a moment later; a race only tests meet)."""
-    with socket.socket() as probe:
-        probe.bind((LOOPBACK, 0))
-        return probe.getsockname()[1]
-
-
 def listening(port: int) -> bool:
-    with socket.socket() as probe:
-        probe.settimeout(0.5)
-        return probe.connect_ex((LOOPBACK, port)) == 0
+    """Whether anything accepts a connection on this port of 127.0.0.1."""
+    return endpoint_listening(f"tcp/{LOOPBACK}:{port}")
 
 
 def viewer_url(web_port: int, grpc_url: str) -> str:
