@@ -99,9 +99,10 @@ def test_a_readme_without_the_markers_is_refused(tmp_path):
 
 def test_barn_and_dynabarn_runs_say_their_outcomes_in_one_line():
     block = {"runs": 20, "success_rate": 0.75, "collisions": 5, "timeouts": 0, "false_successes": 1, "mean_score": 0.37339}
-    assert measurements._scalars({"odometry": "fused", "controller": "dwa", "difficulties": {"easy": block}}, "dynabarn") \
+    assert measurements.summarize({"odometry": "fused", "controller": "dwa", "difficulties": {"easy": block}},
+                                  "dynabarn")[0] \
         == "fused odometry, dwa: easy 15/20, 5 collisions, 0 timeouts, 1 false successes, mean score 0.3734"
-    assert measurements._scalars({"range": "0-149", "all": dict(block, runs=150, success_rate=1.0)}, "barn") \
+    assert measurements.summarize({"range": "0-149", "all": dict(block, runs=150, success_rate=1.0)}, "barn")[0] \
         == "chassis odometry, worlds 0-149: 150/150, 5 collisions, 0 timeouts, 1 false successes, mean score 0.3734"
 
 
