@@ -3,6 +3,7 @@ channel with the mcap reader; the input stays as it was."""
 import hashlib
 
 import numpy as np
+import pytest
 from mcap.reader import make_reader
 from mcap_protobuf.decoder import DecoderFactory
 
@@ -75,6 +76,19 @@ def test_export_refuses_to_overwrite_and_names_an_unreadable_recording(tmp_path,
     (tmp_path / "junk.mcap").write_bytes(b"junk")
     assert cli_main(["export", "--foxglove", str(tmp_path / "junk.mcap"), "-o", str(tmp_path / "out.mcap")]) == 2
     assert "not an MCAP file" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("form, suffix", [("--foxglove", "mcap"), ("--rerun", "rrd")])
+def test_a_bad_recording_leaves_no_export_behind(form, suffix, tmp_path, capsys):
+    """The output is opened before the recording is read: a missing or junk recording must not leave
+    a half-written file (both exports left one, and the next try was refused: 'exists')."""
+    if form == "--rerun":
+        pytest.importorskip("rerun")
+    (tmp_path / "junk.mcap").write_bytes(b"junk")
+    for source, says in ((tmp_path / "missing.mcap", "no such recording"), (tmp_path / "junk.mcap", "not an MCAP file")):
+        out = tmp_path / f"out.{suffix}"
+        assert cli_main(["export", form, str(source), "-o", str(out)]) == 2
+        assert says in capsys.readouterr().err and not out.exists()
 
 
 def test_an_exported_mission_recording_is_right_channel_by_channel(tmp_path, capsys):

@@ -14,7 +14,7 @@ import foxglove
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout
 from .channels import ChannelSet
 from .convert import Converter, RouteTable, ViewParams
-from .recorded import refuse_existing, routed_records
+from .recorded import new_output, routed_records
 
 PROFILE = "omninav-foxglove"
 
@@ -25,20 +25,20 @@ def export_foxglove(source: str | Path, target: str | Path, robot: str = DEFAULT
     under 'malformed/<key>' how many recorded payloads did not decode (they are skipped). Raises
     RecordingError for an unreadable source and FileExistsError when target exists. on_record() is
     called after each recorded message is read (a progress bar)."""
-    target = refuse_existing(target)
     routes = RouteTable(KeyLayout(robot))
     converter = Converter(params)
     context = foxglove.Context()     # its own: nothing else logged in this process lands in the file
     channels = ChannelSet(context)
     counts: Counter[str] = Counter()
-    writer = foxglove.open_mcap(target, context=context,
-                                writer_options=foxglove.mcap.MCAPWriteOptions(profile=PROFILE))
-    try:
-        for msg, outputs in routed_records(source, routes, converter, counts, on_record):
-            for topic, message in outputs:
-                channels.log(topic, message, log_time_ns=max(msg.header.stamp_ns, 0))
-                counts[topic] += 1
-    finally:
-        writer.close()
-        channels.close()
+    with new_output(target) as target:
+        writer = foxglove.open_mcap(target, context=context,
+                                    writer_options=foxglove.mcap.MCAPWriteOptions(profile=PROFILE))
+        try:
+            for msg, outputs in routed_records(source, routes, converter, counts, on_record):
+                for topic, message in outputs:
+                    channels.log(topic, message, log_time_ns=max(msg.header.stamp_ns, 0))
+                    counts[topic] += 1
+        finally:
+            writer.close()
+            channels.close()
     return counts

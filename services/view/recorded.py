@@ -6,6 +6,7 @@ payload that does not decode is counted under 'malformed/<key>' and skipped.
 from __future__ import annotations
 
 from collections import Counter
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
@@ -15,11 +16,19 @@ from ..recorder.mcap_io import read_records
 from .convert import Converter, RouteTable
 
 
-def refuse_existing(target: str | Path) -> Path:
+@contextmanager
+def new_output(target: str | Path) -> Iterator[Path]:
+    """The export's output, which must not exist yet (FileExistsError); if the export fails - a
+    recording that is missing or not MCAP is found only once the output is open - the half-written
+    file goes again, so a bad input leaves nothing behind."""
     target = Path(target)
     if target.exists():
         raise FileExistsError(f"{target} exists; the export never overwrites a file (choose another output)")
-    return target
+    try:
+        yield target
+    except BaseException:
+        target.unlink(missing_ok=True)
+        raise
 
 
 def routed_records(source: str | Path, routes: RouteTable, converter: Converter, counts: Counter[str],

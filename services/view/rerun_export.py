@@ -14,7 +14,7 @@ import rerun as rr
 
 from ...schemas.keys import DEFAULT_ROBOT, KeyLayout
 from .convert import Converter, RouteTable, ViewParams
-from .recorded import refuse_existing, routed_records
+from .recorded import new_output, routed_records
 from .rerun_scene import APPLICATION_ID, RERUN_ROUTES, blueprint, log_at, log_static
 
 
@@ -23,19 +23,19 @@ def export_rerun(source: str | Path, target: str | Path, robot: str = DEFAULT_RO
     """Write target from the recording at source; returns how many log calls went to each entity
     path, and under 'malformed/<key>' how many recorded payloads did not decode (they are skipped).
     Raises RecordingError for an unreadable source and FileExistsError when target exists."""
-    target = refuse_existing(target)
     routes = RouteTable(KeyLayout(robot), RERUN_ROUTES)
     converter = Converter(params)
-    # its own stream (not the process-global one), so nothing else logged in this process lands in the file
-    recording = rr.RecordingStream(APPLICATION_ID, recording_id=str(uuid.uuid4()))
-    recording.save(target, default_blueprint=blueprint())
     counts: Counter[str] = Counter()
-    try:
-        log_static(recording)
-        for msg, outputs in routed_records(source, routes, converter, counts, on_record):
-            log_at(recording, msg.header.stamp_ns, outputs)
-            counts.update(logged.path for logged in outputs)
-    finally:
-        recording.flush()
-        recording.disconnect()
+    with new_output(target) as target:
+        # its own stream (not the process-global one), so nothing else logged in this process lands in the file
+        recording = rr.RecordingStream(APPLICATION_ID, recording_id=str(uuid.uuid4()))
+        recording.save(target, default_blueprint=blueprint())
+        try:
+            log_static(recording)
+            for msg, outputs in routed_records(source, routes, converter, counts, on_record):
+                log_at(recording, msg.header.stamp_ns, outputs)
+                counts.update(logged.path for logged in outputs)
+        finally:
+            recording.flush()
+            recording.disconnect()
     return counts
