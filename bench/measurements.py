@@ -14,6 +14,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..services.runtime.errors import UserError, exits_2_on_user_error
 from .results import RESULTS_DIR, load_results
 
 # relative to the directory the report runs in (the repository)
@@ -318,8 +319,16 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
                         help=f"the README whose headline table to write (default {README})")
 
 
+@exits_2_on_user_error("bench report")
 def main(args: argparse.Namespace) -> int:
-    results = load_results(args.results)
+    for path, what in ((args.results, "the results folder"), (args.readme, "the README")):
+        if not path.exists():
+            raise UserError(f"{path}: no such file or folder ({what}); run it in the repository, or give "
+                            f"--results and --readme")
+    try:
+        results = load_results(args.results)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
     wanted = {
         args.measurements: measurements_md(results),
         args.readme: readme_with_table(args.readme.read_text(), headline_table(results, "docs/measurements.md")),

@@ -143,7 +143,10 @@ def load_results(results_dir: Path = RESULTS_DIR) -> list[tuple[Path, dict]]:
     """Every results file in the folder, in file-name order; a file that is not a results object is an error."""
     out = []
     for path in sorted(results_dir.glob("*.json")):
-        record = json.loads(path.read_text())
+        try:
+            record = json.loads(path.read_text())
+        except json.JSONDecodeError as exc:
+            raise ValueError(f"{path}: not JSON ({exc})") from None
         if not isinstance(record, dict) or "bench" not in record:
             raise ValueError(f"{path}: not a results file (no 'bench')")
         out.append((path, record))

@@ -116,3 +116,21 @@ def test_a_shove_run_says_how_far_the_fused_odometry_was_off_against_the_chassis
     assert measurements._shove(figures) == (
         "the jackal carried 0.56–2.06 m: fused odometry 1.20–2.80 cm off 1 s after the shove, 2.80–6.70 cm at "
         "its end; doubtful 0.00 s after it began", "the chassis's odometry 0.55–2.05 m off", True)
+
+
+def test_report_outside_the_repository_or_on_a_broken_results_file_says_so_in_one_line(tmp_path, capsys):
+    def report(*argv):
+        parser = argparse.ArgumentParser()
+        measurements.add_arguments(parser)
+        return measurements.main(parser.parse_args(list(argv)))
+
+    assert report("--results", str(tmp_path / "nowhere"), "--readme", str(REPO / "README.md")) == 2
+    assert "nowhere: no such file or folder (the results folder)" in capsys.readouterr().err
+    results_dir = tmp_path / "results"
+    results_dir.mkdir()
+    (results_dir / "broken.json").write_text("{not json")
+    assert report("--results", str(results_dir), "--readme", str(REPO / "README.md"), "--check") == 2
+    assert "broken.json: not JSON" in capsys.readouterr().err
+    (results_dir / "broken.json").write_text('{"figures": {}}')
+    assert report("--results", str(results_dir), "--readme", str(REPO / "README.md"), "--check") == 2
+    assert "broken.json: not a results file" in capsys.readouterr().err
