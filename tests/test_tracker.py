@@ -184,3 +184,23 @@ def test_the_evidence_grid_follows_a_robot_that_jumped_beyond_its_window(jump):
     grid.update(0.1, np.asarray(jump), wall + jump)
     hit_here = grid.since != UNSET
     assert hit_here.any() and np.all(grid.since[hit_here] == 0.1)
+
+
+
+def test_two_wide_movers_touching_in_the_scan_are_carved_along_their_tracks():
+    """Two 0.5 m cylinders side by side as the lidar sees them: their arcs join in one cluster
+    wider than any mover. Refused whole it was "a wall", and both tracks died while the robot
+    drove at them (DynaBARN easy-25); carved along the circles where the tracks expect them, each
+    is measured on its own."""
+    def near_arc(centre, radius=0.5, spread=1.2, count=60):
+        angles = np.arctan2(-centre[1], -centre[0]) + np.linspace(-spread, spread, count)
+        return np.column_stack([centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles)])
+    centres = np.array([[3.0, 0.0], [3.1, 1.05]])
+    points = np.vstack([near_arc(c) for c in centres])
+    params = TrackerParams()
+    assert euclidean_clusters(points, (0.0, 0.0), params) == []           # one cluster, too wide
+    priors = np.column_stack([centres + [[0.05, -0.03], [-0.04, 0.06]], [0.45, 0.55]])   # tracks a little off
+    clusters = euclidean_clusters(points, (0.0, 0.0), params, priors=priors)
+    assert len(clusters) == 2
+    for cluster, centre in zip(clusters, centres):
+        assert np.hypot(*(cluster.centre - centre)) < 0.1 and cluster.radius <= params.max_cluster_radius

@@ -45,6 +45,9 @@ from ...parameters.declare import Parameters, Rule, param
 
 ARC_CENTROID = 2.0 / math.pi   # a half circle's points have their centroid this many radii from its centre
 UNSET = -1.0                   # an evidence cell without a streak
+FIT_MIN_POINTS = 8             # points of a cluster before a circle is fitted to it
+FIT_MIN_ARC = math.pi / 4      # rad of the fitted circle the points must span
+FIT_MAX_RMS = 0.03             # m: points further off the fitted circle (rms) are no circle's
 
 
 @dataclass(frozen=True)
@@ -214,13 +217,17 @@ class StaticMap:
 # ---------------------------------------------------------------- clusters
 
 def euclidean_clusters(points: np.ndarray, sensor_xy, params: TrackerParams,
-                       static: np.ndarray | None = None) -> list[Cluster]:
+                       static: np.ndarray | None = None, priors: np.ndarray | None = None) -> list[Cluster]:
     """Clusters of points within cluster_tolerance of each other, of min_cluster_size up to
     max_cluster_size points and max_cluster_radius, in the order of their first point. With
     `static` (N,) flags, a cluster more than max_static_share static is part of the static world:
     the piece of a wall coming out of a mover's shadow is new to the evidence grid, but it hangs
     together with the wall seen before (clustering only the new points made it a false mover
-    sliding along the wall with the shadow's edge)."""
+    sliding along the wall with the shadow's edge). With `priors` (K, 3) — circles x, y, radius
+    where tracks are expected — a cluster refused whole, or claimed by two circles, is carved:
+    the points within cluster_tolerance of each circle's edge are a cluster of their own, and the
+    rest is clustered again (two cylinders passing each other touch in the scan, a 0.9 m cluster,
+    "a wall": both tracks were lost and the robot ran into one; DynaBARN easy-25)."""
     points = np.asarray(points, np.float64).reshape(-1, 2)
     static = np.zeros(len(points), bool) if static is None else np.asarray(static, bool)
     if len(points) < params.min_cluster_size:
@@ -230,20 +237,89 @@ def euclidean_clusters(points: np.ndarray, sensor_xy, params: TrackerParams,
     _, labels = connected_components(graph, directed=False)
     clusters = []
     _, first = np.unique(labels, return_index=True)
+    priors = np.zeros((0, 3)) if priors is None else np.asarray(priors, np.float64).reshape(-1, 3)
     for label in labels[np.sort(first)]:
         member = labels == label
-        members = points[member]
-        if not params.min_cluster_size <= len(members) <= params.max_cluster_size \
-                or np.mean(static[member]) > params.max_static_share:
-            continue
-        centroid = members.mean(axis=0)
-        radius = max(params.min_radius, float(np.max(np.hypot(*(members - centroid).T))))
-        if radius > params.max_cluster_radius:
-            continue
-        away = centroid - np.asarray(sensor_xy, np.float64)
-        away /= max(float(np.hypot(*away)), 1e-9)
-        clusters.append(Cluster(centroid + away * ARC_CENTROID * radius, radius, members))
+        claims = _claims(points[member], priors, params)
+        cluster = _cluster(points[member], static[member], sensor_xy, params) if len(claims) < 2 else None
+        if cluster is not None:
+            clusters.append(cluster)
+        elif len(claims):
+            clusters.extend(_carved(points[member], static[member], sensor_xy, params, priors))
     return clusters
+
+
+def _owners(members: np.ndarray, priors: np.ndarray, params: TrackerParams) -> np.ndarray:
+    """(K,) the index of the circle whose edge each point is nearest, if within cluster_tolerance
+    of it; -1 where none."""
+    if not len(priors):
+        return np.full(len(members), -1)
+    gaps = np.hypot(members[:, None, 0] - priors[None, :, 0], members[:, None, 1] - priors[None, :, 1]) \
+        - priors[None, :, 2]
+    nearest = np.argmin(gaps, axis=1)
+    return np.where(gaps[np.arange(len(members)), nearest] <= params.cluster_tolerance, nearest, -1)
+
+
+def _claims(members: np.ndarray, priors: np.ndarray, params: TrackerParams) -> np.ndarray:
+    """The circles that own at least min_cluster_size of the points: two or more, and the cluster
+    is two movers side by side (measured as one, one of two people crossing got the pair's centre
+    and was lost)."""
+    owners, counts = np.unique(_owners(members, priors, params), return_counts=True)
+    return owners[(owners >= 0) & (counts >= params.min_cluster_size)]
+
+
+def _cluster(members: np.ndarray, static: np.ndarray, sensor_xy, params: TrackerParams) -> Cluster | None:
+    """The circle measured by one cluster's points, or None when they are no mover's."""
+    if not params.min_cluster_size <= len(members) <= params.max_cluster_size \
+            or np.mean(static) > params.max_static_share:
+        return None
+    centroid = members.mean(axis=0)
+    radius = max(params.min_radius, float(np.max(np.hypot(*(members - centroid).T))))
+    if radius > params.max_cluster_radius:
+        return None
+    away = centroid - np.asarray(sensor_xy, np.float64)
+    away /= max(float(np.hypot(*away)), 1e-9)
+    fitted = _circle_fit(members, away, params)
+    if fitted is not None:
+        return Cluster(fitted[:2], max(params.min_radius, fitted[2]), members)
+    return Cluster(centroid + away * ARC_CENTROID * radius, radius, members)
+
+
+def _circle_fit(members: np.ndarray, away: np.ndarray, params: TrackerParams) -> np.ndarray | None:
+    """(x, y, radius) of the circle fitted to an arc (Kasa's algebraic fit), or None where the points
+    do not make one: too few, an arc under FIT_MIN_ARC, a centre on the sensor's side, a radius
+    outside the movers', or points off the circle by more than FIT_MAX_RMS. A cylinder coming out
+    from behind another shows a sliver that grows: measured by the half-circle rule, its centre
+    slid along the sliver and the track's velocity pointed 70° off the cylinder's (DynaBARN easy-25)."""
+    if len(members) < FIT_MIN_POINTS:
+        return None
+    mean = members.mean(axis=0)
+    local = members - mean
+    design = np.column_stack([local, np.ones(len(local))])
+    (a, b, c), *_ = np.linalg.lstsq(design, (local ** 2).sum(axis=1), rcond=None)
+    centre = np.array([a / 2, b / 2])
+    radius_sq = c + centre @ centre
+    if radius_sq <= 0:
+        return None
+    radius = math.sqrt(radius_sq)
+    gaps = np.hypot(*(local - centre).T) - radius
+    bearings = np.arctan2(local[:, 1] - centre[1], local[:, 0] - centre[0])
+    spread = np.ptp(np.unwrap(bearings[np.argsort(bearings)]))
+    if not (params.min_radius <= radius <= params.max_cluster_radius and centre @ away > 0
+            and spread >= FIT_MIN_ARC and math.sqrt(np.mean(gaps ** 2)) <= FIT_MAX_RMS):
+        return None
+    return np.array([*(mean + centre), radius])
+
+
+def _carved(members: np.ndarray, static: np.ndarray, sensor_xy, params: TrackerParams,
+            priors: np.ndarray) -> list[Cluster]:
+    """A cluster cut along the expected circles: each point goes to the circle whose edge it is
+    nearest, if within cluster_tolerance of it; what no circle takes is clustered again."""
+    owners = _owners(members, priors, params)
+    pieces = [_cluster(members[owners == k], static[owners == k], sensor_xy, params) for k in np.unique(owners[owners >= 0])]
+    rest = owners < 0
+    return [c for c in pieces if c is not None] + \
+        (euclidean_clusters(members[rest], sensor_xy, params, static[rest]) if rest.any() else [])
 
 
 # ---------------------------------------------------------------- the tracker
@@ -301,9 +377,10 @@ class MoverTracker:
             self.tracks, self.warm_until_s = [], np.inf
         points = np.asarray(points, np.float64).reshape(-1, 2)
         static = self.static_points(now_s, sensor_xy, points, odom_in_map)
-        clusters = euclidean_clusters(points, sensor_xy, self.params, static)
         for track in self.tracks:
             track.state, track.covariance = predicted(track.state, track.covariance, dt, self.params.process_noise)
+        priors = np.array([[*t.state[:2], t.radius] for t in self.tracks], np.float64).reshape(-1, 3)
+        clusters = euclidean_clusters(points, sensor_xy, self.params, static, priors)
         matches = self._associate(clusters)
         matched = set()
         for t, c in matches:
