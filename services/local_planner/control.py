@@ -266,8 +266,8 @@ class LocalControl:
                     return maneuver
         else:
             result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path, movers)
-        reason = result.status if result.status in ("ok", "escape") else f"{result.status}: {result.message}"
-        return Control(result.cmd, result.status in ("ok", "escape"), "" if result.status == "ok" else reason,
+        reason = result.status if result.status in ("ok", "escape", "evade") else f"{result.status}: {result.message}"
+        return Control(result.cmd, result.status in ("ok", "escape", "evade"), "" if result.status == "ok" else reason,
                        result.trajectory)
 
     def _stalled(self, robot: np.ndarray, movers: Movers | None) -> bool:

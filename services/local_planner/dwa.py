@@ -47,7 +47,7 @@ from ...geometry.polygons import densify
 from ...geometry.se2 import wrap_angle
 from ..costmap.layers import INSCRIBED_INFLATED_OBSTACLE
 from ...geometry.grid import in_grid, kernel_costs, world_to_cell
-from .dynamic import Movers, critic, slack
+from .dynamic import Movers, carried_on, critic, first_contact, slack
 from .dynamic import warm_up as warm_up_movers
 from .footprint_check import FootprintCheck, PoseCheck, kernel_grid, trajectory_cost
 from .footprint_check import warm_up as warm_up_footprint_check
@@ -293,7 +293,7 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, ski
 
 @dataclass(frozen=True)
 class DwaResult:
-    status: str                # ok | escape | no_valid_trajectory | no_path
+    status: str                # ok | escape | evade | no_valid_trajectory | no_path
     cmd: np.ndarray            # (3,) vx, vy, wz to send
     samples: np.ndarray        # (T, 3) sampled twists
     poses: np.ndarray          # (T, S + 1, 3) rolled-out poses in the costmap frame
@@ -369,6 +369,16 @@ def fallback_velocities(params: DwaParams, velocity) -> np.ndarray:
     return _without_standing(params, np.unique(turns, axis=0))
 
 
+def evasion_velocities(params: DwaParams) -> np.ndarray:
+    """(T, 3) twists over the whole velocity range, standing (braking) and backing at escape_vel
+    among them: what the planner ramps towards when evading movers (DwaPlanner._evade)."""
+    vx = _axis(params.min_vel_x, params.max_vel_x, params.vx_samples)
+    vx = np.unique(np.append(vx, min(params.escape_vel, 0.0)))
+    vy = _axis(params.min_vel_y, params.max_vel_y, min(params.vy_samples, 5)) if params.holonomic_robot else np.zeros(1)
+    wz = _axis(params.min_vel_theta, params.max_vel_theta, params.vtheta_samples)
+    return np.stack(np.meshgrid(vx, vy, wz, indexing="ij"), axis=-1).reshape(-1, 3)
+
+
 def _without_standing(params: DwaParams, samples: np.ndarray) -> np.ndarray:
     in_place = (samples[:, 0] == 0.0) & (samples[:, 1] == 0.0)
     return samples[~(in_place & (np.abs(samples[:, 2]) < params.min_in_place_vel_theta))]
@@ -397,9 +407,11 @@ class DwaPlanner:
                       float(np.max(np.abs(samples[:, 2]), initial=0.0)))
         return max(1, int(math.ceil(p.sim_time * fastest / p.sim_granularity)))
 
-    def rollout(self, samples, pose, velocity, costs: np.ndarray, info: MapMetaData, check: PoseCheck | None = None):
+    def rollout(self, samples, pose, velocity, costs: np.ndarray, info: MapMetaData, check: PoseCheck | None = None,
+                ramp: bool | None = None):
         """(poses (T, S+1, 3), max_cost (T,), legal (T,)) of the samples, one batch; `check` may be
-        passed when already set up for this pose and costmap."""
+        passed when already set up for this pose and costmap; `ramp` (default: not dwa) ramps each
+        rollout's twist from `velocity` towards its sample at the acceleration limits."""
         samples = np.ascontiguousarray(samples, np.float64).reshape(-1, 3)
         p = self.params
         n = self.n_steps(samples)
@@ -409,7 +421,8 @@ class DwaPlanner:
         max_cost = np.empty(len(samples), np.int64)
         legal = np.empty(len(samples), np.bool_)
         check = check if check is not None else self.footprint_check.setup(pose, costs, info)
-        _rollout(samples, np.asarray(velocity, np.float64), step_limit, not p.dwa, n, dt,
+        ramp = not p.dwa if ramp is None else ramp
+        _rollout(samples, np.asarray(velocity, np.float64), step_limit, ramp, n, dt,
                  np.asarray(pose, np.float64), kernel_costs(costs), check.near, check.skips,
                  kernel_grid(info), check.outline, self.footprint_check.check_cost, check.centre_limit, poses, max_cost,
                  legal)
@@ -483,6 +496,10 @@ class DwaPlanner:
         if legal.any():
             best = int(np.argmin(scores))
             return DwaResult("ok", samples[best].copy(), samples, poses, scores, best)
+        if movers is not None and len(movers) and not walled_in and wedged is None:
+            evasion = self._evade(pose, velocity, costs, info, check, maps, movers)
+            if evasion is not None:
+                return evasion
         if self.params.escape_vel < 0:
             escape = np.clip(np.array([self.params.escape_vel, 0.0, 0.0]), low, high)
             if escape[0] < 0 and evaluate(escape[None])[1][0]:
@@ -513,13 +530,41 @@ class DwaPlanner:
             return check
         return self.footprint_check.escape_check(check, self._wedged_at, costs, info)
 
+    def _evade(self, pose, velocity, costs: np.ndarray, info: MapMetaData, check: PoseCheck, maps: PathMaps,
+               movers: Movers) -> DwaResult | None:
+        """When every sample meets a mover sooner than standing would (or meets one anyway) but the
+        costmap alone allows some: the way that meets a mover latest, or none — over twists the
+        whole velocity range, each ramped towards at the acceleration limits (braking, turning away,
+        speeding past), not only the next period's window. Braking where a crossing person walks is
+        no refuge (DynaBARN easy-24: braked in a cylinder's way, struck), nor is stopping to replan.
+        The command is the chosen ramp's first control period. None when no way is clear of the
+        costmap."""
+        p = self.params
+        targets = evasion_velocities(p)
+        poses, max_cost, legal = self.rollout(targets, pose, velocity, costs, info, check, ramp=True)
+        if not legal.any():
+            return None
+        carried, times = carried_on(poses, p.sim_time / max(1, poses.shape[1] - 1), p.dynamic_horizon)
+        hard, _ = slack(carried, times, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, 0.0)
+        contact = np.where(legal, first_contact(hard), -1)
+        if contact.max() <= 1:      # every way meets one at once: backing up or braking is all that is left
+            return None
+        scores = np.where(contact == contact.max(), self.score(poses, max_cost, legal, maps, info), np.inf)
+        best = int(np.argmin(scores))
+        soonest, furthest = reachable(p, velocity)
+        cmd = np.clip(targets[best], soonest, furthest)
+        meets = (f"meets none within {times[-1]:.1f} s" if contact[best] == len(times)
+                 else f"meets one latest, after {times[contact[best]]:.1f} s")
+        return DwaResult("evade", cmd, targets, poses, scores, best,
+                         f"every trajectory of the window meets a mover; the way ramped towards {meets}")
+
     def _clear_of(self, poses: np.ndarray, movers: Movers) -> tuple[np.ndarray, np.ndarray]:
         """(legal (T,), cost (T,)) of rollouts against the predicted movers (dynamic.py)."""
         p = self.params
-        dt = p.sim_time / max(1, poses.shape[1] - 1)
-        hard, soft = slack(poses, dt, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, p.dynamic_obstacle_sigmas)
+        poses, times = carried_on(poses, p.sim_time / max(1, poses.shape[1] - 1), p.dynamic_horizon)
+        hard, soft = slack(poses, times, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, p.dynamic_obstacle_sigmas)
         standing = np.repeat(poses[:1, :1], poses.shape[1], axis=1)
-        standing_hard, _ = slack(standing, dt, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, 0.0)
+        standing_hard, _ = slack(standing, times, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, 0.0)
         return critic(hard, soft, standing_hard, p.dynamic_influence_distance, p.dynamic_obstacle_scale)
 
 
