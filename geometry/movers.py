@@ -15,6 +15,9 @@ from ..schemas.messages import Tracks
 from .se2 import compose
 
 
+TRACKED_POINT_MARGIN = 0.15   # m beyond a track's radius within which a scan point is that track's
+
+
 @dataclass(frozen=True)
 class Movers:
     """Tracks at one instant in one frame."""
@@ -34,6 +37,21 @@ class Movers:
         variance = self.variance[:, 0] + 2.0 * t * self.variance[:, 1] + t * t * self.variance[:, 2]
         radii = self.radii + sigmas * np.sqrt(np.maximum(variance, 0.0))
         return np.concatenate([centres, radii[..., None]], axis=2)
+
+    def moving_at_least(self, speed: float) -> Movers:
+        """The movers moving at speed (m/s) or faster."""
+        keep = np.hypot(self.velocities[:, 0], self.velocities[:, 1]) >= speed
+        return Movers(self.positions[keep], self.velocities[keep], self.radii[keep], self.variance[keep])
+
+    def on_movers(self, points: np.ndarray, margin: float, after_s: float = 0.0) -> np.ndarray:
+        """(K,) whether each point (K, 2) lies within a mover's radius plus margin of where the
+        mover is after_s seconds after these tracks' instant: a scan point that is a mover's."""
+        points = np.asarray(points, np.float64).reshape(-1, 2)
+        if not len(self) or not len(points):
+            return np.zeros(len(points), bool)
+        centres = self.positions + self.velocities * after_s
+        gap = np.hypot(points[:, None, 0] - centres[None, :, 0], points[:, None, 1] - centres[None, :, 1])
+        return np.any(gap <= self.radii[None] + margin, axis=1)
 
     def nearest_edge(self, xy) -> float:
         """Distance from the point xy to the nearest mover's edge (inf when there is none)."""

@@ -292,6 +292,29 @@ def test_marking_and_clearing_per_beam():
     assert (row[60:80] == LETHAL_OBSTACLE).all()                    # beyond the hit: untouched
 
 
+def test_skip_tracked_leaves_a_moving_tracks_hits_unmarked_where_the_track_puts_it_at_the_scan():
+    """Four hits 1 m from the sensor: east on a track moving north at 2 m/s (whose tracks, 0.2 s
+    after the scan, put it 0.4 m further north), north on a track standing still (slower than
+    skip_tracked_min_speed: the costmap's), west and south on no track. Without skip_tracked every
+    hit is marked."""
+    from omninav.geometry.movers import Movers
+    tracks = Movers(np.array([[3.0, 2.375], [1.975, 3.0]]), np.array([[0.0, 2.0], [0.0, 0.0]]),
+                    np.array([0.05, 0.05]), np.zeros((2, 3)))
+    marked = {}
+    for skip in (False, True):
+        layers = (ObstacleLayerParams(observation_sources=(ObservationSource("scan", obstacle_range=2.5),),
+                                      footprint_clearing_enabled=False, skip_tracked=skip),)
+        costmap = Costmap(CostmapParams(width=4.0, height=4.0, resolution=0.05, robot_radius=0.2, layers=layers))
+        assert costmap.needs_tracks == skip
+        costmap.add_scan(scan([1.0] * 4, angle_min=-math.pi, increment=math.pi / 2, stamp_ns=1_000_000_000),
+                         (1.975, 1.975, 0.0))
+        costmap.set_movers(tracks, 1_200_000_000)
+        costmap.update()
+        marked[skip] = set(zip(*np.nonzero(costmap.costs == LETHAL_OBSTACLE)))
+    assert marked[False] == {(39, 19), (19, 39), (39, 59), (59, 39)}
+    assert marked[True] == {(39, 19), (19, 39), (59, 39)}         # east, on the walking track, is not
+
+
 def test_clearing_stops_at_raytrace_range_and_needs_the_clearing_flag():
     # a hit at 3.5 m lies beyond obstacle_range (not marked); clearing reaches 2.0 m only
     costmap = _obstacle_costmap(ObservationSource("scan", raytrace_range=2.0, clearing=True), size=120)

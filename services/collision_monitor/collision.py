@@ -48,13 +48,12 @@ from ...geometry.polygons import points_in_polygons, transform_points
 from ...geometry.footprint import STOP_PADDING, pad
 from ...geometry.frames import scan_points
 from ...geometry.se2 import integrate, inverse
-from ...geometry.movers import Movers
+from ...geometry.movers import TRACKED_POINT_MARGIN, Movers
 from ...parameters.declare import Parameters, Rule, param
 
 # a command -> the robot's poses (K, 3), robot frame now, while it carries the command out and then stops
 PathOf = Callable[[np.ndarray], np.ndarray]
 APPROACH_SCALES = (1.0, 0.75, 0.5, 0.25)   # of a command, tried in turn against the tracks (then standing)
-TRACKED_POINT_MARGIN = 0.15   # m beyond a track's radius within which a scan point is that track's
 # m beyond a track's radius within which a scan point may be the person it follows: the tracks in
 # effect are tracks_delay_s (0.5 s) old, carried on at constant velocity, and a person who turned
 # since is up to 0.3 m from there (0.5 s × a right-angle turn at 0.55 m/s)
@@ -137,12 +136,11 @@ class CollisionMonitor:
         zones = points_in_polygons(points, self._zones)
         if movers is None or len(movers) == 0:
             return self._check_points(twist, paths, points, zones)
-        gap = np.hypot(*(points[:, None, :] - movers.positions[None]).transpose(2, 0, 1))
-        on_track = np.any(gap <= movers.radii[None] + TRACKED_POINT_MARGIN, axis=1)
+        on_track = movers.on_movers(points, TRACKED_POINT_MARGIN)
         result = self._check_points(twist, paths, points[~on_track], zones[~on_track])
         if result.action == "stop":
             return result
-        near_person = np.any(gap <= movers.radii[None] + PERSON_POINT_MARGIN, axis=1)
+        near_person = movers.on_movers(points, PERSON_POINT_MARGIN)
         return self._check_movers(result, movers, paths, points[zones[:, 0] | (zones[:, 1] & near_person)])
 
     def held_path(self, twist) -> np.ndarray:

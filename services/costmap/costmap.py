@@ -120,12 +120,20 @@ class Costmap:
             if isinstance(layer, KeepoutLayer):
                 layer.set_masks(keepout, speed)
 
-    def set_movers(self, movers) -> None:
-        """The tracks (geometry/movers.py Movers, None: none) at the coming update's time in the
-        global frame, for the mover layer(s)."""
+    @property
+    def needs_tracks(self) -> bool:
+        """Whether a layer reads the tracks: a mover layer, or an obstacle layer that skips them."""
+        return any(isinstance(layer, MoverLayer) or (isinstance(layer, ObstacleLayer) and layer.params.skip_tracked)
+                   for layer in self.layers)
+
+    def set_movers(self, movers, stamp_ns: int = 0) -> None:
+        """The tracks (geometry/movers.py Movers, None: none) at the coming update's time stamp_ns
+        in the global frame, for the mover layer(s) and the obstacle layers that skip them."""
         for layer in self.layers:
             if isinstance(layer, MoverLayer):
                 layer.set_movers(movers)
+            elif isinstance(layer, ObstacleLayer):
+                layer.set_movers(movers, stamp_ns)
 
     def add_scan(self, scan: LaserScan, sensor_pose, topic: str = "scan") -> int:
         """Feed a scan (sensor pose x, y, yaw in this costmap's global frame) to every observation

@@ -24,6 +24,7 @@ from ...schemas.messages import LaserScan, MapMetaData, OccupancyGrid, Pose2D
 from ...geometry.grid import cell_to_world, grid_coords, in_grid, world_to_cell
 from ...geometry.footprint import cells_inside, transform
 from ...geometry.frames import scan_points
+from ...geometry.movers import TRACKED_POINT_MARGIN, Movers
 from .params import InflationLayerParams, KeepoutLayerParams, ObstacleLayerParams, StaticLayerParams
 
 FREE_SPACE, INSCRIBED_INFLATED_OBSTACLE, LETHAL_OBSTACLE, NO_INFORMATION = 0, 253, 254, 255
@@ -249,7 +250,11 @@ class ObstacleLayer:
     footprint (`body`, without footprint_padding), where nothing else can be: ROS clears the padded
     one, which erased an obstacle within the padding, and a footprint check of the padded
     footprint then found it clear (BARN world 7: the Jackal, padded by 0.1 m, drove into a
-    cylinder 3.5 cm ahead of its bumper)."""
+    cylinder 3.5 cm ahead of its bumper). With skip_tracked, a hit within TRACKED_POINT_MARGIN of
+    a tracked mover (where its track puts it at the scan's stamp) is not marked: marked where it
+    stood, a cylinder walking past closed the way behind it for the rollouts and, beside the robot,
+    walled it in while it pushed (DynaBARN easy-38); the local planner meets the tracks where they
+    will be. Its beams still clear."""
 
     def __init__(self, params: ObstacleLayerParams, track_unknown_space: bool, body: np.ndarray):
         self.params = params
@@ -260,6 +265,11 @@ class ObstacleLayer:
         self.sources = {s.name: s for s in params.observation_sources}
         self._buffers: dict[str, deque[Observation]] = {name: deque() for name in self.sources}
         self.costs: np.ndarray | None = None
+        self._movers: tuple[Movers, int] | None = None    # the tracks and the instant they are at (ns)
+
+    def set_movers(self, movers: Movers | None, stamp_ns: int) -> None:
+        """The tracks at stamp_ns in the costmap's frame, for skip_tracked (None: none)."""
+        self._movers = None if movers is None else (movers, stamp_ns)
 
     def resize(self, info: MapMetaData) -> None:
         self.costs = np.full((info.height, info.width), self.default, np.uint8)
@@ -314,6 +324,10 @@ class ObstacleLayer:
                 continue
             d2 = ((obs.points - np.asarray(obs.origin)) ** 2).sum(axis=1)
             near = obs.points[d2 < spec.obstacle_range ** 2]
+            if self.params.skip_tracked and self._movers is not None:
+                movers, stamp_ns = self._movers
+                moving = movers.moving_at_least(self.params.skip_tracked_min_speed)
+                near = near[~moving.on_movers(near, TRACKED_POINT_MARGIN, (obs.stamp_ns - stamp_ns) / 1e9)]
             box = union(box, self._set(info, *world_to_cell(info, near[:, 0], near[:, 1]), LETHAL_OBSTACLE))
         if self.params.footprint_clearing_enabled and view.robot_pose is not None:
             rows, cols = cells_inside(info, transform(self.body, view.robot_pose))

@@ -16,10 +16,11 @@ published, only answered); `get` on either key answers its costs after the last 
 stamped with the sim time they are sent at, which runs up to a scan period behind the clock: the
 node waits for the scans (consumers defer them, see global_planner/node.py).
 
-A costmap with a mover layer (mover_layer.py) also takes the tracker's tracks (sporadic, held
-tracks_delay_s as the local planner holds them): at each of its update cycles the tracks in effect
-are predicted to the cycle's time and carried into its frame; tracks older than tracks_timeout_s
-(a tracker that stopped) are dropped rather than walked on for ever.
+A costmap with a mover layer (mover_layer.py), or an obstacle layer with skip_tracked, also takes
+the tracker's tracks (sporadic, held tracks_delay_s as the local planner holds them): at each of
+its update cycles the tracks in effect are predicted to the cycle's time and carried into its
+frame; tracks older than tracks_timeout_s (a tracker that stopped) are dropped rather than walked
+on for ever.
 
 costmap/clear (ClearCostmaps, the navigator's clear_costmaps recovery) forgets the obstacle layers'
 cells outside the square of side reset_distance around the robot, in both costmaps, as move_base's
@@ -57,7 +58,7 @@ from ...geometry.se2 import compose
 from .costmap import Costmap
 from ...geometry.frames import FrameParams, LASER_MOUNT
 from .layers import same_geometry, warm_up
-from .params import CostmapParams, MoverLayerParams, ObstacleLayerParams, StaticLayerParams, load_costmap_params
+from .params import CostmapParams, ObstacleLayerParams, StaticLayerParams, load_costmap_params
 from ...parameters.declare import param
 
 SAMPLES = "compose/params/"
@@ -92,7 +93,7 @@ class ServedCostmap:
         self.frame = params.global_frame
         self.publisher = publisher
         self.needs_map = any(isinstance(l, StaticLayerParams) and l.enabled for l in params.layers)
-        self.needs_tracks = params.layer(MoverLayerParams) is not None
+        self.needs_tracks = self.core.needs_tracks
         self.has_map = static_map is not None
         self.cycles = 0                         # update cycles run (by the timer)
         self.updated_ns: int | None = None      # sim time of the last update
@@ -241,7 +242,7 @@ class CostmapNode(Node):
         served.cycles += 1
         self._apply_clears(served)
         if served.needs_tracks:
-            served.core.set_movers(self._movers_in(served.frame))
+            served.core.set_movers(self._movers_in(served.frame), self.now_ns)
         self._update(served)
 
     def _movers_in(self, frame: str):

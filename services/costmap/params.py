@@ -104,6 +104,11 @@ class ObstacleLayerParams(Parameters):
     footprint_clearing_enabled: bool = True
     combination_method: int = param(1, choices=(0, 1))  # 0 overwrite, 1 maximum
     observation_sources: tuple[ObservationSource, ...] = ()
+    # ours, no ROS names: hits on the tracker's moving obstacles are not marked (the local planner
+    # meets those where they will be); the costmap then takes the tracks. Slower tracks stay marked
+    # (the local planner leaves them to the costmap: its dynamic_min_speed)
+    skip_tracked: bool = False
+    skip_tracked_min_speed: float = param(0.1, ge=0)    # m/s
 
     rules = (Rule("observation_sources", lambda p: _unique_names(p.observation_sources), "of different names",
                   shown=lambda p: [s.name for s in p.observation_sources]),)
@@ -306,7 +311,8 @@ def _obstacle_layer(name: str, section: dict, parent: dict, source: str) -> Obst
 # costmap-level names Costmap2DROS copies into plugins of each type (copyParentParameters)
 _PARENT_COPIES = {
     StaticLayerParams: ("map_topic", "unknown_cost_value", "lethal_cost_threshold", "track_unknown_space"),
-    ObstacleLayerParams: ("raytrace_range", "obstacle_range", "track_unknown_space"),
+    ObstacleLayerParams: ("raytrace_range", "obstacle_range", "track_unknown_space", "skip_tracked",
+                          "skip_tracked_min_speed"),
     InflationLayerParams: ("cost_scaling_factor", "inflation_radius"),
     KeepoutLayerParams: (),
     MoverLayerParams: (),
