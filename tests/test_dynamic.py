@@ -14,7 +14,7 @@ FOOTPRINT = np.array([[0.416, 0.318], [-0.416, 0.318], [-0.416, -0.318], [0.416,
 INFO = MapMetaData(resolution=0.05, width=160, height=120, origin=Pose2D(-3.0, -3.0, 0.0))
 FREE = np.zeros((INFO.height, INFO.width), np.uint8)
 PATH = np.column_stack([np.linspace(0.0, 4.5, 91), np.zeros(91), np.zeros(91)])
-PARAMS = DwaParams(max_vel_x=0.5, max_vel_y=0.3, min_vel_y=-0.3)
+PARAMS = DwaParams(max_vel_x=0.5, max_vel_y=0.3, min_vel_y=-0.3, dynamic_horizon=2.5, evade_movers=True)
 
 
 def movers(*tracks) -> Movers:
@@ -95,8 +95,9 @@ def test_critic_rules_on_synthetic_slacks():
     # a mover within the margin walking at the robot: standing meets them at once, and so does
     # driving on towards them — illegal, not "no sooner than standing"; backing away is legal
     near = np.array([[-0.05, -0.1, -0.2, -0.3], [-0.05, -0.02, 0.02, 0.05]])
-    legal, _ = critic(near, near, np.array([[-0.05, -0.07, -0.09, -0.11]]), 0.8, 10.0)
-    assert legal.tolist() == [False, True]
+    standing = np.array([[-0.05, -0.07, -0.09, -0.11]])
+    assert critic(near, near, standing, 0.8, 10.0, closing_at_once=True)[0].tolist() == [False, True]
+    assert critic(near, near, standing, 0.8, 10.0)[0].tolist() == [True, True]     # without evade_movers
 
 
 def test_tracks_are_predicted_to_the_tick_and_carried_into_the_planners_frame():
@@ -114,7 +115,7 @@ def test_tracks_are_predicted_to_the_tick_and_carried_into_the_planners_frame():
 def test_backing_from_a_person_in_the_way_starts_no_escape():
     """DWA's escape (forward samples held back until the robot has backed escape_reset_dist) is for
     gaps it does not fit, which stay put; a person who walks on frees the way at once."""
-    planner = DwaPlanner(DwaParams(min_vel_x=0.0, holonomic_robot=False), FootprintCheck(FOOTPRINT))
+    planner = DwaPlanner(DwaParams(min_vel_x=0.0, holonomic_robot=False, evade_movers=True), FootprintCheck(FOOTPRINT))
     in_the_way = movers((0.77, 0.0, -0.05, 0.0, 0.3))     # within the kept margin of the front, coming on
     first = planner.compute((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), FREE, INFO, PATH, movers=in_the_way)
     assert first.status in ("evade", "escape") and first.cmd[0] < 0       # backs away

@@ -197,10 +197,24 @@ def test_two_wide_movers_touching_in_the_scan_are_carved_along_their_tracks():
         return np.column_stack([centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles)])
     centres = np.array([[3.0, 0.0], [3.1, 1.05]])
     points = np.vstack([near_arc(c) for c in centres])
-    params = TrackerParams()
+    params = TrackerParams(carve_by_tracks=True)
     assert euclidean_clusters(points, (0.0, 0.0), params) == []           # one cluster, too wide
     priors = np.column_stack([centres + [[0.05, -0.03], [-0.04, 0.06]], [0.45, 0.55]])   # tracks a little off
     clusters = euclidean_clusters(points, (0.0, 0.0), params, priors=priors)
     assert len(clusters) == 2
     for cluster, centre in zip(clusters, centres):
         assert np.hypot(*(cluster.centre - centre)) < 0.1 and cluster.radius <= params.max_cluster_radius
+
+
+def test_with_fit_circles_a_partly_hidden_cylinder_is_measured_at_its_centre():
+    """A 0.5 m cylinder of which the lidar sees only one flank (the rest behind another): the
+    half-circle rule puts the centre behind the middle of the flank, the circle fit at the centre."""
+    centre, radius = np.array([3.0, 0.0]), 0.5
+    facing = math.pi
+    angles = facing + np.linspace(0.2, 1.2, 40)           # one flank only
+    rng = np.random.default_rng(0)
+    points = centre + (radius + rng.normal(0.0, 0.005, len(angles)))[:, None] * np.column_stack([np.cos(angles), np.sin(angles)])
+    (plain,) = euclidean_clusters(points, (0.0, 0.0), TrackerParams())
+    (fitted,) = euclidean_clusters(points, (0.0, 0.0), TrackerParams(fit_circles=True))
+    assert np.hypot(*(fitted.centre - centre)) < 0.03 and abs(fitted.radius - radius) < 0.03
+    assert np.hypot(*(plain.centre - centre)) > 0.1

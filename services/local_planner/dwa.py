@@ -496,7 +496,7 @@ class DwaPlanner:
         if legal.any():
             best = int(np.argmin(scores))
             return DwaResult("ok", samples[best].copy(), samples, poses, scores, best)
-        if movers is not None and len(movers) and not walled_in and wedged is None:
+        if self.params.evade_movers and movers is not None and len(movers) and not walled_in and wedged is None:
             evasion = self._evade(pose, velocity, costs, info, check, maps, movers)
             if evasion is not None:
                 return evasion
@@ -544,7 +544,7 @@ class DwaPlanner:
         poses, max_cost, legal = self.rollout(targets, pose, velocity, costs, info, check, ramp=True)
         if not legal.any():
             return None
-        carried, times = carried_on(poses, p.sim_time / max(1, poses.shape[1] - 1), p.dynamic_horizon)
+        carried, times = carried_on(poses, p.sim_time / max(1, poses.shape[1] - 1), max(p.dynamic_horizon, p.sim_time))
         hard, _ = slack(carried, times, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, 0.0)
         contact = np.where(legal, first_contact(hard), -1)
         if contact.max() <= 1:      # every way meets one at once: backing up or braking is all that is left
@@ -561,11 +561,12 @@ class DwaPlanner:
     def _clear_of(self, poses: np.ndarray, movers: Movers) -> tuple[np.ndarray, np.ndarray]:
         """(legal (T,), cost (T,)) of rollouts against the predicted movers (dynamic.py)."""
         p = self.params
-        poses, times = carried_on(poses, p.sim_time / max(1, poses.shape[1] - 1), p.dynamic_horizon)
+        poses, times = carried_on(poses, p.sim_time / max(1, poses.shape[1] - 1), max(p.dynamic_horizon, p.sim_time))
         hard, soft = slack(poses, times, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, p.dynamic_obstacle_sigmas)
         standing = np.repeat(poses[:1, :1], poses.shape[1], axis=1)
         standing_hard, _ = slack(standing, times, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, 0.0)
-        return critic(hard, soft, standing_hard, p.dynamic_influence_distance, p.dynamic_obstacle_scale)
+        return critic(hard, soft, standing_hard, p.dynamic_influence_distance, p.dynamic_obstacle_scale,
+                      closing_at_once=p.evade_movers)
 
 
 def warm_up() -> None:

@@ -9,11 +9,11 @@ rollout meets a mover at the first pose after the start whose hard slack is nega
 the start's (moving away from a person who came too near is no meeting); it is illegal when it
 meets one sooner than the robot standing still would (people who do not give way walk into a
 robot that stopped in their way: braking is no refuge, and what meets them only later is
-re-planned next cycle), and when it closes in on one at once (standing would too: a person
-within the margin walking at the robot). Rollouts are carried on past sim_time to
-dynamic_horizon at their last twist (carried_on) for this. Within dynamic_influence_distance of the soft slack a rollout costs
-dynamic_obstacle_scale per unit of intrusion deeper than at its start, and up to as much again
-the sooner it meets a mover.
+re-planned next cycle), and with closing_at_once (DwaParams.evade_movers) when it closes in on
+one at once (standing would too: a person within the margin walking at the robot). Rollouts are
+carried on past sim_time to dynamic_horizon at their last twist (carried_on) for this. Within
+dynamic_influence_distance of the soft slack a rollout costs dynamic_obstacle_scale per unit of
+intrusion deeper than at its start, and up to as much again the sooner it meets a mover.
 """
 from __future__ import annotations
 
@@ -115,7 +115,7 @@ def first_contact(hard: np.ndarray) -> np.ndarray:
 
 
 def critic(hard: np.ndarray, soft: np.ndarray, standing: np.ndarray, influence: float,
-           scale: float) -> tuple[np.ndarray, np.ndarray]:
+           scale: float, closing_at_once: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(legal (T,), cost (T,)) of rollouts from their slacks (T, S), `standing` (1, S) the hard slack
     of the robot standing where it is: a rollout that meets a mover sooner than standing still
     would is illegal (standing in a person's way is no refuge: what reaches them later is
@@ -127,7 +127,9 @@ def critic(hard: np.ndarray, soft: np.ndarray, standing: np.ndarray, influence: 
     # closing in on a mover already within the margin is met at once whether standing or driving
     # on: only a way that does not close in is legal then (driving on into a person who walks at
     # the robot made the contact the robot's)
-    legal = (contact >= standing_contact) & ((contact > 1) | (standing_contact > 1))
+    legal = contact >= standing_contact
+    if closing_at_once:
+        legal &= (contact > 1) | (standing_contact > 1)
     intrusion = np.clip(1.0 - soft / influence, 0.0, None)
     deeper = np.clip(intrusion[:, 1:].max(axis=1, initial=0.0) - intrusion[:, 0], 0.0, None)
     sooner = (hard.shape[1] - contact) / hard.shape[1]      # 0 without a meeting, towards 1 the sooner

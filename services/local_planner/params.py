@@ -56,7 +56,8 @@ class DwaParams(Parameters):
     dynamic_obstacle_sigmas: float = param(2.0, ge=0)           # ... plus this many standard deviations of its predicted position
     dynamic_obstacle_scale: float = param(20.0, ge=0)           # per unit of intrusion into dynamic_influence_distance
     dynamic_influence_distance: float = param(0.8, gt=0)        # m beyond the kept distance within which a track costs
-    dynamic_horizon: float = param(2.5, ge=0)                   # s over which rollouts are held against movers (carried on past sim_time)
+    dynamic_horizon: float = param(0.0, ge=0)                   # s over which rollouts are held against movers (carried on past sim_time; 0: sim_time)
+    evade_movers: bool = False                                  # no way of the window clear of movers: ramp towards the one meeting them latest (dwa.py)
     dynamic_min_speed: float = param(0.1, ge=0)                 # m/s: slower tracks are left to the costmap (a standing person is in it)
     wedged_mover_distance: float = param(1.0, ge=0)             # m: a robot wedged on an obstacle's cells drives off them only with no track's edge nearer
 

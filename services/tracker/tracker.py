@@ -77,6 +77,8 @@ class TrackerParams(Parameters):
     tentative_max_misses: int = param(1, ge=0)          # the same for a tentative track
     radius_smoothing: float = param(0.3, gt=0, le=1)    # weight of a new cluster's radius in the track's estimate
     min_radius: float = param(0.1, gt=0)                # m: a track is at least this wide
+    carve_by_tracks: bool = False                       # a cluster too wide, or claimed by two tracks, is cut along the tracks' circles
+    fit_circles: bool = False                           # an arc is measured by a fitted circle where one fits
 
     rules = (Rule("max_cluster_size", lambda p: p.max_cluster_size >= p.min_cluster_size,
                   "at least min_cluster_size ({p.min_cluster_size})"),)
@@ -279,7 +281,7 @@ def _cluster(members: np.ndarray, static: np.ndarray, sensor_xy, params: Tracker
         return None
     away = centroid - np.asarray(sensor_xy, np.float64)
     away /= max(float(np.hypot(*away)), 1e-9)
-    fitted = _circle_fit(members, away, params)
+    fitted = _circle_fit(members, away, params) if params.fit_circles else None
     if fitted is not None:
         return Cluster(fitted[:2], max(params.min_radius, fitted[2]), members)
     return Cluster(centroid + away * ARC_CENTROID * radius, radius, members)
@@ -379,7 +381,8 @@ class MoverTracker:
         static = self.static_points(now_s, sensor_xy, points, odom_in_map)
         for track in self.tracks:
             track.state, track.covariance = predicted(track.state, track.covariance, dt, self.params.process_noise)
-        priors = np.array([[*t.state[:2], t.radius] for t in self.tracks], np.float64).reshape(-1, 3)
+        priors = np.array([[*t.state[:2], t.radius] for t in self.tracks if self.params.carve_by_tracks],
+                          np.float64).reshape(-1, 3)
         clusters = euclidean_clusters(points, sensor_xy, self.params, static, priors)
         matches = self._associate(clusters)
         matched = set()
