@@ -265,11 +265,12 @@ class ObstacleLayer:
         self.sources = {s.name: s for s in params.observation_sources}
         self._buffers: dict[str, deque[Observation]] = {name: deque() for name in self.sources}
         self.costs: np.ndarray | None = None
-        self._movers: tuple[Movers, int] | None = None    # the tracks and the instant they are at (ns)
+        self._movers: tuple[Movers, int] | None = None    # the moving tracks and the instant they are at (ns)
 
     def set_movers(self, movers: Movers | None, stamp_ns: int) -> None:
-        """The tracks at stamp_ns in the costmap's frame, for skip_tracked (None: none)."""
-        self._movers = None if movers is None else (movers, stamp_ns)
+        """The tracks at stamp_ns in the costmap's frame, for skip_tracked (None: none); only those
+        moving at skip_tracked_min_speed or faster are kept."""
+        self._movers = None if movers is None else (movers.moving_at_least(self.params.skip_tracked_min_speed), stamp_ns)
 
     def resize(self, info: MapMetaData) -> None:
         self.costs = np.full((info.height, info.width), self.default, np.uint8)
@@ -325,8 +326,7 @@ class ObstacleLayer:
             d2 = ((obs.points - np.asarray(obs.origin)) ** 2).sum(axis=1)
             near = obs.points[d2 < spec.obstacle_range ** 2]
             if self.params.skip_tracked and self._movers is not None:
-                movers, stamp_ns = self._movers
-                moving = movers.moving_at_least(self.params.skip_tracked_min_speed)
+                moving, stamp_ns = self._movers
                 near = near[~moving.on_movers(near, TRACKED_POINT_MARGIN, (obs.stamp_ns - stamp_ns) / 1e9)]
             box = union(box, self._set(info, *world_to_cell(info, near[:, 0], near[:, 1]), LETHAL_OBSTACLE))
         if self.params.footprint_clearing_enabled and view.robot_pose is not None:

@@ -63,7 +63,7 @@ from ...geometry.se2 import compose
 from ...parameters.declare import Rule, group, param
 from ...parameters.from_mapping import load_params
 from .approach import FinalApproach
-from .dwa import DwaPlanner, path_maps, reachable
+from .dwa import VALID_DWA_STATUSES, DwaPlanner, path_maps, reachable
 from .maneuver import ManeuverDriver, ManeuverParams, plan_maneuver
 from ...geometry.movers import Movers, movers_at
 from .dynamic import slack
@@ -266,8 +266,9 @@ class LocalControl:
                     return maneuver
         else:
             result = self.controller.compute(robot, velocity, costmap.data, costmap.info, path, movers)
-        reason = result.status if result.status in ("ok", "escape", "evade") else f"{result.status}: {result.message}"
-        return Control(result.cmd, result.status in ("ok", "escape", "evade"), "" if result.status == "ok" else reason,
+        valid = result.status in VALID_DWA_STATUSES
+        reason = result.status if valid else f"{result.status}: {result.message}"
+        return Control(result.cmd, valid, "" if result.status == "ok" else reason,
                        result.trajectory)
 
     def _stalled(self, robot: np.ndarray, movers: Movers | None) -> bool:

@@ -291,6 +291,9 @@ def _rollout(samples, v0, step_limit, ramp, n_steps, dt, pose0, costs, near, ski
 
 # ---------------------------------------------------------------- the planner
 
+VALID_DWA_STATUSES = ("ok", "escape", "evade")     # the statuses whose command is a valid one
+
+
 @dataclass(frozen=True)
 class DwaResult:
     status: str                # ok | escape | evade | no_valid_trajectory | no_path
@@ -544,7 +547,7 @@ class DwaPlanner:
         poses, max_cost, legal = self.rollout(targets, pose, velocity, costs, info, check, ramp=True)
         if not legal.any():
             return None
-        carried, times = carried_on(poses, p.sim_time / max(1, poses.shape[1] - 1), max(p.dynamic_horizon, p.sim_time))
+        carried, times = self._carried(poses)
         hard, _ = slack(carried, times, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, 0.0)
         contact = np.where(legal, first_contact(hard), -1)
         if contact.max() <= 1:      # every way meets one at once: backing up or braking is all that is left
@@ -558,10 +561,15 @@ class DwaPlanner:
         return DwaResult("evade", cmd, targets, poses, scores, best,
                          f"every trajectory of the window meets a mover; the way ramped towards {meets}")
 
+    def _carried(self, poses: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Rollouts of sim_time carried on to dynamic_horizon, for the movers (dynamic.carried_on)."""
+        p = self.params
+        return carried_on(poses, p.sim_time / max(1, poses.shape[1] - 1), max(p.dynamic_horizon, p.sim_time))
+
     def _clear_of(self, poses: np.ndarray, movers: Movers) -> tuple[np.ndarray, np.ndarray]:
         """(legal (T,), cost (T,)) of rollouts against the predicted movers (dynamic.py)."""
         p = self.params
-        poses, times = carried_on(poses, p.sim_time / max(1, poses.shape[1] - 1), max(p.dynamic_horizon, p.sim_time))
+        poses, times = self._carried(poses)
         hard, soft = slack(poses, times, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, p.dynamic_obstacle_sigmas)
         standing = np.repeat(poses[:1, :1], poses.shape[1], axis=1)
         standing_hard, _ = slack(standing, times, self.footprint_check.footprint, movers, p.dynamic_obstacle_margin, 0.0)

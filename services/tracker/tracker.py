@@ -242,12 +242,13 @@ def euclidean_clusters(points: np.ndarray, sensor_xy, params: TrackerParams,
     priors = np.zeros((0, 3)) if priors is None else np.asarray(priors, np.float64).reshape(-1, 3)
     for label in labels[np.sort(first)]:
         member = labels == label
-        claims = _claims(points[member], priors, params)
+        owners = _owners(points[member], priors, params)
+        claims = _claims(owners, params)
         cluster = _cluster(points[member], static[member], sensor_xy, params) if len(claims) < 2 else None
         if cluster is not None:
             clusters.append(cluster)
         elif len(claims):
-            clusters.extend(_carved(points[member], static[member], sensor_xy, params, priors))
+            clusters.extend(_carved(points[member], static[member], owners, sensor_xy, params))
     return clusters
 
 
@@ -262,12 +263,12 @@ def _owners(members: np.ndarray, priors: np.ndarray, params: TrackerParams) -> n
     return np.where(gaps[np.arange(len(members)), nearest] <= params.cluster_tolerance, nearest, -1)
 
 
-def _claims(members: np.ndarray, priors: np.ndarray, params: TrackerParams) -> np.ndarray:
-    """The circles that own at least min_cluster_size of the points: two or more, and the cluster
-    is two movers side by side (measured as one, one of two people crossing got the pair's centre
-    and was lost)."""
-    owners, counts = np.unique(_owners(members, priors, params), return_counts=True)
-    return owners[(owners >= 0) & (counts >= params.min_cluster_size)]
+def _claims(owners: np.ndarray, params: TrackerParams) -> np.ndarray:
+    """The circles that own (_owners) at least min_cluster_size of the points: two or more, and the
+    cluster is two movers side by side (measured as one, one of two people crossing got the pair's
+    centre and was lost)."""
+    circles, counts = np.unique(owners, return_counts=True)
+    return circles[(circles >= 0) & (counts >= params.min_cluster_size)]
 
 
 def _cluster(members: np.ndarray, static: np.ndarray, sensor_xy, params: TrackerParams) -> Cluster | None:
@@ -313,11 +314,10 @@ def _circle_fit(members: np.ndarray, away: np.ndarray, params: TrackerParams) ->
     return np.array([*(mean + centre), radius])
 
 
-def _carved(members: np.ndarray, static: np.ndarray, sensor_xy, params: TrackerParams,
-            priors: np.ndarray) -> list[Cluster]:
-    """A cluster cut along the expected circles: each point goes to the circle whose edge it is
-    nearest, if within cluster_tolerance of it; what no circle takes is clustered again."""
-    owners = _owners(members, priors, params)
+def _carved(members: np.ndarray, static: np.ndarray, owners: np.ndarray, sensor_xy,
+            params: TrackerParams) -> list[Cluster]:
+    """A cluster cut along the expected circles: each point goes to the circle that owns it
+    (_owners); what no circle takes is clustered again."""
     pieces = [_cluster(members[owners == k], static[owners == k], sensor_xy, params) for k in np.unique(owners[owners >= 0])]
     rest = owners < 0
     return [c for c in pieces if c is not None] + \
@@ -381,8 +381,8 @@ class MoverTracker:
         static = self.static_points(now_s, sensor_xy, points, odom_in_map)
         for track in self.tracks:
             track.state, track.covariance = predicted(track.state, track.covariance, dt, self.params.process_noise)
-        priors = np.array([[*t.state[:2], t.radius] for t in self.tracks if self.params.carve_by_tracks],
-                          np.float64).reshape(-1, 3)
+        priors = np.array([[*t.state[:2], t.radius] for t in self.tracks], np.float64).reshape(-1, 3) \
+            if self.params.carve_by_tracks else None
         clusters = euclidean_clusters(points, sensor_xy, self.params, static, priors)
         matches = self._associate(clusters)
         matched = set()
