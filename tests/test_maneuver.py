@@ -115,18 +115,60 @@ def test_walled_in_there_is_no_maneuver():
     assert segments is None
 
 
+class LateRobot:
+    """A robot that answers a twist LATE_TICKS ticks late, each rate ramped at its acceleration
+    limits (ACCEL: the velocity smoother's, the motors'), as the Jackal's command chain does."""
+    LATE_TICKS = 2
+
+    def __init__(self, pose):
+        self.pose, self.twist = np.array(pose, float), np.zeros(3)
+        self.waiting = [np.zeros(3)] * self.LATE_TICKS
+
+    def answer(self, command) -> np.ndarray:
+        self.waiting.append(np.asarray(command, float))
+        wanted = self.waiting.pop(0)
+        limit = np.array([ACCEL[0], 0.0, ACCEL[1]]) * DT
+        self.twist = self.twist + np.clip(wanted - self.twist, -limit, limit)
+        self.pose = integrate(self.pose, self.twist, DT)
+        return self.pose
+
+
+def drive(driver, robot, ticks=400) -> list[np.ndarray]:
+    poses = [robot.pose.copy()]
+    while (twist := driver.step(robot.pose, DT)) is not None and len(poses) < ticks:
+        poses.append(robot.answer(twist).copy())
+    return poses
+
+
 def test_the_driver_drives_the_segments_as_planned():
     params = ManeuverParams()
-    segments = [Segment("drive", -0.4), Segment("turn", math.pi / 2), Segment("drive", 0.3)]
-    pose, ticks = np.array([1.0, 0.5, 0.0]), 0
-    driver = ManeuverDriver(segments, pose, params, TOP, ACCEL)
-    while (twist := driver.step(pose, DT)) is not None and ticks < 400:
-        assert abs(twist[0]) <= params.speed and abs(twist[2]) <= params.turn_speed
-        pose = integrate(pose, twist, DT)
-        ticks += 1
-    assert ticks < 400 and driver.finished
+    segments = [Segment("drive", -0.4, 0.0), Segment("turn", math.pi / 2), Segment("drive", 0.3, math.pi / 2)]
+    robot = LateRobot([1.0, 0.5, 0.0])
+    driver = ManeuverDriver(segments, robot.pose, params, TOP, ACCEL)
+    poses = drive(driver, robot)
+    assert len(poses) < 400 and driver.finished
+    pose = poses[-1]
     assert math.hypot(pose[0] - 0.6, pose[1] - 0.8) <= 2 * DRIVE_TOLERANCE + 0.01
     assert abs(float(wrap_angle(pose[2] - math.pi / 2))) <= TURN_TOLERANCE + 0.02
+
+
+def test_a_turn_ends_settled_on_its_heading_and_the_drive_after_it_holds_the_planned_one():
+    # a robot answering late swung on 9° past a turn ended the tick it came within tolerance, and
+    # the drive after it, holding the heading it began with, carried the Jackal's corner into a
+    # cylinder (BARN world 112)
+    params = ManeuverParams()
+    segments = [Segment("turn", math.pi / 2), Segment("drive", 0.6, math.pi / 2)]
+    robot = LateRobot([0.0, 0.0, 0.0])
+    driver = ManeuverDriver(segments, robot.pose, params, TOP, ACCEL)
+    poses = np.array(drive(driver, robot))
+    assert driver.finished
+    driving = poses[poses[:, 1] > 0.05]              # once it has moved off the spot it turned on
+    assert len(driving) > 5
+    assert np.abs(wrap_angle(driving[:, 2] - math.pi / 2)).max() <= math.radians(4.0)
+    assert np.abs(driving[:, 0]).max() <= 0.01        # on the planned line, within a centimetre
+    assert abs(poses[-1][1] - 0.6) <= 2 * DRIVE_TOLERANCE + 0.01
+    turning = poses[poses[:, 1] <= 0.05]
+    assert wrap_angle(turning[:, 2] - math.pi / 2).max() <= math.radians(4.0)   # overshoots by little
 
 
 def test_a_driver_held_back_gives_up_after_twice_its_time():
@@ -142,14 +184,14 @@ def test_a_driver_held_back_gives_up_after_twice_its_time():
 @pytest.mark.parametrize("segment, at_full_speed", [(Segment("drive", 0.5), 0.5 / ManeuverParams().speed),
                                                     (Segment("turn", math.pi / 2), math.pi / 2 / ManeuverParams().turn_speed)])
 def test_a_segment_ends_braking_at_the_robots_limits_not_creeping_up_on_its_end(segment, at_full_speed):
-    # braking at half the limits from top speed adds top / (2 · braking): 0.2 s to a drive, 0.47 s to
-    # a turn; an approach slowing in proportion to what is left would add more than a second to each
+    # speeding up and braking at the robot's limits (half of them to brake) and answering late add
+    # top / (2 · accel) + top / (2 · braking) + the lateness: under a second to a turn; an approach
+    # slowing in proportion to what is left, or one swinging about its end, takes seconds more
     params = ManeuverParams()
-    top, braking = (params.speed, 0.5 * ACCEL[0]) if segment.kind == "drive" else (params.turn_speed, 0.5 * ACCEL[1])
-    pose, ticks = np.zeros(3), 0
-    driver = ManeuverDriver([segment], pose, params, TOP, ACCEL)
-    while (twist := driver.step(pose, DT)) is not None:
-        pose = integrate(pose, twist, DT)
-        ticks += 1
+    top, accel = (params.speed, ACCEL[0]) if segment.kind == "drive" else (params.turn_speed, ACCEL[1])
+    robot = LateRobot(np.zeros(3))
+    driver = ManeuverDriver([segment], robot.pose, params, TOP, ACCEL)
+    poses = drive(driver, robot)
     assert driver.finished
-    assert ticks * DT <= at_full_speed + top / (2 * braking) + 3 * DT
+    late = LateRobot.LATE_TICKS * DT
+    assert (len(poses) - 1) * DT <= at_full_speed + top / (2 * accel) + top / accel + late + 3 * DT

@@ -38,7 +38,10 @@ TURN_STEP = math.radians(5.0)        # rad: one turn move; 72 heading bins
 HEADING_BINS = 72
 BACK_COST = 2.0                      # a step back costs this many steps ahead: forward is the way on
 TURN_COST_M = 0.1                    # m of travel a turn of one radian costs
-TURN_TOLERANCE = math.radians(2.0)   # rad: a turn is done this near its heading
+TURN_TOLERANCE = math.radians(2.0)   # rad: a turn is done this near its heading, and turning no faster than
+SETTLED_RATE = 0.1                   # rad/s (seen between ticks): a robot still swinging overshoots it
+DRIVE_HEADING_SLACK = math.radians(4.0)   # rad: off its heading by more, a drive turns back on the spot first
+ANSWER_LAG_S = 0.2                   # s: a turn command takes effect this late (the command chain, the pose's age)
 DRIVE_TOLERANCE = 0.005              # m: a drive is done this near its distance
 HEADING_GAIN = 2.0                   # 1/s: turn rate per radian of heading error
 SWITCH_COST_M = 0.1                  # m: each change between moves (ahead, back, turn left, turn right) costs this
@@ -64,6 +67,7 @@ class ManeuverParams(Parameters):
 class Segment:
     kind: str        # "turn" (to `value` rad, absolute heading) | "drive" (`value` m along the heading, negative back)
     value: float
+    heading: float | None = None   # a drive's heading as planned (None: the one the robot has when it starts)
 
 
 def _bin(pose, resolution: float) -> tuple[int, int, int]:
@@ -149,17 +153,21 @@ def _segments(key, came_from, poses) -> list[Segment]:
             ahead = math.cos(th0) * (x1 - x0) + math.sin(th0) * (y1 - y0) > 0
             step = math.hypot(x1 - x0, y1 - y0) * (1.0 if ahead else -1.0)
             if segments and segments[-1].kind == "drive" and segments[-1].value * step > 0:
-                segments[-1] = Segment("drive", segments[-1].value + step)
+                segments[-1] = Segment("drive", segments[-1].value + step, segments[-1].heading)
             else:
-                segments.append(Segment("drive", step))
+                segments.append(Segment("drive", step, float(wrap_angle(th0))))
     return segments
 
 
 class ManeuverDriver:
     """Drives the segments one after the other: a turn on the spot towards its heading, at most
-    turn_speed; a drive straight at most `speed`, its heading held to the one it started with, until
-    the distance along that heading is covered — neither faster than the robot's own top speeds
-    (`top`: m/s, rad/s). Each segment ends at the speed from which the robot
+    turn_speed, done once within TURN_TOLERANCE and no longer swinging (SETTLED_RATE between ticks);
+    a drive straight at most `speed`, its heading held to the one planned, turning back on the spot
+    first when more than DRIVE_HEADING_SLACK off it, until the distance along that heading is
+    covered — neither faster than the robot's own top speeds (`top`: m/s, rad/s). A robot answers a
+    command late: a turn ended the tick it came within tolerance swung on by 9° while the next drive
+    began, and that drive, holding the heading it started with, carried the Jackal's corner into a
+    cylinder its plan cleared (BARN world 112). Each segment ends at the speed from which the robot
     stops in what is left of it at half its acceleration limits (`accel`: m/s², rad/s²; half,
     because a command takes effect a tick late), and never faster than covers the rest in one tick:
     a segment ends in about the time its distance takes, not in an exponential approach. `step`
@@ -170,9 +178,11 @@ class ManeuverDriver:
                  accel: tuple[float, float]):
         self.segments = list(segments)
         self.speed, self.turn_speed = min(params.speed, top[0]), min(params.turn_speed, top[1])
-        self.braking = (0.5 * accel[0], 0.5 * accel[1])
+        self.accel = accel
+        self._twist = np.zeros(3)              # the twist last commanded
         self.index = 0
         self.anchor = np.asarray(pose, np.float64)[:3].copy()
+        self._last_heading: float | None = None
         # twice the time the segments take at full speed, and a second more: a robot the monitor holds
         # back (or that cannot follow) gives the maneuver up
         full_speed = sum(abs(s.value) / (self.speed if s.kind == "drive" else self.turn_speed) for s in self.segments)
@@ -187,24 +197,45 @@ class ManeuverDriver:
         self.time_left -= dt
         if self.time_left < 0.0:
             return None
+        swing = 0.0 if self._last_heading is None else float(wrap_angle(pose[2] - self._last_heading)) / dt
+        self._last_heading = float(pose[2])
         while self.index < len(self.segments):
             segment = self.segments[self.index]
             if segment.kind == "turn":
                 error = float(wrap_angle(segment.value - pose[2]))
-                if abs(error) <= TURN_TOLERANCE:
+                if abs(error) <= TURN_TOLERANCE and abs(swing) <= SETTLED_RATE:
                     self._next(pose)
                     continue
-                return np.array([0.0, 0.0, self._approach(error, self.turn_speed, self.braking[1], dt)])
-            heading = self.anchor[2]
+                return self._turn(error, dt)
+            heading = self.anchor[2] if segment.heading is None else segment.heading
             covered = math.cos(heading) * (pose[0] - self.anchor[0]) + math.sin(heading) * (pose[1] - self.anchor[1])
             remaining = segment.value - covered
             if remaining * math.copysign(1.0, segment.value) <= DRIVE_TOLERANCE:
                 self._next(pose)
                 continue
-            speed = self._approach(remaining, self.speed, self.braking[0], dt)
-            hold = float(np.clip(HEADING_GAIN * wrap_angle(heading - pose[2]), -self.turn_speed, self.turn_speed))
-            return np.array([speed, 0.0, hold])
+            off = float(wrap_angle(heading - pose[2]))
+            if abs(off) > DRIVE_HEADING_SLACK:
+                return self._turn(off, dt)
+            speed = self._ramp(0, remaining, self.speed, dt)
+            hold = float(np.clip(HEADING_GAIN * off, -self.turn_speed, self.turn_speed))
+            return self._command(speed, hold)
         return None
+
+    def _turn(self, error: float, dt: float) -> np.ndarray:
+        return self._command(0.0, self._ramp(2, error, self.turn_speed, dt))
+
+    def _command(self, speed: float, rate: float) -> np.ndarray:
+        self._twist = np.array([speed, 0.0, rate])
+        return self._twist.copy()
+
+    def _ramp(self, axis: int, remaining: float, top: float, dt: float) -> float:
+        """The rate along `axis` (0 ahead, 2 turning) towards a target `remaining` away: braking for
+        where the rate last commanded carries the robot before a command takes effect, and changed
+        no faster than the robot's acceleration (a command the smoother must ramp to arrives later
+        still)."""
+        last, accel = float(self._twist[axis]), self.accel[0 if axis == 0 else 1]
+        wanted = self._approach(remaining - last * ANSWER_LAG_S, top, 0.5 * accel, dt)
+        return float(np.clip(wanted, last - accel * dt, last + accel * dt))
 
     @staticmethod
     def _approach(remaining: float, top: float, braking: float, dt: float) -> float:
