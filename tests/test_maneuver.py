@@ -11,7 +11,7 @@ from omninav.geometry.se2 import integrate, wrap_angle
 from omninav.schemas.messages import MapMetaData, Pose2D
 from omninav.services.local_planner.dwa import path_maps
 from omninav.services.local_planner.footprint_check import FootprintCheck
-from omninav.services.local_planner.maneuver import (DRIVE_TOLERANCE, FACING, TURN_STEP, TURN_TOLERANCE,
+from omninav.services.local_planner.maneuver import (DRIVE_TOLERANCE, FACING, SETTLE_S, TURN_STEP, TURN_TOLERANCE,
                                                      ManeuverDriver, ManeuverParams, Segment, plan_maneuver)
 
 INFO = MapMetaData(resolution=0.05, width=160, height=120, origin=Pose2D(-2.0, -3.0))   # x -2..6, y -3..3 m
@@ -171,14 +171,14 @@ def test_a_turn_ends_settled_on_its_heading_and_the_drive_after_it_holds_the_pla
     assert wrap_angle(turning[:, 2] - math.pi / 2).max() <= math.radians(4.0)   # overshoots by little
 
 
-def test_a_driver_held_back_gives_up_after_twice_its_time():
+def test_a_driver_held_back_gives_up_after_twice_its_time_and_a_settling():
     params = ManeuverParams()
     driver = ManeuverDriver([Segment("drive", 0.5)], (0.0, 0.0, 0.0), params, TOP, ACCEL)
     ticks = 0
     while driver.step((0.0, 0.0, 0.0), DT) is not None:     # the robot never moves
         ticks += 1
     assert not driver.finished
-    assert ticks * DT == pytest.approx(2 * 0.5 / params.speed + 1.0, abs=2 * DT)
+    assert ticks * DT == pytest.approx(2 * 0.5 / params.speed + SETTLE_S + 1.0, abs=2 * DT)
 
 
 @pytest.mark.parametrize("segment, at_full_speed", [(Segment("drive", 0.5), 0.5 / ManeuverParams().speed),

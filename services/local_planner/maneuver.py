@@ -38,10 +38,12 @@ TURN_STEP = math.radians(5.0)        # rad: one turn move; 72 heading bins
 HEADING_BINS = 72
 BACK_COST = 2.0                      # a step back costs this many steps ahead: forward is the way on
 TURN_COST_M = 0.1                    # m of travel a turn of one radian costs
-TURN_TOLERANCE = math.radians(2.0)   # rad: a turn is done this near its heading, and turning no faster than
-SETTLED_RATE = 0.1                   # rad/s (seen between ticks): a robot still swinging overshoots it
+TURN_TOLERANCE = math.radians(2.0)   # rad: a turn is done this near its heading
 DRIVE_HEADING_SLACK = math.radians(4.0)   # rad: off its heading by more, a drive turns back on the spot first
-ANSWER_LAG_S = 0.2                   # s: a turn command takes effect this late (the command chain, the pose's age)
+PROFILE_ACCEL = 0.75                 # of the robot's accelerations: a profile the smoother and the floor follow
+SETTLED_RATE = 0.05                  # rad/s and
+SETTLED_SPEED = 0.02                 # m/s (seen between ticks): slower, the robot has settled after a profile
+SETTLE_S = 0.5                       # s: at most this long waited for it
 DRIVE_TOLERANCE = 0.005              # m: a drive is done this near its distance
 HEADING_GAIN = 2.0                   # 1/s: turn rate per radian of heading error
 SWITCH_COST_M = 0.1                  # m: each change between moves (ahead, back, turn left, turn right) costs this
@@ -160,89 +162,106 @@ def _segments(key, came_from, poses) -> list[Segment]:
 
 
 class ManeuverDriver:
-    """Drives the segments one after the other: a turn on the spot towards its heading, at most
-    turn_speed, done once within TURN_TOLERANCE and no longer swinging (SETTLED_RATE between ticks);
-    a drive straight at most `speed`, its heading held to the one planned, turning back on the spot
-    first when more than DRIVE_HEADING_SLACK off it, until the distance along that heading is
-    covered — neither faster than the robot's own top speeds (`top`: m/s, rad/s). A robot answers a
-    command late: a turn ended the tick it came within tolerance swung on by 9° while the next drive
-    began, and that drive, holding the heading it started with, carried the Jackal's corner into a
-    cylinder its plan cleared (BARN world 112). Each segment ends at the speed from which the robot
-    stops in what is left of it at half its acceleration limits (`accel`: m/s², rad/s²; half,
-    because a command takes effect a tick late), and never faster than covers the rest in one tick:
-    a segment ends in about the time its distance takes, not in an exponential approach. `step`
-    gives the twist for the robot at a pose, None once every segment is done or the time it may take
-    is up (`finished` says which)."""
+    """Drives the segments one after the other, each as a velocity profile at the robot's limits
+    (speeding up and braking at PROFILE_ACCEL of its accelerations, at most `speed` / turn_speed and
+    its own top speeds `top`: m/s, rad/s), commanded tick by tick without waiting for the pose to
+    follow; once the robot has settled (SETTLED_RATE, SETTLED_SPEED, or SETTLE_S at most) what is
+    left is measured, and a segment further off than TURN_TOLERANCE / DRIVE_TOLERANCE is driven
+    again by a profile of the rest. A drive holds the heading planned (HEADING_GAIN), turning back
+    on the spot first when it starts more than DRIVE_HEADING_SLACK off it. A robot answers a
+    command late (the command chain, the smoother's ramp, the pose's age): steered by the pose it
+    overshoots, and a turn ended the tick the pose came within tolerance swung on 9° while the
+    next drive began, holding the heading it began with, into a cylinder its plan cleared (BARN
+    world 112). `step` gives the twist for the robot at a pose, None once every segment is done or
+    the time it may take is up (`finished` says which)."""
 
     def __init__(self, segments: list[Segment], pose, params: ManeuverParams, top: tuple[float, float],
                  accel: tuple[float, float]):
         self.segments = list(segments)
         self.speed, self.turn_speed = min(params.speed, top[0]), min(params.turn_speed, top[1])
-        self.accel = accel
-        self._twist = np.zeros(3)              # the twist last commanded
+        self.accel = (PROFILE_ACCEL * accel[0], PROFILE_ACCEL * accel[1])
         self.index = 0
         self.anchor = np.asarray(pose, np.float64)[:3].copy()
-        self._last_heading: float | None = None
-        # twice the time the segments take at full speed, and a second more: a robot the monitor holds
-        # back (or that cannot follow) gives the maneuver up
+        self._profile: tuple[str, np.ndarray] | None = None   # ("drive" | "turn", the rates still to command)
+        self._settling_s = 0.0
+        self._last_pose: np.ndarray | None = None
+        # twice the time the segments take at full speed, a settling per segment and a second more:
+        # a robot the monitor holds back (or that cannot follow) gives the maneuver up
         full_speed = sum(abs(s.value) / (self.speed if s.kind == "drive" else self.turn_speed) for s in self.segments)
-        self.time_left = 2.0 * full_speed + 1.0
-
-    def _next(self, pose) -> None:
-        self.index += 1
-        self.anchor = np.asarray(pose, np.float64)[:3].copy()
+        self.time_left = 2.0 * full_speed + SETTLE_S * len(self.segments) + 1.0
 
     def step(self, pose, dt: float) -> np.ndarray | None:
         """The twist for the robot at `pose` for the next dt seconds; None once done or out of time."""
         self.time_left -= dt
         if self.time_left < 0.0:
             return None
-        swing = 0.0 if self._last_heading is None else float(wrap_angle(pose[2] - self._last_heading)) / dt
-        self._last_heading = float(pose[2])
+        pose = np.asarray(pose, np.float64)[:3]
+        moving = self._moving(pose, dt)
         while self.index < len(self.segments):
             segment = self.segments[self.index]
+            heading = self.anchor[2] if segment.heading is None else segment.heading
+            if self._profile is not None and len(self._profile[1]):
+                kind, rates = self._profile
+                rate, self._profile = rates[0], (kind, rates[1:])
+                if kind == "turn":
+                    return np.array([0.0, 0.0, rate])
+                hold = float(np.clip(HEADING_GAIN * wrap_angle(heading - pose[2]), -self.turn_speed, self.turn_speed))
+                return np.array([rate, 0.0, hold])
+            if self._profile is not None and moving and self._settling_s < SETTLE_S:
+                self._settling_s += dt
+                return np.zeros(3)
+            self._profile, self._settling_s = None, 0.0
             if segment.kind == "turn":
                 error = float(wrap_angle(segment.value - pose[2]))
-                if abs(error) <= TURN_TOLERANCE and abs(swing) <= SETTLED_RATE:
+                if abs(error) <= TURN_TOLERANCE:
                     self._next(pose)
                     continue
-                return self._turn(error, dt)
-            heading = self.anchor[2] if segment.heading is None else segment.heading
+                self._profile = ("turn", self._rates(error, self.turn_speed, self.accel[1], dt))
+                continue
+            off = float(wrap_angle(heading - pose[2]))
+            if abs(off) > DRIVE_HEADING_SLACK:
+                self._profile = ("turn", self._rates(off, self.turn_speed, self.accel[1], dt))
+                continue
             covered = math.cos(heading) * (pose[0] - self.anchor[0]) + math.sin(heading) * (pose[1] - self.anchor[1])
             remaining = segment.value - covered
             if remaining * math.copysign(1.0, segment.value) <= DRIVE_TOLERANCE:
                 self._next(pose)
                 continue
-            off = float(wrap_angle(heading - pose[2]))
-            if abs(off) > DRIVE_HEADING_SLACK:
-                return self._turn(off, dt)
-            speed = self._ramp(0, remaining, self.speed, dt)
-            hold = float(np.clip(HEADING_GAIN * off, -self.turn_speed, self.turn_speed))
-            return self._command(speed, hold)
+            self._profile = ("drive", self._rates(remaining, self.speed, self.accel[0], dt))
         return None
 
-    def _turn(self, error: float, dt: float) -> np.ndarray:
-        return self._command(0.0, self._ramp(2, error, self.turn_speed, dt))
+    def _next(self, pose) -> None:
+        self.index += 1
+        self.anchor = np.asarray(pose, np.float64)[:3].copy()
 
-    def _command(self, speed: float, rate: float) -> np.ndarray:
-        self._twist = np.array([speed, 0.0, rate])
-        return self._twist.copy()
-
-    def _ramp(self, axis: int, remaining: float, top: float, dt: float) -> float:
-        """The rate along `axis` (0 ahead, 2 turning) towards a target `remaining` away: braking for
-        where the rate last commanded carries the robot before a command takes effect, and changed
-        no faster than the robot's acceleration (a command the smoother must ramp to arrives later
-        still)."""
-        last, accel = float(self._twist[axis]), self.accel[0 if axis == 0 else 1]
-        wanted = self._approach(remaining - last * ANSWER_LAG_S, top, 0.5 * accel, dt)
-        return float(np.clip(wanted, last - accel * dt, last + accel * dt))
+    def _moving(self, pose: np.ndarray, dt: float) -> bool:
+        """Whether the robot moved faster than settled between the last tick and this one."""
+        last, self._last_pose = self._last_pose, pose.copy()
+        if last is None:
+            return False
+        return (abs(float(wrap_angle(pose[2] - last[2]))) > SETTLED_RATE * dt
+                or math.hypot(*(pose[:2] - last[:2])) > SETTLED_SPEED * dt)
 
     @staticmethod
-    def _approach(remaining: float, top: float, braking: float, dt: float) -> float:
-        """The signed rate towards a target `remaining` away: at most top, slow enough to stop in
-        the rest at `braking`, and covering no more than the rest in one tick."""
-        size = abs(remaining)
-        return math.copysign(min(top, math.sqrt(2.0 * braking * size), size / dt), remaining)
+    def _rates(distance: float, top: float, accel: float, dt: float) -> np.ndarray:
+        """The rate for each tick of dt that covers `distance` (signed) speeding up and braking at
+        `accel`, at most `top`: each the mean over its tick of the trapezoid (or triangle), so that
+        the ticks cover the distance exactly."""
+        size = abs(distance)
+        peak = min(top, math.sqrt(size * accel))
+        ramp = peak / accel
+        total = 2.0 * ramp + (size - peak * ramp) / peak
+
+        def covered(t):
+            t = np.clip(t, 0.0, total)
+            up = 0.5 * accel * np.minimum(t, ramp) ** 2
+            cruise = peak * np.clip(t - ramp, 0.0, total - 2.0 * ramp)
+            left = np.clip(total - t, 0.0, ramp)
+            down = np.where(t > total - ramp, peak * ramp / 2.0 - 0.5 * accel * left ** 2, 0.0)
+            return up + cruise + down
+
+        ticks = np.arange(math.ceil(total / dt - 1e-9) + 1) * dt
+        return math.copysign(1.0, distance) * np.diff(covered(ticks)) / dt
 
     @property
     def finished(self) -> bool:
