@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from omninav.schemas.messages import MapMetaData, OccupancyGrid, Pose2D
-from omninav.services.tracker.tracker import MoverTracker, TrackerParams, euclidean_clusters, predicted
+from omninav.services.tracker.tracker import MoverTracker, Track, TrackerParams, euclidean_clusters, predicted
 from omninav.sim.lidar import LidarParams, cast, scan
 from omninav.sim.world import load_world
 
@@ -204,6 +204,8 @@ def test_two_wide_movers_touching_in_the_scan_are_carved_along_their_tracks():
     assert len(clusters) == 2
     for cluster, centre in zip(clusters, centres):
         assert np.hypot(*(cluster.centre - centre)) < 0.1 and cluster.radius <= params.max_cluster_radius
+    fitting = TrackerParams(carve_by_tracks=True, fit_circles=True)      # no one circle fits two arcs
+    assert len(euclidean_clusters(points, (0.0, 0.0), fitting, priors=priors)) == 2
 
 
 def test_with_fit_circles_a_partly_hidden_cylinder_is_measured_at_its_centre():
@@ -218,3 +220,44 @@ def test_with_fit_circles_a_partly_hidden_cylinder_is_measured_at_its_centre():
     (fitted,) = euclidean_clusters(points, (0.0, 0.0), TrackerParams(fit_circles=True))
     assert np.hypot(*(fitted.centre - centre)) < 0.03 and abs(fitted.radius - radius) < 0.03
     assert np.hypot(*(plain.centre - centre)) > 0.1
+
+
+def _arc(centre, radius=0.5, spread=1.2, count=60) -> np.ndarray:
+    """The side of a cylinder a lidar at the origin sees."""
+    angles = np.arctan2(-centre[1], -centre[0]) + np.linspace(-spread, spread, count)
+    return np.column_stack([centre[0] + radius * np.cos(angles), centre[1] + radius * np.sin(angles)])
+
+
+def test_one_cylinder_two_tracks_claim_is_measured_whole_not_carved_into_fragments():
+    """Two tracks of 0.25 m on the two halves of one 0.5 m cylinder (a sliver coming out from behind
+    another started a second track): carved along them, each scan measured two fragments and kept
+    the cylinder split, the tracks' velocities 50° apart (DynaBARN hard-20). An arc one circle fits
+    is one mover."""
+    centre = np.array([3.0, 0.0])
+    points = _arc(centre)
+    priors = np.array([[2.75, -0.25, 0.25], [2.75, 0.25, 0.25]])
+    carved = euclidean_clusters(points, (0.0, 0.0), TrackerParams(carve_by_tracks=True), priors=priors)
+    assert len(carved) == 2                                               # without the fit
+    params = TrackerParams(carve_by_tracks=True, fit_circles=True)
+    (whole,) = euclidean_clusters(points, (0.0, 0.0), params, priors=priors)
+    assert np.hypot(*(whole.centre - centre)) < 0.03 and abs(whole.radius - 0.5) < 0.03
+
+
+def test_a_track_inside_another_tracks_circle_is_dropped_the_older_kept():
+    """Two solid movers cannot overlap: a track whose centre lies inside the circle of one with more
+    hits is the same mover tracked twice, and only the older stays."""
+    params = TrackerParams(carve_by_tracks=True, fit_circles=True)
+    tracker = MoverTracker(params)
+    tracker.warm_until_s = math.inf                        # no restart once the walls are known
+    older = Track(1, np.array([3.0, 0.0, 1.0, 0.0]), np.eye(4) * 0.01, 0.5, hits=12, moved=True)
+    younger = Track(2, np.array([2.8, 0.2, 0.2, 1.0]), np.eye(4) * 0.01, 0.25, hits=5, moved=True)
+    apart = Track(3, np.array([3.0, 1.2, 0.0, 1.0]), np.eye(4) * 0.01, 0.5, hits=3, moved=True)
+    tracker.tracks = [younger, older, apart]
+    tracker.stamp_s = 0.0
+    tracker.update(0.0, (0.0, 0.0), np.vstack([_arc(np.array([3.0, 0.0])), _arc(np.array([3.0, 1.2]))]))
+    assert [t.id for t in tracker.tracks] == [1, 3]
+    without = MoverTracker(TrackerParams())
+    without.warm_until_s = math.inf
+    without.tracks, without.stamp_s = [Track(**vars(t)) for t in (younger, older, apart)], 0.0
+    without.update(0.0, (0.0, 0.0), np.vstack([_arc(np.array([3.0, 0.0])), _arc(np.array([3.0, 1.2]))]))
+    assert len(without.tracks) == 3

@@ -77,7 +77,8 @@ class TrackerParams(Parameters):
     tentative_max_misses: int = param(1, ge=0)          # the same for a tentative track
     radius_smoothing: float = param(0.3, gt=0, le=1)    # weight of a new cluster's radius in the track's estimate
     min_radius: float = param(0.1, gt=0)                # m: a track is at least this wide
-    carve_by_tracks: bool = False                       # a cluster too wide, or claimed by two tracks, is cut along the tracks' circles
+    carve_by_tracks: bool = False                       # a cluster too wide, or claimed by two tracks, is cut along the tracks'
+                                                        # circles (unless one circle fits it); a track inside another's circle is dropped
     fit_circles: bool = False                           # an arc is measured by a fitted circle where one fits
 
     rules = (Rule("max_cluster_size", lambda p: p.max_cluster_size >= p.min_cluster_size,
@@ -244,7 +245,8 @@ def euclidean_clusters(points: np.ndarray, sensor_xy, params: TrackerParams,
         member = labels == label
         owners = _owners(points[member], priors, params)
         claims = _claims(owners, params)
-        cluster = _cluster(points[member], static[member], sensor_xy, params) if len(claims) < 2 else None
+        cluster = _cluster(points[member], static[member], sensor_xy, params) \
+            if len(claims) < 2 or _one_circle(points[member], sensor_xy, params) else None
         if cluster is not None:
             clusters.append(cluster)
         elif len(claims):
@@ -269,6 +271,16 @@ def _claims(owners: np.ndarray, params: TrackerParams) -> np.ndarray:
     centre and was lost)."""
     circles, counts = np.unique(owners, return_counts=True)
     return circles[(circles >= 0) & (counts >= params.min_cluster_size)]
+
+
+def _one_circle(members: np.ndarray, sensor_xy, params: TrackerParams) -> bool:
+    """Whether a cluster two tracks claim is the arc of one circle (fit_circles): a cylinder that
+    two tracks had split was carved along them scan after scan, and kept split (DynaBARN hard-20:
+    three tracks of 0.22-0.28 m on a 0.5 m cylinder, their velocities 50° apart)."""
+    if not params.fit_circles:
+        return False
+    away = members.mean(axis=0) - np.asarray(sensor_xy, np.float64)
+    return _circle_fit(members, away / max(float(np.hypot(*away)), 1e-9), params) is not None
 
 
 def _cluster(members: np.ndarray, static: np.ndarray, sensor_xy, params: TrackerParams) -> Cluster | None:
@@ -394,6 +406,8 @@ class MoverTracker:
                 track.misses += 1
         self.tracks = [t for t in self.tracks if t.misses <= (self.params.max_misses if t.confirmed(self.params)
                                                              else self.params.tentative_max_misses)]
+        if self.params.carve_by_tracks:
+            self.tracks = _without_doubles(self.tracks)
         used = {c for _, c in matches}
         for c, cluster in enumerate(clusters):
             if c not in used:
@@ -443,6 +457,19 @@ class MoverTracker:
                         np.array([t.state for t in tracks], np.float64).reshape(-1, 4),
                         np.array([t.covariance for t in tracks], np.float64).reshape(-1, 4, 4),
                         np.array([t.radius for t in tracks], np.float64).reshape(-1))
+
+
+def _without_doubles(tracks: list[Track]) -> list[Track]:
+    """The tracks without those whose centre lies inside the circle of a track with more hits (the
+    earlier on a tie): two solid movers cannot overlap, so they are one mover tracked twice."""
+    order = sorted(range(len(tracks)), key=lambda k: (-tracks[k].hits, k))
+    kept: list[int] = []
+    for k in order:
+        x, y = tracks[k].state[:2]
+        if all(math.hypot(x - tracks[j].state[0], y - tracks[j].state[1]) >= max(tracks[j].radius, tracks[k].radius)
+               for j in kept):
+            kept.append(k)
+    return [tracks[k] for k in sorted(kept)]
 
 
 def warm_up() -> None:
