@@ -321,3 +321,20 @@ def test_a_robot_creeping_slower_than_stall_radius_over_stall_time_has_stalled(s
     assert bool(ticks) == stalls
     if stalls:
         assert ticks[0] * DT == pytest.approx(m.stall_time)
+
+
+def test_where_the_padded_footprint_finds_no_way_the_maneuver_searches_within_the_monitors_zone():
+    # a gap 0.80 m wide on the path: the robot (0.636 m wide) padded 0.1 m does not pass it, its
+    # outline grown by the monitor's 0.02 m stop zone does; the search kept the padding and found
+    # nothing twelve times over while the robot stood in a pocket (BARN world 58, the Jackal with
+    # its wheels in its footprint)
+    grid = costmap((0.9, 0.4, 1.1, 3.0), (0.9, -3.0, 1.1, -0.4))
+    params = LocalControlParams(holonomic_robot=False, min_vel_x=0.0, footprint_padding=0.1, stop_padding=0.02)
+    core, frames = LocalControl(params, DT), RobotFrames("map", "odom")
+    core.follow(follow_path(EAST), frames)
+    robot = np.zeros(3)
+    maps = path_maps(EAST, robot, grid.info, grid.data, core.controller.distances)
+    first = core._plan_maneuver(robot, grid, maps)
+    assert first is not None and core._counted == ["maneuver/unpadded", "maneuver/planned"]
+    pose = drive_maneuver(core, grid, robot)
+    assert pose[0] >= params.maneuver_params().progress - 0.05 and abs(pose[1]) < 0.05   # into the gap
