@@ -85,8 +85,11 @@ def test_the_reference_length_of_a_shipped_path_file():
 
 def test_the_jackal_profile_sets_the_robot_of_every_service(tmp_path):
     profile = load_profile("jackal")
-    assert profile.drive == "diff" and profile.footprint_padding == 0.1
-    assert np.ptp(np.array(profile.footprint), axis=0).tolist() == pytest.approx([0.42, 0.33])
+    # the outline with the wheels (the body the simulator collides), padded to the challenge's 0.53 m
+    assert profile.drive == "diff" and profile.footprint_padding == 0.057
+    size = np.ptp(np.array(profile.footprint), axis=0)
+    assert size.tolist() == pytest.approx(np.ptp(np.array(profile.body["outline"]), axis=0).tolist(), abs=1e-3)
+    assert size[1] + 2 * profile.footprint_padding == pytest.approx(0.53)
     world = load_world(Path(__file__).resolve().parents[1] / "sim" / "worlds" / "room.yaml")
     services = {s["name"]: s for s in compose_for(world, Path(world.source), None, profile.drive, "odom",
                                                   tmp_path / "run.mcap", 0, 1.0, "r1", profile)["services"]}
