@@ -114,6 +114,7 @@ class Cluster:
     centre: np.ndarray         # (2,) the circle's centre as measured
     radius: float
     points: np.ndarray         # (K, 2)
+    fitted: bool = False       # measured by a circle fitted to the points (fit_circles)
 
 
 # ---------------------------------------------------------------- static world
@@ -245,8 +246,13 @@ def euclidean_clusters(points: np.ndarray, sensor_xy, params: TrackerParams,
         member = labels == label
         owners = _owners(points[member], priors, params)
         claims = _claims(owners, params)
-        cluster = _cluster(points[member], static[member], sensor_xy, params) \
-            if len(claims) < 2 or _one_circle(points[member], sensor_xy, params) else None
+        cluster = _cluster(points[member], static[member], sensor_xy, params)
+        if len(claims) >= 2 and not (cluster is not None and cluster.fitted):
+            # claimed by two tracks and the arc of no one circle: movers side by side. One circle
+            # fits: one cylinder that two tracks had split, carved along them scan after scan and
+            # kept split (DynaBARN hard-20: three tracks of 0.22-0.28 m on a 0.5 m cylinder, their
+            # velocities 50° apart)
+            cluster = None
         if cluster is not None:
             clusters.append(cluster)
         elif len(claims):
@@ -273,16 +279,6 @@ def _claims(owners: np.ndarray, params: TrackerParams) -> np.ndarray:
     return circles[(circles >= 0) & (counts >= params.min_cluster_size)]
 
 
-def _one_circle(members: np.ndarray, sensor_xy, params: TrackerParams) -> bool:
-    """Whether a cluster two tracks claim is the arc of one circle (fit_circles): a cylinder that
-    two tracks had split was carved along them scan after scan, and kept split (DynaBARN hard-20:
-    three tracks of 0.22-0.28 m on a 0.5 m cylinder, their velocities 50° apart)."""
-    if not params.fit_circles:
-        return False
-    away = members.mean(axis=0) - np.asarray(sensor_xy, np.float64)
-    return _circle_fit(members, away / max(float(np.hypot(*away)), 1e-9), params) is not None
-
-
 def _cluster(members: np.ndarray, static: np.ndarray, sensor_xy, params: TrackerParams) -> Cluster | None:
     """The circle measured by one cluster's points, or None when they are no mover's."""
     if not params.min_cluster_size <= len(members) <= params.max_cluster_size \
@@ -296,7 +292,7 @@ def _cluster(members: np.ndarray, static: np.ndarray, sensor_xy, params: Tracker
     away /= max(float(np.hypot(*away)), 1e-9)
     fitted = _circle_fit(members, away, params) if params.fit_circles else None
     if fitted is not None:
-        return Cluster(fitted[:2], max(params.min_radius, fitted[2]), members)
+        return Cluster(fitted[:2], max(params.min_radius, fitted[2]), members, fitted=True)
     return Cluster(centroid + away * ARC_CENTROID * radius, radius, members)
 
 
